@@ -21,7 +21,7 @@ def _facet(side_sign, centre_z, gap=0.001, angle_deg=40.0, curvature=8.0):
     a = np.radians(angle_deg)
     n = np.array([-np.sin(a), -side_sign * np.cos(a), 0.0])   # from the lower (L5) surface to L4's
     t1 = np.array([0.0, 0.0, 1.0])
-    t2 = np.cross(n, t1)
+    t2 = side_sign * np.cross(n, t1)   # mirrored ordering of the grid
     c = np.array([-0.032, side_sign * 0.016, centre_z])
     g = np.linspace(-0.004, 0.004, 3)
     U, V = np.meshgrid(g, g, indexing="ij")

@@ -1,0 +1,158 @@
+"""Force laws: values from the papers, slack points, monotonicity, continuity, derivatives."""
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from lumbar.elements import (contact_penalty, disc_axial_force, disc_torque, fit_surface, rupp_force,
+                             softplus_force, torque_angle)
+from lumbar.elements.ligament import rupp_shape
+
+from conftest import TABLE1
+
+
+def fd(f, x, h=1e-6):
+    return (f(x + h) - f(x - h)) / (2 * h)
+
+
+def test_torque_angle_inverts_to_published_disc_only_rom():
+    """Inverting Eq. 3 with Table 1 gives the disc-only ROM stated in shared/NOTES.md."""
+    from scipy.optimize import brentq
+    expect = {"flexion": [4.93, 6.60, 8.43, 10.11, 13.41], "extension": [2.25, 4.93, 7.95, 10.29, 12.82],
+              "lateral_bending": [2.17, 3.68, 5.19, 6.51, 9.09], "axial_rotation": [1.29, 2.78, 4.45, 5.82, 7.73]}
+    for d, roms in expect.items():
+        for M, rom in zip([1, 2.5, 5, 7.5, 10], roms):
+            lo, hi = (np.radians(1.8), np.radians(15.6)) if d == "flexion" else (1e-9, np.radians(40))
+            phi = brentq(lambda p: torque_angle(p, *TABLE1[d])[0] - M, lo, hi)
+            assert np.degrees(phi) == pytest.approx(rom, abs=0.01)
+
+
+def test_flexion_law_peaks_near_15_6_deg():
+    phi = np.radians(np.linspace(5, 30, 20001))
+    T, _ = torque_angle(phi, *TABLE1["flexion"])
+    assert T.max() == pytest.approx(10.19, abs=0.01)
+    assert np.degrees(phi[T.argmax()]) == pytest.approx(15.6, abs=0.2)
+
+
+def test_disc_torque_derivative_and_direction_split():
+    phi = np.array([[0.01, 0.05, -0.02], [-0.03, -0.07, 0.04]])
+    T, D = disc_torque(phi, TABLE1)
+    for k in range(3):
+        def f(v, k=k):
+            p = phi.copy(); p[:, k] = v; return disc_torque(p, TABLE1)[0][:, k]
+        np.testing.assert_allclose(D[:, k], fd(f, phi[:, k]), rtol=1e-6)
+    assert T[0, 1] == pytest.approx(torque_angle(0.05, *TABLE1["flexion"])[0])
+    assert T[1, 1] == pytest.approx(torque_angle(-0.07, *TABLE1["extension"])[0])
+    # lateral bending and axial rotation are odd (left = right)
+    assert disc_torque(-phi, TABLE1)[0][0, 0] == pytest.approx(-T[0, 0])
+
+
+def test_disc_axial_force_compression_only_by_default():
+    F, dF = disc_axial_force(np.array([-1e-3, 0.0, 1e-3]), 690234060.0, 659748.0)
+    assert F[0] == pytest.approx(690234060.0 * 1e-6 + 659748.0 * 1e-3)
+    assert F[1] == 0 and F[2] == 0
+    Ft, _ = disc_axial_force(1e-3, 690234060.0, 659748.0, k_tension=1e5)
+    assert Ft == pytest.approx(-100.0)  # traction pulls the upper vertebra back down
+
+
+@pytest.mark.parametrize("law,eps,force", [
+    ((173.5, -10.06, -26.82, 5.625), 0.0, 0.01), ((173.5, -10.06, -26.82, 5.625), 8.0, 64.6),
+    ((48.12, -43.97, -2.5, 15.0), 10.0, 2.3), ((98.94, 18.97, -82.2, 73.33), 10.0, 7.8),
+    ((0.4517, -3.502, 0.0, 0.02414), 4.0, 9.3), ((47.11, 4.21, 54.85, -11.25), 10.0, 66.6),
+    ((47.11, 4.21, 54.85, -11.25), 15.0, 62.7),
+])
+def test_softplus_law_matches_table3_values(law, eps, force):
+    F, _ = softplus_force(eps, *law, slack_width_pct=0.0)
+    assert F == pytest.approx(force, abs=0.06)
+
+
+def test_softplus_slack_and_tension_only():
+    eps = np.linspace(-20, 0, 50)
+    for law in [(173.5, -10.06, -26.82, 5.625), (47.11, 4.21, 54.85, -11.25), (-50.49, -36.0, -0.02453, 4.718)]:
+        F, _ = softplus_force(eps, *law)
+        assert np.all(F == 0.0)                      # slack fibre carries nothing
+        F2, _ = softplus_force(np.linspace(0, 60, 200), *law)
+        assert np.all(F2 >= 0.0)                     # never pushes
+
+
+def test_softplus_continuous_across_slack_point_for_flaval_ligament():
+    """The published FL fit is 79.5 N at 0 % strain; the slack ramp keeps the force continuous."""
+    eps = np.linspace(-0.01, 1.0, 20001)
+    F, dF = softplus_force(eps, 47.11, 4.21, 54.85, -11.25, slack_width_pct=0.5)
+    assert np.abs(np.diff(F)).max() < 0.02
+    np.testing.assert_allclose(dF[1:-1], np.gradient(F, eps)[1:-1], rtol=2e-2, atol=0.5)
+
+
+def test_softplus_monotone_for_positive_d_laws():
+    eps = np.linspace(0.6, 40, 500)
+    for law in [(173.5, -10.06, -26.82, 5.625), (48.12, -43.97, -2.5, 15.0), (98.94, 18.97, -82.2, 73.33),
+                (0.4517, -3.502, 0.0, 0.02414), (1.218, -22.97, 0.0, 1.369)]:
+        F, dF = softplus_force(eps, *law)
+        assert np.all(np.diff(F) >= -1e-12) and np.all(dF >= 0)
+
+
+def test_rupp_law_is_c1_and_reproduces_paper_shape():
+    sh = rupp_shape(1.52e-3, 4.98e-3, 55.0, 456.0, 3)
+    l_a, dF0, nu, K_nl, K_l = sh
+    assert nu == pytest.approx(3.20294, rel=1e-4) and K_l == pytest.approx(38632, rel=1e-4)
+    assert K_nl == pytest.approx(1.94821e10, rel=1e-4)
+    dl = np.array([l_a - 1e-9, l_a + 1e-9])
+    F, dF = rupp_force(dl, *sh)
+    assert F[0] == pytest.approx(F[1], abs=1e-3) and dF[0] == pytest.approx(dF[1], rel=1e-4)
+    assert rupp_force(-1e-4, *sh)[0] == 0.0
+    x = np.linspace(1e-5, 6e-3, 50)
+    np.testing.assert_allclose(rupp_force(x, *sh)[1], fd(lambda v: rupp_force(v, *sh)[0], x, 1e-9), rtol=1e-4)
+
+
+def test_contact_penalty_zero_when_open_and_linear_when_closed():
+    F, dF = contact_penalty(np.array([-1e-3, 0.0, 1e-3]), 12000.0, 5e-5)
+    assert F[0] == 0 and F[1] == 0
+    assert F[2] == pytest.approx(12000.0 * (1e-3 - 2.5e-5))
+    assert dF[2] == 12000.0
+
+
+def _facet_sets(coef, rot_seed=1, gap=0.001):
+    rng = np.random.default_rng(rot_seed)
+    U, V = [a.ravel() for a in np.meshgrid(np.linspace(-0.005, 0.005, 3), np.linspace(-0.003, 0.003, 3))]
+    W = coef[0] * U**3 + coef[1] * V**3 + coef[2] * U**2 + coef[3] * V**2
+    R = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    base = np.column_stack([U, V, W])
+    off = np.array([0.01, 0.02, 0.03])
+    return (base - [0, 0, gap / 2]) @ R.T + off, (base + [0, 0, gap / 2]) @ R.T + off
+
+
+def test_facet_surface_recovers_generating_quadric_exactly():
+    sup, inf = _facet_sets([0.0, 0.0, 8.0, 5.0])
+    s = fit_surface(sup, inf)
+    assert s.rms_m < 1e-9
+    np.testing.assert_allclose(s.gap(inf)[0], 0.0005, atol=1e-9)    # inferior set on the upper side
+    np.testing.assert_allclose(s.gap(sup)[0], -0.0005, atol=1e-9)
+    np.testing.assert_allclose(np.sort(np.abs(s.coef[2:4])), [5.0, 8.0], rtol=1e-6)
+
+
+def test_facet_surface_fits_cubic_within_landmark_precision():
+    sup, inf = _facet_sets([200.0, -300.0, 8.0, 5.0])
+    s = fit_surface(sup, inf)
+    assert s.rms_m < 5e-5                          # 0.05 mm: well below the 1 mm joint gap
+    assert np.all(s.gap(inf)[0] > 0) and np.all(s.gap(sup)[0] < 0)
+
+
+def test_facet_gap_gradient_matches_finite_differences():
+    sup, inf = _facet_sets([200.0, -300.0, 8.0, 5.0])
+    s = fit_surface(sup, inf)
+    P = inf[:3]
+    _, grad, hess = s.gap(P)
+    for k in range(3):
+        e = np.zeros(3); e[k] = 1e-7
+        np.testing.assert_allclose(grad[:, k], (s.gap(P + e)[0] - s.gap(P - e)[0]) / 2e-7, rtol=1e-5, atol=1e-8)
+        np.testing.assert_allclose(hess[:, :, k], (s.gap(P + e)[1] - s.gap(P - e)[1]) / 2e-7, rtol=1e-4, atol=1e-4)
+
+
+@settings(max_examples=60, deadline=None)
+@given(a=st.floats(0.1, 500), b=st.floats(-40, 20), c=st.floats(-100, 100), d=st.floats(0.05, 80),
+       eps=st.floats(-30, 60))
+def test_property_softplus_tension_only_and_continuous(a, b, c, d, eps):
+    F, dF = softplus_force(eps, a, b, c, d)
+    assert F >= 0.0 and np.isfinite(F) and np.isfinite(dF)
+    F2, _ = softplus_force(eps + 1e-7, a, b, c, d)
+    assert abs(F2 - F) <= abs(dF) * 1e-7 + 1e-3 * max(1.0, a / d) * 1e-3

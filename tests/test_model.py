@@ -1,0 +1,172 @@
+"""Equilibrium model: exact Jacobians, analytic cases, symmetry, honest non-convergence."""
+import copy
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from lumbar import so3
+from lumbar.elements.ligament import rupp_shape
+from lumbar.fsu import add_level, build_fsu, range_of_motion
+from lumbar.geometry.synthetic import mirror_check, symmetric_fsu
+from lumbar.model import SpineModel
+from lumbar.solve import solve
+
+from conftest import make_charset
+
+
+def fd_jacobian(m, x, R, loads, h=1e-7, **kw):
+    B, nb = x.shape[:2]
+    J = np.zeros((B, nb, 6, nb, 6))
+    for b in range(nb):
+        for k in range(6):
+            d = np.zeros((B, nb, 6)); d[:, b, k] = h
+            Qp, _ = m.evaluate(x + d[..., :3], so3.exp(d[..., 3:]) @ R, loads, jacobian=False, **kw)
+            Qm, _ = m.evaluate(x - d[..., :3], so3.exp(-d[..., 3:]) @ R, loads, jacobian=False, **kw)
+            J[:, :, :, b, k] = (Qp - Qm) / (2 * h)
+    return J
+
+
+def perturbed_state(m, B, seed, sx=4e-4, sr=0.05):
+    rng = np.random.default_rng(seed)
+    x, R = m.reference_state(B)
+    x = x + rng.normal(0, sx, x.shape)
+    x[:, :, 2] -= 1.0e-3                       # compress the discs and close the facets
+    R = so3.exp(rng.normal(0, sr, (B, m.nb, 3))) @ R
+    return x, R, rng.normal(0, 1, (B, m.nb, 6))
+
+
+def assert_jacobian(m, x, R, loads, **kw):
+    Q, J = m.evaluate(x, R, loads, **kw)
+    Jfd = fd_jacobian(m, x, R, loads, **kw)
+    scale = np.abs(J).max()
+    assert np.abs(J - Jfd).max() < 1e-8 * scale + 1e-4
+
+
+def test_jacobian_matches_finite_differences_single_body(charset):
+    fsu = build_fsu(symmetric_fsu(), charset)
+    m = fsu.model
+    x, R, loads = perturbed_state(m, 4, 0)
+    assert m.contact_forces(x, R).max() > 0     # the test must exercise facet contact
+    assert_jacobian(m, x, R, loads)
+
+
+def _two_level_model(charset, law="softplus"):
+    """L3-L4-L5 chain from the synthetic level shifted up by one segment: two free bodies."""
+    geo = symmetric_fsu()
+    lev = geo.levels["L4-L5"]
+    up = copy.deepcopy(lev)
+    dz = np.array([0.0, 0.0, 0.038])
+    up.name, up.upper, up.lower = "L3-L4", "L3", "L4"
+    up.disc_centre = lev.disc_centre + dz
+    for lig in up.ligaments:
+        lig.upper, lig.lower = lig.upper + dz, lig.lower + dz
+    for f in up.facets.values():
+        f.superior, f.inferior = f.superior + dz, f.inferior + dz
+    m = SpineModel()
+    m.add_body("L3", geo.vertebrae["L4"].centroid + dz)
+    m.add_body("L4", geo.vertebrae["L4"].centroid)
+    m.add_body("L5", geo.vertebrae["L5"].centroid, fixed=True)
+    add_level(m, up, charset)
+    add_level(m, lev, charset)
+    if law == "rupp":
+        sh = rupp_shape(1.52e-3, 4.98e-3, 55.0, 456.0, 3)
+        m.add_fibre_group("ALLr", "ALL", "L3-L5", 0, -1, [[0.02, 0.0, 0.03]], [[0.02, 0.0, -0.01]], 0.0,
+                          "rupp", sh, prestrain_pct=6.8, scale=3.0)
+    m.add_fibre_group("cable", "cable", "L3", 0, -1, [[-0.03, 0.01, 0.05]], [[-0.04, 0.05, -0.06]], 0.0,
+                      "cable", (80.0,))
+    return m.finalize()
+
+
+@pytest.mark.parametrize("law", ["softplus", "rupp"])
+def test_jacobian_matches_finite_differences_two_free_bodies(charset, law):
+    m = _two_level_model(charset, law)
+    x, R, loads = perturbed_state(m, 3, 2)
+    assert_jacobian(m, x, R, loads)
+
+
+def test_linear_torsional_disc_gives_rom_equal_moment_over_stiffness():
+    k = {"flexion": 30.0, "extension": 30.0, "lateral_bending": 45.0, "axial_rotation": 80.0}
+    torque = {d: (0.0, 1.0, v) for d, v in k.items()}
+    fsu = build_fsu(symmetric_fsu(), make_charset(torque=torque, ligaments=False, facet_stiffness=0.0))
+    df = range_of_motion(fsu, [1.0, 5.0], ["flexion", "extension", "lateral_bending", "axial_rotation"])
+    assert df["converged"].all()
+    expected = np.degrees(df["moment_nm"] / df["direction"].map(k))
+    np.testing.assert_allclose(df["rom_deg"], expected, rtol=1e-7)  # solver tolerance 1e-8 N*m
+
+
+def test_symmetric_unit_bends_and_twists_equally_left_and_right(charset):
+    geo = symmetric_fsu()
+    assert mirror_check(geo) < 1e-12
+    fsu = build_fsu(geo, charset)
+    dirs = ["lateral_bending_left", "lateral_bending_right", "axial_rotation_left", "axial_rotation_right"]
+    df = range_of_motion(fsu, [2.5, 10.0], dirs).set_index(["direction", "moment_nm"])
+    assert df["converged"].all()
+    for M in (2.5, 10.0):
+        assert df.loc[("lateral_bending_left", M), "rom_deg"] == pytest.approx(
+            df.loc[("lateral_bending_right", M), "rom_deg"], abs=1e-6)
+        assert df.loc[("axial_rotation_left", M), "rom_deg"] == pytest.approx(
+            df.loc[("axial_rotation_right", M), "rom_deg"], abs=1e-6)
+    assert df.loc[("lateral_bending_left", 10.0), "rom_deg"] > 0
+
+
+def test_disc_only_unit_reproduces_published_fit_inversion(charset):
+    fsu = build_fsu(symmetric_fsu(), charset)
+    df = range_of_motion(fsu, [1, 2.5, 5, 7.5, 10], stages=["wo_all"])
+    assert df["converged"].all()
+    got = df.set_index(["direction", "moment_nm"])["rom_deg"]
+    assert got[("flexion", 1.0)] == pytest.approx(4.93, abs=0.01)
+    assert got[("flexion", 10.0)] == pytest.approx(13.41, abs=0.01)
+    assert got[("extension", 10.0)] == pytest.approx(12.82, abs=0.01)
+    assert got[("axial_rotation", 2.5)] == pytest.approx(2.78, abs=0.01)
+
+
+def test_solver_flags_moment_beyond_disc_flexion_peak(charset, caplog):
+    """Eq. 3 in flexion peaks at 10.19 N*m: a disc-only unit has no equilibrium above it."""
+    fsu = build_fsu(symmetric_fsu(), charset)
+    df = range_of_motion(fsu, [10.0, 10.5], ["flexion"], stages=["wo_all"], max_iter=30)
+    row = df.set_index("moment_nm")
+    assert bool(row.loc[10.0, "converged"]) is True
+    assert bool(row.loc[10.5, "converged"]) is False
+    assert np.isnan(row.loc[10.5, "rom_deg"])
+    assert row.loc[10.5, "residual_moment_nm"] > 1e-3
+    assert "not" in caplog.text and "converge" in caplog.text
+
+
+def test_rom_grows_with_moment_and_with_each_removed_ligament(charset):
+    fsu = build_fsu(symmetric_fsu(), charset)
+    df = range_of_motion(fsu, [1, 2.5, 5, 7.5, 10], ["flexion"], stages=["intact", "wo_ssl", "wo_isl", "wo_fl"])
+    assert df["converged"].all()
+    for _, g in df.groupby("stage"):
+        assert np.all(np.diff(g.sort_values("moment_nm")["rom_deg"]) > 0)
+    at10 = df[df.moment_nm == 10].set_index("stage")["rom_deg"]
+    assert at10["intact"] <= at10["wo_ssl"] + 1e-9 <= at10["wo_isl"] + 2e-9
+
+
+def test_converged_solutions_balance_within_tolerance(charset):
+    fsu = build_fsu(symmetric_fsu(), charset)
+    m = fsu.model
+    loads = np.zeros((3, 1, 6))
+    loads[0, 0, 4] = 7.5
+    loads[1, 0, 3] = -5.0
+    loads[2, 0, :3] = [20.0, -10.0, -300.0]     # a compressive and shear force at the centroid
+    res = solve(m, loads)
+    assert res.converged.all()
+    Q, _ = m.evaluate(res.x, res.R, loads, jacobian=False)
+    assert np.abs(Q).max() < 1e-6
+
+
+@settings(max_examples=15, deadline=None)
+@given(M=st.floats(0.0, 9.0), axis=st.integers(0, 2), sign=st.sampled_from([-1.0, 1.0]),
+       Fz=st.floats(-400.0, 0.0))
+def test_property_converged_solutions_balance(M, axis, sign, Fz):
+    fsu = build_fsu(symmetric_fsu(), make_charset())
+    loads = np.zeros((1, 1, 6))
+    loads[0, 0, 3 + axis] = sign * M
+    loads[0, 0, 2] = Fz
+    res = solve(fsu.model, loads)
+    if res.converged[0]:
+        Q, _ = fsu.model.evaluate(res.x, res.R, loads, jacobian=False)
+        assert np.abs(Q[..., :3]).max() < 1e-6 and np.abs(Q[..., 3:]).max() < 1e-6
+        assert np.all(fsu.model.fibre_state(res.x, res.R)[2] >= 0)   # ligaments never push
