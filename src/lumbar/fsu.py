@@ -154,7 +154,7 @@ def moment_loads(directions, moments_nm, nb=1, body=0):
 
 
 def range_of_motion(fsu: FSU, moments_nm=(1, 2.5, 5, 7.5, 10), directions=MAIN_DIRECTIONS,
-                    stages=("intact",), load_steps=5, max_iter=50, tol=1e-8) -> pd.DataFrame:
+                    stages=("intact",), load_steps=1, max_iter=50, tol=1e-8) -> pd.DataFrame:
     """ROM table (one row per stage x direction x moment), solved as one batch."""
     for d in directions:
         if d not in DIRECTIONS:

@@ -120,6 +120,7 @@ class SpineModel:
         return sid
 
     def add_disc(self, spec: DiscSpec):
+        spec._ia, spec._ib = np.array([spec.upper]), np.array([spec.lower])
         self.discs.append(spec)
 
     def finalize(self):
@@ -154,52 +155,130 @@ class SpineModel:
         R = np.broadcast_to(np.eye(3), (batch, self.nb, 3, 3)).copy()
         return x, R
 
-    def _pose(self, x, R, idx):
-        """Positions/rotations/centroids of bodies ``idx`` (ground -> identity at reference)."""
+    def _groups(self, idx):
+        """{body: element indices} for an element-to-body index array (cached per array)."""
+        key = id(idx)
+        cache = self.__dict__.setdefault("_group_cache", {})
+        if key not in cache:
+            g = {}
+            for n, b in enumerate(np.asarray(idx).tolist()):
+                g.setdefault(b, []).append(n)
+            cache[key] = (idx, [(b, np.array(v)) for b, v in g.items()])
+        return cache[key][1]
+
+    def _attach(self, x, R, idx, s):
+        """World positions p (B, n, 3) of reference points s (n, 3) on bodies idx, and x of each body."""
         B = x.shape[0]
-        free = idx >= 0
-        ii = np.where(free, idx, 0)
-        xb = np.where(free[None, :, None], x[:, ii], 0.0)
-        Rb = np.where(free[None, :, None, None], R[:, ii], np.eye(3))
-        cb = np.where(free[:, None], self.c[ii] if self.nb else 0.0, 0.0)
-        return xb, Rb, np.broadcast_to(cb, (B,) + cb.shape)
+        p = np.empty((B, len(idx), 3))
+        xe = np.zeros((B, len(idx), 3))
+        for b, sel in self._groups(idx):
+            if b < 0:
+                p[:, sel] = s[sel]
+            else:
+                p[:, sel] = x[:, b, None, :] + (s[sel] - self.c[b]) @ np.swapaxes(R[:, b], -1, -2)
+                xe[:, sel] = x[:, b, None, :]
+        return p, xe
 
-    def _points(self, x, R, idx, s):
-        xb, Rb, cb = self._pose(x, R, idx)
-        p = xb + np.einsum("bnij,bnj->bni", Rb, s[None] - cb)
-        return p, xb, Rb
+    def _to_body(self, x, R, idx, p):
+        """Reference-frame coordinates, in bodies idx, of world points p (B, n, 3)."""
+        P = np.empty_like(p)
+        for b, sel in self._groups(idx):
+            P[:, sel] = p[:, sel] if b < 0 else (p[:, sel] - x[:, b, None, :]) @ R[:, b] + self.c[b]
+        return P
 
-    # ---------------------------------------------------------------- assembly helpers
-    def _scatter(self, Q, J, ia, ib, QA, QB, AA, AB, BA, BB):
-        """Add per-element generalized forces and 6x6 blocks to the global arrays."""
-        nb = self.nb
-        onehot = np.zeros((nb + 1, len(ia)))
-        onehot[np.where(ia >= 0, ia, nb), np.arange(len(ia))] = 1.0
-        SA = onehot[:nb]
-        onehot = np.zeros((nb + 1, len(ib)))
-        onehot[np.where(ib >= 0, ib, nb), np.arange(len(ib))] = 1.0
-        SB = onehot[:nb]
-        Q += np.einsum("mn,bnk->bmk", SA, QA) + np.einsum("mn,bnk->bmk", SB, QB)
-        if J is not None:
-            for S1, S2, blk in ((SA, SA, AA), (SA, SB, AB), (SB, SA, BA), (SB, SB, BB)):
-                J += np.einsum("mn,pn,bnkl->bmkpl", S1, S2, blk)
+    def _rotate(self, R, idx, v):
+        """Rotate body-fixed vectors v (B, n, ..., 3) of bodies idx into the world frame."""
+        out = np.empty_like(v)
+        for b, sel in self._groups(idx):
+            if b < 0:
+                out[:, sel] = v[:, sel]
+            else:
+                Rt = np.swapaxes(R[:, b], -1, -2)
+                Rt = Rt.reshape(Rt.shape[:1] + (1,) * (v.ndim - 3) + (3, 3))
+                out[:, sel] = v[:, sel] @ Rt
+        return out
+
+    # ---------------------------------------------------------------- assembly
+    # Every element stiffness K = df/d(relative displacement) used here is a sum of weighted
+    # rank-1 terms w v v^T. With G = [I, -[r]x], G_a^T (w v v^T) G_b = w [v; ra x v][v; rb x v]^T,
+    # so each 6x6 block summed over elements is one batched GEMM. Geometric (rotation) terms use
+    # [a]x[b]x = b a^T - (a.b) I.
+    @staticmethod
+    def _outer_sum(a, b):
+        """sum_n a_n b_n^T for (B, n, 3) arrays -> (B, 3, 3)."""
+        return np.swapaxes(a, -1, -2) @ b
 
     @staticmethod
-    def _GtKG(K, ra, rb):
-        """G_a^T K G_b with G = [I, -[r]x] -> (..., 6, 6)."""
-        Ha, Hb = so3.hat(ra), so3.hat(rb)
-        out = np.empty(K.shape[:-2] + (6, 6))
-        out[..., :3, :3] = K
-        out[..., :3, 3:] = -K @ Hb
-        out[..., 3:, :3] = Ha @ K
-        out[..., 3:, 3:] = -Ha @ K @ Hb
+    def _hatprod_sum(a, b):
+        """sum_n [a_n]x [b_n]x = sum_n (b_n a_n^T - (a_n . b_n) I) -> (B, 3, 3)."""
+        out = np.swapaxes(b, -1, -2) @ a
+        tr = np.einsum("bni,bni->b", a, b)
+        out[:, 0, 0] -= tr
+        out[:, 1, 1] -= tr
+        out[:, 2, 2] -= tr
         return out
+
+    def _assemble(self, Q, J, ia, ib, f, ra, rb, w, v, body_relative):
+        """Add generalized forces and Jacobian blocks of point elements.
+
+        ia/ib (n,) body of the point / of the other attachment (or of the law's frame);
+        f (B, n, 3) force on body ia at its point; ra, rb (B, n, 3) lever arms of the point about
+        each body's reference point; w (B, n, T), v (B, n, T, 3) the rank-1 terms of
+        K = df/dp (world); ``body_relative``: the law is fixed in body ib (facets, disc translation)
+        instead of depending on the distance between two attached points (fibres).
+        """
+        nb = self.nb
+        Qa = np.concatenate([f, so3.cross(ra, f)], axis=-1)
+        Qb = -np.concatenate([f, so3.cross(rb, f)], axis=-1)
+        pairs = {}
+        for n, key in enumerate(zip(ia.tolist(), ib.tolist())):
+            pairs.setdefault(key, []).append(n)
+        for (i, j), idx in pairs.items():
+            sel = np.array(idx)
+            if i >= 0:
+                Q[:, i] += Qa[:, sel].sum(1)
+            if j >= 0:
+                Q[:, j] += Qb[:, sel].sum(1)
+            if J is None:
+                continue
+            B, T = w.shape[0], w.shape[-1]
+            vs = v[:, sel]
+            fa = f[:, sel]
+            wf = w[:, sel].reshape(B, -1, 1)
+            ga = np.concatenate([vs, so3.cross(ra[:, sel, None, :], vs)], axis=-1).reshape(B, -1, 6)
+            gb = np.concatenate([vs, so3.cross(rb[:, sel, None, :], vs)], axis=-1).reshape(B, -1, 6)
+            ra_s, rb_s = ra[:, sel], rb[:, sel]
+            if i >= 0:
+                blk = np.swapaxes(ga * wf, -1, -2) @ ga
+                blk[:, 3:, 3:] += self._hatprod_sum(fa, ra_s)
+                J[:, i, :, i, :] += blk
+            if j >= 0:
+                blk = np.swapaxes(gb * wf, -1, -2) @ gb
+                if body_relative:
+                    Fs = so3.hat(fa.sum(1))
+                    blk[:, :3, 3:] += Fs
+                    blk[:, 3:, :3] -= Fs
+                    blk[:, 3:, 3:] += self._hatprod_sum(rb_s, fa)
+                else:
+                    blk[:, 3:, 3:] -= self._hatprod_sum(fa, rb_s)
+                J[:, j, :, j, :] += blk
+            if i >= 0 and j >= 0:
+                ab = -(np.swapaxes(ga * wf, -1, -2) @ gb)
+                ba = -(np.swapaxes(gb * wf, -1, -2) @ ga)
+                if body_relative:
+                    Fs = so3.hat(fa.sum(1))
+                    ab[:, :3, 3:] -= Fs
+                    ab[:, 3:, 3:] -= self._hatprod_sum(ra_s, fa)
+                    ba[:, 3:, :3] += Fs
+                    ba[:, 3:, 3:] -= self._hatprod_sum(fa, ra_s)
+                J[:, i, :, j, :] += ab
+                J[:, j, :, i, :] += ba
 
     # ---------------------------------------------------------------- evaluation
     def fibre_state(self, x, R, fmask=1.0):
         """Fibre lengths [m], strains [%] and tensions [N] (B, nf)."""
-        pa, _, _ = self._points(x, R, self.f_a, self.f_sa)
-        pb, _, _ = self._points(x, R, self.f_b, self.f_sb)
+        pa, _ = self._attach(x, R, self.f_a, self.f_sa)
+        pb, _ = self._attach(x, R, self.f_b, self.f_sb)
         d = pa - pb
         dn = np.linalg.norm(d, axis=-1)
         length = dn + self.f_extra
@@ -239,81 +318,59 @@ class SpineModel:
             self._add_discs(x, R, Q, J, params or {})
         return Q, J
 
-    def _two_point(self, Q, J, ia, ib, f, K, pa, pb, xa, xb):
-        ra, rb = pa - xa, pb - xb
-        Ha, Hb = so3.hat(ra), so3.hat(rb)
-        QA = np.concatenate([f, np.cross(ra, f)], axis=-1)
-        QB = np.concatenate([-f, -np.cross(rb, f)], axis=-1)
-        if J is None:
-            self._scatter(Q, None, ia, ib, QA, QB, None, None, None, None)
-            return
-        F = so3.hat(f)
-        AA = self._GtKG(K, ra, ra)
-        AA[..., 3:, 3:] += F @ Ha
-        BB = self._GtKG(K, rb, rb)
-        BB[..., 3:, 3:] += -F @ Hb
-        AB = -self._GtKG(K, ra, rb)
-        BA = -self._GtKG(K, rb, ra)
-        self._scatter(Q, J, ia, ib, QA, QB, AA, AB, BA, BB)
-
     def _add_fibres(self, x, R, Q, J, fmask):
         _, _, T, dT, d, dn, pa, pb = self.fibre_state(x, R, fmask)
-        xa = self._pose(x, R, self.f_a)[0]
-        xb = self._pose(x, R, self.f_b)[0]
+        xa = self._attach(x, R, self.f_a, self.f_sa)[1]
+        xb = self._attach(x, R, self.f_b, self.f_sb)[1]
         u = d / dn[..., None]
         f = -T[..., None] * u                     # force on the upper end (pulls towards lower)
-        uu = u[..., :, None] * u[..., None, :]
-        K = -(dT[..., None, None] * uu + (T / dn)[..., None, None] * (np.eye(3) - uu))
-        self._two_point(Q, J, self.f_a, self.f_b, f, K, pa, pb, xa, xb)
-
-    def _body_relative(self, Q, J, ia, ib, f, K, p, xa, xb):
-        """Point force f at p (on body ia) from a law fixed in body ib; K = df/dp (world)."""
-        ra, rB = p - xa, p - xb
-        Ha, HB, F = so3.hat(ra), so3.hat(rB), so3.hat(f)
-        QA = np.concatenate([f, np.cross(ra, f)], axis=-1)
-        QB = np.concatenate([-f, -np.cross(rB, f)], axis=-1)
-        if J is None:
-            self._scatter(Q, None, ia, ib, QA, QB, None, None, None, None)
-            return
-        AA = self._GtKG(K, ra, ra)
-        AA[..., 3:, 3:] += F @ Ha
-        AB = -self._GtKG(K, ra, rB)
-        AB[..., :3, 3:] += -F
-        AB[..., 3:, 3:] += -Ha @ F
-        BA = -self._GtKG(K, rB, ra)
-        BA[..., 3:, :3] += F
-        BA[..., 3:, 3:] += -F @ Ha
-        BB = self._GtKG(K, rB, rB)
-        BB[..., :3, 3:] += F
-        BB[..., 3:, :3] += -F
-        BB[..., 3:, 3:] += HB @ F
-        self._scatter(Q, J, ia, ib, QA, QB, AA, AB, BA, BB)
+        # K = -(dT u u^T + T/|d| (I - u u^T)) = alpha I + beta u u^T
+        alpha = -T / dn
+        beta = T / dn - dT
+        Bn = u.shape[:2]
+        v = np.empty(Bn + (4, 3))
+        v[..., 0, :] = u
+        v[..., 1:, :] = np.eye(3)
+        w = np.stack([beta, alpha, alpha, alpha], axis=-1)
+        self._assemble(Q, J, self.f_a, self.f_b, f, pa - xa, pb - xb, w, v, body_relative=False)
 
     def _add_contacts(self, x, R, Q, J, cmask):
-        p, xa, _ = self._points(x, R, self.k_a, self.k_s)
-        xB, RB, cB = self._pose(x, R, self.k_b)
-        P = np.einsum("bnji,bnj->bni", RB, p - xB) + cB         # reference coords in the lower body
+        p, xa = self._attach(x, R, self.k_a, self.k_s)
+        xB = self._attach(x, R, self.k_b, self.k_s)[1]
+        P = self._to_body(x, R, self.k_b, p)                    # reference coords in the lower body
         g = np.empty(P.shape[:-1])
         grad = np.empty(P.shape)
-        hess = np.empty(P.shape + (3,))
         for sid, surf in enumerate(self.surfaces):
             sel = self.k_surf == sid
-            g[:, sel], grad[:, sel], hess[:, sel] = surf.gap(P[:, sel])
+            g[:, sel], grad[:, sel], _ = surf.gap(P[:, sel])
         Fm, dFm = contact_penalty(-g, self.k_stiff, self.contact_eps)
         Fm, dFm = Fm * cmask, dFm * cmask
-        f_loc = Fm[..., None] * grad
-        K_loc = -dFm[..., None, None] * grad[..., :, None] * grad[..., None, :] + Fm[..., None, None] * hess
-        f = np.einsum("bnij,bnj->bni", RB, f_loc)
-        K = RB @ K_loc @ np.swapaxes(RB, -1, -2)
-        self._body_relative(Q, J, self.k_a, self.k_b, f, K, p, xa, xB)
+        # K = R_B (-dF grad grad^T + F hess) R_B^T, hess = -f_uu a_u a_u^T - f_vv a_v a_v^T
+        Bn = g.shape
+        v = np.empty(Bn + (3, 3))
+        w = np.empty(Bn + (3,))
+        v[..., 0, :] = grad
+        w[..., 0] = -dFm
+        for sid, surf in enumerate(self.surfaces):
+            sel = self.k_surf == sid
+            q = surf.local(P[:, sel])
+            _, _, _, fuu, fvv = surf.surface(q[..., 0], q[..., 1])
+            v[:, sel, 1, :] = surf.axes[0]
+            v[:, sel, 2, :] = surf.axes[1]
+            w[:, sel, 1] = -Fm[:, sel] * fuu
+            w[:, sel, 2] = -Fm[:, sel] * fvv
+        v = self._rotate(R, self.k_b, v)
+        f = Fm[..., None] * v[..., 0, :]
+        self._assemble(Q, J, self.k_a, self.k_b, f, p - xa, p - xB, w, v, body_relative=True)
 
     def _add_discs(self, x, R, Q, J, params):
         for spec in self.discs:
-            ia, ib = np.array([spec.upper]), np.array([spec.lower])
-            p, xa, Ra = self._points(x, R, ia, spec.centre[None])
-            xB, RB, cB = self._pose(x, R, ib)
-            # translation: law in the disc frame fixed to the lower body
-            P = np.einsum("bnji,bnj->bni", RB, p - xB) + cB
+            ia, ib = spec._ia, spec._ib
+            p, xa = self._attach(x, R, ia, spec.centre[None])
+            xB = self._attach(x, R, ib, spec.centre[None])[1]
+            Ra = R[:, spec.upper][:, None] if spec.upper >= 0 else np.broadcast_to(np.eye(3), (x.shape[0], 1, 3, 3))
+            RB = R[:, spec.lower][:, None] if spec.lower >= 0 else np.broadcast_to(np.eye(3), (x.shape[0], 1, 3, 3))
+            P = self._to_body(x, R, ib, p)
             r = (P - spec.centre) @ spec.frame.T
             kt = params.get("k_tension", spec.k_tension)
             kt = np.reshape(kt, (-1, 1)) if np.ndim(kt) else kt
@@ -324,10 +381,11 @@ class SpineModel:
             D[..., 1, 1] = -spec.k_shear
             D[..., 2, 2] = dFz
             f_B = F_loc @ spec.frame                                  # in lower-body coordinates
-            K_B = spec.frame.T @ D @ spec.frame
-            f = np.einsum("bnij,bnj->bni", RB, f_B)
-            K = RB @ K_B @ np.swapaxes(RB, -1, -2)
-            self._body_relative(Q, J, ia, ib, f, K, p, xa, xB)
+            # K = R_B frame^T D frame R_B^T = sum_k D_kk (R_B e_k)(R_B e_k)^T
+            v = self._rotate(R, ib, np.broadcast_to(spec.frame, (x.shape[0], 1, 3, 3)).copy())
+            f = np.einsum("bnk,bnki->bni", F_loc, v)
+            w = np.stack([D[..., 0, 0], D[..., 1, 1], D[..., 2, 2]], axis=-1)
+            self._assemble(Q, J, ia, ib, f, p - xa, p - xB, w, v, body_relative=True)
             # rotation: Eq. 3 per project axis of the lower body
             Rrel = np.swapaxes(RB[:, 0], -1, -2) @ Ra[:, 0]
             phi = so3.log(Rrel)
@@ -357,10 +415,10 @@ class SpineModel:
         (B, nd, 3), disc-frame force on the upper body [N] (B, nd, 3) and torque [N*m] (B, nd, 3)."""
         out = {"phi": [], "r": [], "force": [], "torque": []}
         for spec in self.discs:
-            ia, ib = np.array([spec.upper]), np.array([spec.lower])
-            p, _, Ra = self._points(x, R, ia, spec.centre[None])
-            xB, RB, cB = self._pose(x, R, ib)
-            P = np.einsum("bnji,bnj->bni", RB, p - xB) + cB
+            p, _ = self._attach(x, R, spec._ia, spec.centre[None])
+            P = self._to_body(x, R, spec._ib, p)
+            Ra = R[:, spec.upper][:, None] if spec.upper >= 0 else np.broadcast_to(np.eye(3), (x.shape[0], 1, 3, 3))
+            RB = R[:, spec.lower][:, None] if spec.lower >= 0 else np.broadcast_to(np.eye(3), (x.shape[0], 1, 3, 3))
             r = ((P - spec.centre) @ spec.frame.T)[:, 0]
             Fz, _ = disc_axial_force(r[:, 2], spec.k_quadratic, spec.k_linear, spec.k_tension)
             F = np.stack([-spec.k_shear * r[:, 0], -spec.k_shear * r[:, 1], Fz], axis=-1)
@@ -374,9 +432,8 @@ class SpineModel:
 
     def contact_forces(self, x, R, cmask=1.0):
         """Total normal contact force [N] per facet surface (B, n_surfaces)."""
-        p, _, _ = self._points(x, R, self.k_a, self.k_s)
-        xB, RB, cB = self._pose(x, R, self.k_b)
-        P = np.einsum("bnji,bnj->bni", RB, p - xB) + cB
+        p, _ = self._attach(x, R, self.k_a, self.k_s)
+        P = self._to_body(x, R, self.k_b, p)
         out = np.zeros((x.shape[0], len(self.surfaces)))
         for sid, surf in enumerate(self.surfaces):
             sel = self.k_surf == sid

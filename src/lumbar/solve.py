@@ -78,7 +78,11 @@ def _modified_newton_step(A, Q, nb):
 
 def newton(model, x, R, loads, fmask=1.0, cmask=1.0, params=None, max_iter=50, tol_force=1e-8,
            tol_moment=1e-8, max_step_trans=1e-3, max_step_rot=0.05, damping=(1.0, 1e-6)):
-    """Damped Newton on a batch; returns (x, R, converged, res_f, res_m, iterations)."""
+    """Damped modified Newton on a batch; returns (x, R, converged, res_f, res_m, iterations).
+
+    The line search evaluates its trial states with the Jacobian, so an accepted trial (the
+    usual case, full step) provides the residual and Jacobian of the next iteration.
+    """
     B, nb = x.shape[:2]
     n = 6 * nb
     x, R = x.copy(), R.copy()
@@ -87,28 +91,27 @@ def newton(model, x, R, loads, fmask=1.0, cmask=1.0, params=None, max_iter=50, t
     res_f = np.full(B, np.inf)
     res_m = np.full(B, np.inf)
     reg = np.tile(np.r_[np.full(3, damping[0]), np.full(3, damping[1])], nb)
+
+    def sub(idx):
+        return (_take(loads, idx, B), _take(fmask, idx, B), _take(cmask, idx, B), _take_params(params, idx, B))
+
     active = np.arange(B)
-    for _ in range(max_iter + 1):
-        if active.size == 0:
-            break
-        xa, Ra = x[active], R[active]
-        La = _take(loads, active, B)
-        fm, cm, pa = _take(fmask, active, B), _take(cmask, active, B), _take_params(params, active, B)
-        Q, J = model.evaluate(xa, Ra, La, fm, cm, jacobian=True, params=pa)
+    La, fm, cm, pa = sub(active)
+    Q, J = model.evaluate(x, R, La, fm, cm, jacobian=True, params=pa)
+    for it in range(max_iter + 1):
         rf, rm = _residual_norms(Q)
         res_f[active], res_m[active] = rf, rm
         done = (rf < tol_force) & (rm < tol_moment)
         conv[active[done]] = True
-        keep = ~done
-        if iters[active].max(initial=0) >= max_iter:
+        if it == max_iter:
             break
-        active, xa, Ra, Q, J = active[keep], xa[keep], Ra[keep], Q[keep], J[keep]
+        keep = ~done
+        active, Q, J = active[keep], Q[keep], J[keep]
         if active.size == 0:
             break
-        fm, cm, pa = _take(fmask, active, B), _take(cmask, active, B), _take_params(params, active, B)
-        La = _take(loads, active, B)
+        La, fm, cm, pa = sub(active)
+        xa, Ra = x[active], R[active]
         d = _modified_newton_step(-J.reshape(-1, n, n) + np.diag(reg), Q.reshape(-1, n), nb)
-        # step limits per body
         st = np.linalg.norm(d[..., :3], axis=-1).max(-1) / max_step_trans
         sr = np.linalg.norm(d[..., 3:], axis=-1).max(-1) / max_step_rot
         d = d / np.maximum(1.0, np.maximum(st, sr))[:, None, None]
@@ -116,62 +119,86 @@ def newton(model, x, R, loads, fmask=1.0, cmask=1.0, params=None, max_iter=50, t
         alpha = np.ones(active.size)
         accepted = np.zeros(active.size, bool)
         xn, Rn = xa.copy(), Ra.copy()
+        Qn, Jn = np.empty_like(Q), np.empty_like(J)
+        todo = np.arange(active.size)
         for _ls in range(10):
-            todo = ~accepted
-            xt = xa + alpha[:, None, None] * d[..., :3]
-            Rt = so3.exp(alpha[:, None, None] * d[..., 3:]) @ Ra
-            Qt, _ = model.evaluate(xt, Rt, La, fm, cm, jacobian=False, params=pa)
-            ok = todo & (_merit(Qt) < m0 * (1.0 - 1e-4 * alpha))
-            xn[ok], Rn[ok] = xt[ok], Rt[ok]
-            accepted |= ok
-            if accepted.all():
+            xt = xa[todo] + alpha[todo, None, None] * d[todo, :, :3]
+            Rt = so3.exp(alpha[todo, None, None] * d[todo, :, 3:]) @ Ra[todo]
+            sa = active[todo]
+            Lt, ft, ct, pt = sub(sa)
+            Qt, Jt = model.evaluate(xt, Rt, Lt, ft, ct, jacobian=True, params=pt)
+            ok = _merit(Qt) < m0[todo] * (1.0 - 1e-4 * alpha[todo])
+            last = _ls == 9
+            # where no decrease was found (a local minimum of the merit, e.g. at the torque minimum
+            # of Eq. 3 with p3 < 0), the last trial is the full step-limited step, to hop over it
+            if last:
+                ok[:] = True
+            take = todo[ok]
+            xn[take], Rn[take], Qn[take], Jn[take] = xt[ok], Rt[ok], Qt[ok], Jt[ok]
+            accepted[take] = True
+            todo = todo[~ok]
+            if todo.size == 0:
                 break
-            alpha = np.where(accepted, alpha, alpha * 0.5)
-        # where no decrease was found (a local minimum of the merit, e.g. at the torque minimum of
-        # Eq. 3 with p3 < 0), take the full step-limited Newton step to hop over it
-        if not accepted.all():
-            nf = ~accepted
-            xn[nf] = xa[nf] + d[nf][..., :3]
-            Rn[nf] = so3.exp(d[nf][..., 3:]) @ Ra[nf]
+            alpha[todo] = 1.0 if _ls == 8 else alpha[todo] * 0.5
         x[active], R[active] = xn, Rn
+        Q, J = Qn, Jn
         iters[active] += 1
     return x, R, conv, res_f, res_m, iters
 
 
-def solve(model, loads, x0=None, R0=None, fmask=1.0, cmask=1.0, params=None, load_steps=5,
-          max_iter=50, tol_force=1e-8, tol_moment=1e-8, **kw) -> SolveResult:
-    """Equilibrium under ``loads`` (B, nb, 6), reached by load continuation from the start state.
-
-    The start state (default: reference configuration) is first brought to equilibrium under
-    zero external load, then the load is applied in ``load_steps`` equal increments.
-    """
-    loads = np.asarray(loads, float)
+def _continuation(model, loads, x, R, fmask, cmask, params, load_steps, max_iter, tol_force, tol_moment, kw):
     B = loads.shape[0]
-    if x0 is None:
-        x0, R0 = model.reference_state(B)
-    x, R = np.array(x0, float), np.array(R0, float)
     alive = np.ones(B, bool)
     frac = np.zeros(B)
     iters = np.zeros(B, int)
     res_f = np.zeros(B)
     res_m = np.zeros(B)
-    for k in range(0, load_steps + 1):
+    x, R = x.copy(), R.copy()
+    for k in range(1, load_steps + 1):
         lam = k / load_steps
         idx = np.flatnonzero(alive)
         if idx.size == 0:
             break
-        L = lam * loads[idx]
         xs, Rs, conv, rf, rm, it = newton(
-            model, x[idx], R[idx], L, _take(fmask, idx, B), _take(cmask, idx, B),
+            model, x[idx], R[idx], lam * loads[idx], _take(fmask, idx, B), _take(cmask, idx, B),
             _take_params(params, idx, B), max_iter, tol_force, tol_moment, **kw)
         iters[idx] += it
         res_f[idx], res_m[idx] = rf, rm
         ok = idx[conv]
         x[ok], R[ok] = xs[conv], Rs[conv]
         frac[ok] = lam
-        bad = idx[~conv]
-        if bad.size:
-            alive[bad] = False
-            log.warning("equilibrium not reached for %d scenario(s) at load fraction %.2f "
-                        "(max residual %.2e N, %.2e N*m)", bad.size, lam, rf[~conv].max(), rm[~conv].max())
-    return SolveResult(x, R, alive, res_f, res_m, iters, frac)
+        alive[idx[~conv]] = False
+    return x, R, alive, res_f, res_m, iters, frac
+
+
+def solve(model, loads, x0=None, R0=None, fmask=1.0, cmask=1.0, params=None, load_steps=1,
+          retry_load_steps=(4, 16), max_iter=50, tol_force=1e-8, tol_moment=1e-8, **kw) -> SolveResult:
+    """Equilibrium under ``loads`` (B, nb, 6) from the start state (default: reference).
+
+    The full load is applied in ``load_steps`` increments (one by default: the modified Newton
+    with step limits is robust for these models). Scenarios that fail are retried from their
+    start state with finer load continuation (``retry_load_steps``); those that still fail are
+    returned with ``converged = False``, frozen at the last load fraction they reached, and logged.
+    """
+    loads = np.asarray(loads, float)
+    B = loads.shape[0]
+    if x0 is None:
+        x0, R0 = model.reference_state(B)
+    x0, R0 = np.asarray(x0, float), np.asarray(R0, float)
+    x, R, conv, res_f, res_m, iters, frac = _continuation(
+        model, loads, x0, R0, fmask, cmask, params, load_steps, max_iter, tol_force, tol_moment, kw)
+    for steps in retry_load_steps:
+        bad = np.flatnonzero(~conv)
+        if bad.size == 0:
+            break
+        out = _continuation(model, loads[bad], x0[bad], R0[bad], _take(fmask, bad, B), _take(cmask, bad, B),
+                            _take_params(params, bad, B), steps, max_iter, tol_force, tol_moment, kw)
+        better = out[2] | (out[6] > frac[bad])
+        sel = bad[better]
+        x[sel], R[sel], conv[sel] = out[0][better], out[1][better], out[2][better]
+        res_f[sel], res_m[sel], frac[sel] = out[3][better], out[4][better], out[6][better]
+        iters[bad] += out[5]
+    if not conv.all():
+        log.warning("equilibrium not reached for %d of %d scenario(s) (max residual %.2e N, %.2e N*m); "
+                    "flagged converged=False", int((~conv).sum()), B, res_f[~conv].max(), res_m[~conv].max())
+    return SolveResult(x, R, conv, res_f, res_m, iters, frac)

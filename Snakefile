@@ -1,0 +1,21 @@
+# lumbar: lumbar-spine multibody biomechanics (see README.md).
+# Run from the repository root:  snakemake --cores 2
+from snakemake.utils import min_version
+
+min_version("9.0")
+
+
+configfile: "config/config.yaml"
+
+
+report: "workflow/report/workflow.rst"
+
+
+include: "workflow/rules/common.smk"
+include: "workflow/rules/geometry.smk"
+
+
+rule all:
+    input:
+        final_outputs(),
+    default_target: True

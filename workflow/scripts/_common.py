@@ -1,0 +1,65 @@
+"""Shared helpers of the workflow scripts (not part of the library; import by path).
+
+Every script in this directory runs two ways:
+  * from Snakemake (``script:`` directive): the global ``snakemake`` object is given;
+  * by hand, for debugging: ``python workflow/scripts/<stage>.py <rule> [--configfile ...]``,
+    which builds a stand-in object with the same attributes from the config and argparse.
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+class _Named(list):
+    """List with attribute access, like snakemake's Namedlist (``snakemake.output[0]``, ``.params.x``)."""
+
+    def __init__(self, items=(), **named):
+        super().__init__(list(items) + [v for v in named.values() if v not in items])
+        for k, v in named.items():
+            setattr(self, k, v)
+
+
+def stand_in(rules: dict, doc: str = "", argv=None):
+    """Build a stand-in ``snakemake`` object from argparse for running a script by hand.
+
+    ``rules`` maps rule name -> function(config) -> dict(output=[...], params={...}, input=[...]),
+    mirroring the rule in workflow/rules/; the config is validated and filled by lumbar.config.
+    """
+    from lumbar.config import load_config
+
+    ap = argparse.ArgumentParser(description=doc)
+    ap.add_argument("rule", choices=sorted(rules))
+    ap.add_argument("--configfile", default=str(ROOT / "config" / "config.yaml"))
+    ap.add_argument("--output", nargs="+", help="override the rule's output path(s)")
+    ap.add_argument("--log", default=None, help="log file (default: stderr only)")
+    args = ap.parse_args(argv)
+    config = load_config(args.configfile)
+    spec = rules[args.rule](config)
+    return SimpleNamespace(
+        rule=args.rule,
+        config=config,
+        input=_Named(spec.get("input", [])),
+        output=_Named(args.output or spec["output"]),
+        params=SimpleNamespace(**spec.get("params", {})),
+        log=_Named([args.log] if args.log else []),
+        wildcards=SimpleNamespace(),
+        threads=1,
+    )
+
+
+def setup_logging(smk) -> logging.Logger:
+    """Log to the rule's log file (``snakemake.log[0]``) if it has one, and to stderr."""
+    handlers = [logging.StreamHandler(sys.stderr)]
+    if len(smk.log):
+        Path(smk.log[0]).parent.mkdir(parents=True, exist_ok=True)
+        handlers.append(logging.FileHandler(smk.log[0], mode="w"))
+    logging.basicConfig(level=logging.INFO, handlers=handlers, force=True,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    logging.captureWarnings(True)
+    return logging.getLogger(f"lumbar.workflow.{smk.rule}")
