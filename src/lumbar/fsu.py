@@ -97,6 +97,8 @@ def add_level(model: SpineModel, level, charset, facet_stiffness=None, k_shear=N
     ks = disc.k_shear if k_shear is None else k_shear
     if ks is None:
         raise ValueError("characteristic set has no disc shear stiffness: set fsu.disc_shear_stiffness_n_per_m")
+    if not np.isfinite(ks) or ks <= 0:
+        raise ValueError(f"disc shear stiffness must be a finite value > 0 N/m, got {ks}")
     model.add_disc(DiscSpec(up, lo, np.asarray(level.disc_centre, float), disc_frame(level.disc_normal),
                             disc.k_axial_quadratic, disc.k_axial_linear, ks, disc.k_tension,
                             disc.torque, name=level.name))
@@ -117,8 +119,8 @@ def add_level(model: SpineModel, level, charset, facet_stiffness=None, k_shear=N
         kinds.append(lig.kind)
     sides = []
     k_fac = charset.facet.stiffness if facet_stiffness is None else facet_stiffness
-    if k_fac < 0:
-        raise ValueError(f"facet stiffness must be >= 0 N/m, got {k_fac}")
+    if not np.isfinite(k_fac) or k_fac < 0:
+        raise ValueError(f"facet stiffness must be a finite value >= 0 N/m, got {k_fac}")
     for side in ("left", "right"):
         fl = level.facets.get(side)
         if fl is None:
@@ -194,16 +196,9 @@ def range_of_motion(fsu: FSU, moments_nm=(1, 2.5, 5, 7.5, 10), directions=MAIN_D
     return df
 
 
-def _load_geometry(kind, path):
-    if kind == "synthetic":
-        from .geometry.synthetic import symmetric_fsu
-        return symmetric_fsu()
-    from .geometry import load_geometry
-    return load_geometry(kind, path=path)
-
-
 def main(argv=None) -> int:
     from .characteristics import CHARACTERISTIC_SETS, load_characteristic_set
+    from .geometry import load_geometry
     p = argparse.ArgumentParser(prog="python -m lumbar.fsu", description=__doc__.split("\n\n")[0])
     p.add_argument("--moment", type=float, nargs="+", default=[10.0], help="pure moment(s) [N*m]")
     p.add_argument("--direction", default="all",
@@ -214,6 +209,7 @@ def main(argv=None) -> int:
     p.add_argument("--stage", default="intact", help="all | comma list of " + ", ".join(STAGES))
     p.add_argument("--level", default="L4-L5")
     p.add_argument("--shear-stiffness", type=float, default=None, help="disc shear stiffness [N/m]")
+    p.add_argument("--facet-stiffness", type=float, default=None, help="facet contact stiffness [N/m]")
     a = p.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     directions = MAIN_DIRECTIONS if a.direction == "all" else tuple(a.direction.split(","))
@@ -222,9 +218,9 @@ def main(argv=None) -> int:
         if not np.isfinite(m) or m < 0:
             p.error(f"--moment must be finite and >= 0 N*m, got {m}")
     try:
-        geo = _load_geometry(a.geometry, a.geometry_dir)
+        geo = load_geometry(a.geometry, path=a.geometry_dir)
         cs = load_characteristic_set(a.set)
-        fsu = build_fsu(geo, cs, a.level, k_shear=a.shear_stiffness)
+        fsu = build_fsu(geo, cs, a.level, facet_stiffness=a.facet_stiffness, k_shear=a.shear_stiffness)
         df = range_of_motion(fsu, a.moment, directions, stages)
     except (ValueError, KeyError, FileNotFoundError) as e:
         print(f"error: {e}", file=sys.stderr)

@@ -229,6 +229,12 @@ def read_table(path, schema: TableSchema) -> pd.DataFrame:
 
 
 # ---------------------------------------------------------------- writers
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 @contextlib.contextmanager
 def atomic_writer(path, mode: str = "w", encoding: str | None = "utf-8",
                   newline: str | None = "") -> Iterator[Any]:
@@ -239,6 +245,7 @@ def atomic_writer(path, mode: str = "w", encoding: str | None = "utf-8",
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.fchmod(fd, 0o666 & ~_umask())   # mkstemp makes 0600; results get the usual permissions
     try:
         if "b" in mode:
             f = os.fdopen(fd, mode)

@@ -17,10 +17,11 @@ import logging
 import os
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from .io import atomic_writer
 
 __all__ = ["render_fsu", "offscreen_available", "facet_surfaces"]
 
@@ -130,15 +131,8 @@ def _views(items):
 def _atomic_png(path: Path, rgb: np.ndarray) -> None:
     from PIL import Image
 
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".png.tmp")
-    os.close(fd)
-    try:
-        Image.fromarray(np.ascontiguousarray(rgb[..., :3]).astype(np.uint8)).save(tmp, format="PNG")
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    with atomic_writer(path, "wb") as f:
+        Image.fromarray(np.ascontiguousarray(rgb[..., :3]).astype(np.uint8)).save(f, format="PNG")
 
 
 def _render_pyvista(items, path: Path) -> None:
@@ -217,16 +211,11 @@ def _render_matplotlib(items, path: Path) -> None:
         ax.set_ylabel("y left [mm]")
         ax.set_zlabel("z superior [mm]")
         ax.set_title(f"{items['title']}: {label}")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".png.tmp")
-    os.close(fd)
     try:
-        fig.savefig(tmp, format="png", metadata={"Software": None})
-        os.replace(tmp, path)
+        with atomic_writer(path, "wb") as f:
+            fig.savefig(f, format="png", metadata={"Software": None})
     finally:
         plt.close(fig)
-        if os.path.exists(tmp):
-            os.unlink(tmp)
 
 
 def render_fsu(geometry, level: str, path, surfaces=None, backend: str = "auto") -> str:

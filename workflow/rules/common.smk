@@ -11,6 +11,7 @@ def final_outputs():
     return [
         "results/tables/fsu_geometry.csv",
         "results/figures/fig1_l4l5_model.png",
+        "results/tables/fsu_rom_intact.csv",
     ]
 
 

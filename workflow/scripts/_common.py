@@ -25,6 +25,11 @@ class _Named(list):
             setattr(self, k, v)
 
 
+def _named(spec):
+    """Namedlist stand-in from a list (positional) or a dict (named entries)."""
+    return _Named(**spec) if isinstance(spec, dict) else _Named(spec)
+
+
 def stand_in(rules: dict, doc: str = "", argv=None):
     """Build a stand-in ``snakemake`` object from argparse for running a script by hand.
 
@@ -44,7 +49,7 @@ def stand_in(rules: dict, doc: str = "", argv=None):
     return SimpleNamespace(
         rule=args.rule,
         config=config,
-        input=_Named(spec.get("input", [])),
+        input=_named(spec.get("input", [])),
         output=_Named(args.output or spec["output"]),
         params=SimpleNamespace(**spec.get("params", {})),
         log=_Named([args.log] if args.log else []),

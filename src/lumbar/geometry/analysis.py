@@ -117,3 +117,26 @@ def projected_area(points: np.ndarray, normal: np.ndarray) -> float:
     b = np.cross(n, a)
     q = np.c_[points @ a, points @ b]
     return float(ConvexHull(q).volume)
+
+
+def summary_table(geo) -> "pd.DataFrame":
+    """One row per level: disc centre/normal/CSA/height, facet landmarks, ligament fibres (mm)."""
+    import pandas as pd
+
+    rows = []
+    for name in sorted(geo.levels):
+        lev = geo.levels[name]
+        row = {"geometry": geo.name, "level": name, "upper": lev.upper, "lower": lev.lower}
+        for ax, c in zip("xyz", lev.disc_centre):
+            row[f"disc_centre_{ax}_mm"] = 1e3 * float(c)
+        for ax, n in zip("xyz", lev.disc_normal):
+            row[f"disc_normal_{ax}"] = float(n)
+        row["disc_csa_mm2"] = 1e6 * float(lev.disc_csa)
+        row["disc_height_mm"] = 1e3 * float(lev.disc_height)
+        row["facet_landmarks_n"] = int(sum(len(f.superior) + len(f.inferior) for f in lev.facets.values()))
+        for lig in lev.ligaments:
+            length = np.linalg.norm(np.asarray(lig.upper) - np.asarray(lig.lower), axis=1) + np.asarray(lig.extra_length)
+            row[f"{lig.name}_n_fibres"] = int(len(length))
+            row[f"{lig.name}_mean_length_mm"] = 1e3 * float(length.mean()) if len(length) else np.nan
+        rows.append(row)
+    return pd.DataFrame(rows)

@@ -38,7 +38,10 @@ def load_geometry(kind: str = "default", path=None, levels=None) -> SpineGeometr
             raise GeometryError("kind='visible_human' needs path= the visible_human_lss folder")
         from .visible_human import load_visible_human  # noqa: PLC0415
         return load_visible_human(path, levels=levels)
-    raise GeometryError(f"unknown geometry kind {kind!r}; expected 'default'/'myo_sim' or 'visible_human'")
+    if k == "synthetic":
+        from .synthetic import symmetric_fsu  # noqa: PLC0415
+        return symmetric_fsu()
+    raise GeometryError(f"unknown geometry kind {kind!r}; expected 'default'/'myo_sim', 'visible_human' or 'synthetic'")
 
 
 def _body_centroid(mesh: trimesh.Trimesh, x_post: float) -> np.ndarray:

@@ -1,0 +1,48 @@
+"""FSU stage: rule fsu_rom, the range of motion of the intact L4-L5 unit for every characteristic set.
+
+By hand: python workflow/scripts/fsu.py fsu_rom --configfile config/test/config.yaml --output /tmp/rom.csv
+"""
+import importlib.util
+from pathlib import Path
+
+import pandas as pd
+
+_spec = importlib.util.spec_from_file_location("_common", Path(__file__).resolve().parent / "_common.py")
+_common = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_common)
+
+RULES = {
+    "fsu_rom": lambda c: dict(
+        input=dict(characteristics=c["characteristics"]["data_dir"]),
+        output=["results/tables/fsu_rom_intact.csv"],
+        params=dict(geometry=c["geometry"], fsu=c["fsu"], solver=c["solver"], sets=c["characteristics"]["sets"])),
+}
+
+if "snakemake" not in globals():
+    snakemake = _common.stand_in(RULES, __doc__)
+
+log = _common.setup_logging(snakemake)
+
+from lumbar.characteristics import load_characteristic_set  # noqa: E402
+from lumbar.fsu import build_fsu, range_of_motion  # noqa: E402
+from lumbar.geometry import load_geometry  # noqa: E402
+from lumbar.io import write_table_atomic  # noqa: E402
+
+g, f, s = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solver
+geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
+tables = []
+for name in snakemake.params.sets:
+    cs = load_characteristic_set(name, data_dir=snakemake.input.characteristics)
+    fsu = build_fsu(geo, cs, f["level"], facet_stiffness=f["facet_stiffness_n_per_m"],
+                    k_shear=f.get("disc_shear_stiffness_n_per_m"))
+    df = range_of_motion(fsu, f["moments_nm"], f["directions"], stages=["intact"], load_steps=s["load_steps"],
+                         max_iter=s["max_iter"], tol=min(s["tol_force_n"], s["tol_moment_nm"]))
+    df.insert(0, "set", name)
+    df.insert(1, "geometry", geo.name)
+    n_bad = int((~df["converged"]).sum())
+    log.info("set %s: %d scenarios, %d not converged", name, len(df), n_bad)
+    if n_bad:
+        log.warning("set %s: %d scenario(s) did not converge; rom_deg is NaN there", name, n_bad)
+    tables.append(df)
+write_table_atomic(pd.concat(tables, ignore_index=True), snakemake.output[0])
+log.info("wrote %s", snakemake.output[0])
