@@ -22,8 +22,8 @@ def test_defaults_filled_from_empty():
         "calibrated", "chazal1985", "shirazi_adl1986", "white_panjabi1990", "nolte1990", "rupp2015"]
     assert cfg["fsu"] == {"level": "L4-L5", "moments_nm": [1, 2.5, 5, 7.5, 10],
                           "directions": ["flexion", "extension", "lateral_bending", "axial_rotation"],
-                          "facet_stiffness_n_per_m": 12000}
-    assert cfg["solver"] == {"tol_force_n": 1e-8, "tol_moment_nm": 1e-8, "max_iter": 50, "load_steps": 5}
+                          "facet_stiffness_n_per_m": 12000, "disc_shear_stiffness_n_per_m": None}
+    assert cfg["solver"] == {"tol_force_n": 1e-8, "tol_moment_nm": 1e-8, "max_iter": 50, "load_steps": 1}
     assert cfg["seed"] == 20261123
 
 
