@@ -275,26 +275,32 @@ class SpineModel:
                 J[:, j, :, i, :] += ba
 
     # ---------------------------------------------------------------- evaluation
-    def fibre_state(self, x, R, fmask=1.0):
-        """Fibre lengths [m], strains [%] and tensions [N] (B, nf)."""
+    def fibre_state(self, x, R, fmask=1.0, params=None):
+        """Fibre lengths [m], strains [%] and tensions [N] (B, nf).
+
+        ``params["fibre_l0_scale"]`` (B, nf) or (B, 1): per-scenario multiplier of the slack lengths
+        (a prestrain change: scale = (1 + eps0) / (1 + eps0'))."""
         pa, _ = self._attach(x, R, self.f_a, self.f_sa)
         pb, _ = self._attach(x, R, self.f_b, self.f_sb)
         d = pa - pb
         dn = np.linalg.norm(d, axis=-1)
         length = dn + self.f_extra
-        T, dT = self._tension(length)
-        return length, (length / self.f_l0 - 1.0) * 100.0, T * fmask, dT * fmask, d, dn, pa, pb
+        l0 = self.f_l0
+        if params and params.get("fibre_l0_scale") is not None:
+            l0 = l0 * np.asarray(params["fibre_l0_scale"], float).reshape(length.shape[0], -1)
+        T, dT = self._tension(length, l0)
+        return length, (length / l0 - 1.0) * 100.0, T * fmask, dT * fmask, d, dn, pa, pb
 
-    def _tension(self, length):
+    def _tension(self, length, l0):
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-            return self._tension_raw(length)
+            return self._tension_raw(length, l0)
 
-    def _tension_raw(self, length):
+    def _tension_raw(self, length, l0):
         par = self.f_par
-        eps = (length / self.f_l0 - 1.0) * 100.0
+        eps = (length / l0 - 1.0) * 100.0
         Ts, dTs = softplus_force(eps, par[:, 0], par[:, 1], par[:, 2], par[:, 3], self.slack_width_pct)
-        dTs = dTs * 100.0 / self.f_l0
-        Tr, dTr = rupp_force(length - self.f_l0, par[:, 0], par[:, 1], par[:, 2], par[:, 3], par[:, 4])
+        dTs = dTs * 100.0 / l0
+        Tr, dTr = rupp_force(length - l0, par[:, 0], par[:, 1], par[:, 2], par[:, 3], par[:, 4])
         law = self.f_law
         T = np.where(law == LAW_SOFTPLUS, Ts, np.where(law == LAW_RUPP, Tr, par[:, 0]))
         dT = np.where(law == LAW_SOFTPLUS, dTs, np.where(law == LAW_RUPP, dTr, 0.0))
@@ -305,21 +311,24 @@ class SpineModel:
 
         ``loads`` (B, nb, 6): external force and moment (about the reference point) per body.
         ``fmask`` (B, nf) / ``cmask`` (B, nc): element weights per scenario (broadcastable).
-        ``params``: optional dict of per-scenario overrides, e.g. {'k_tension': (B,)}.
+        ``params``: optional per-scenario model extensions (each vanishes at its default):
+        ``k_tension`` (B,) disc tensile stiffness [N/m]; ``disc_phi_offset`` (B, 3) neutral-angle
+        offset of every disc torque law [rad] (T = T_law(phi - offset)); ``fibre_l0_scale`` (B, nf)
+        or (B, 1) slack-length multiplier of the fibres.
         """
         B, nb = x.shape[0], self.nb
         Q = np.zeros((B, nb, 6)) if loads is None else np.array(loads, float, copy=True)
         J = np.zeros((B, nb, 6, nb, 6)) if jacobian else None
         if self.nf:
-            self._add_fibres(x, R, Q, J, fmask)
+            self._add_fibres(x, R, Q, J, fmask, params or {})
         if self.nc:
             self._add_contacts(x, R, Q, J, cmask)
         if self.nd:
             self._add_discs(x, R, Q, J, params or {})
         return Q, J
 
-    def _add_fibres(self, x, R, Q, J, fmask):
-        _, _, T, dT, d, dn, pa, pb = self.fibre_state(x, R, fmask)
+    def _add_fibres(self, x, R, Q, J, fmask, params):
+        _, _, T, dT, d, dn, pa, pb = self.fibre_state(x, R, fmask, params)
         xa = self._attach(x, R, self.f_a, self.f_sa)[1]
         xb = self._attach(x, R, self.f_b, self.f_sb)[1]
         u = d / dn[..., None]
@@ -389,7 +398,8 @@ class SpineModel:
             # rotation: Eq. 3 per project axis of the lower body
             Rrel = np.swapaxes(RB[:, 0], -1, -2) @ Ra[:, 0]
             phi = so3.log(Rrel)
-            T, dT = disc_torque(phi, spec.torque)
+            off = params.get("disc_phi_offset")
+            T, dT = disc_torque(phi if off is None else phi - np.reshape(off, (-1, 3)), spec.torque)
             tau = np.einsum("bij,bj->bi", RB[:, 0], T)                 # torque on the lower body
             if spec.upper >= 0:
                 Q[:, spec.upper, 3:] -= tau
@@ -443,9 +453,9 @@ class SpineModel:
             out[:, sid] = (Fm * np.linalg.norm(grad, axis=-1)).sum(-1)
         return out
 
-    def group_forces(self, x, R, fmask=1.0):
+    def group_forces(self, x, R, fmask=1.0, params=None):
         """Total tension [N] per fibre group (B, n_groups)."""
-        T = self.fibre_state(x, R, fmask)[2]
+        T = self.fibre_state(x, R, fmask, params)[2]
         G = np.zeros((len(self.fibre_groups), self.nf))
         G[self.f_group, np.arange(self.nf)] = 1.0
         return T @ G.T
