@@ -14,6 +14,10 @@ report: "workflow/report/workflow.rst"
 include: "workflow/rules/common.smk"
 include: "workflow/rules/geometry.smk"
 include: "workflow/rules/fsu.smk"
+include: "workflow/rules/virtual_experiment.smk"
+include: "workflow/rules/calibration.smk"
+include: "workflow/rules/stepwise_reduction.smk"
+include: "workflow/rules/l2s1.smk"
 
 
 rule all:

@@ -66,7 +66,9 @@ EXPECTED_LIGAMENTS: dict[str, tuple[str, ...]] = {
 }
 
 KINDS = frozenset({"original_text", "original_figure", "third_party", "derived_from_published_fit",
-                   "surrogate"})
+                   "surrogate",
+                   # written by lumbar.calibration.write_characteristics (results/calibration/characteristics)
+                   "calibrated_on_surrogate", "calibrated_on_measured"})
 
 # unit -> factor to SI, per parameter family
 _LEN = {"m": 1.0, "mm": 1e-3}

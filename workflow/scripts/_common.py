@@ -68,3 +68,11 @@ def setup_logging(smk) -> logging.Logger:
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     logging.captureWarnings(True)
     return logging.getLogger(f"lumbar.workflow.{smk.rule}")
+
+
+def first(item):
+    """The single path of an input that may be a path, an empty list or a one-element (Named)list."""
+    if isinstance(item, (str, Path)):
+        return str(item)
+    items = list(item)
+    return str(items[0]) if items else None

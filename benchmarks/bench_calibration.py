@@ -1,0 +1,55 @@
+"""Benchmark: backward calibration wall time and 960 forward equilibria (6 sets x 160 scenarios), one core.
+
+Prints one JSON object. The calibration runs on a noise-free surrogate of the default model (1 virtual
+specimen, no variation), i.e. the round trip of tests/test_calibration.py, from generic start values.
+Targets: calibration < 60 s, 960 forward equilibria < 2 s. Usage: python benchmarks/bench_calibration.py
+"""
+from __future__ import annotations
+
+import os
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")   # one core
+
+import dataclasses  # noqa: E402
+import json  # noqa: E402
+import logging  # noqa: E402
+import time  # noqa: E402
+
+from lumbar.calibration import calibrate  # noqa: E402
+from lumbar.characteristics import CHARACTERISTIC_SETS, load_characteristic_set  # noqa: E402
+from lumbar.fsu import build_fsu  # noqa: E402
+from lumbar.geometry import load_geometry  # noqa: E402
+from lumbar.stepwise_reduction import reference_table, simulate_stepwise_reduction  # noqa: E402
+from lumbar.virtual_experiment import SpecimenVariation, stepwise_reduction_table  # noqa: E402
+
+
+def main():
+    logging.basicConfig(level=logging.ERROR)
+    geo = load_geometry("default", levels=["L4-L5"])
+    paper = load_characteristic_set("calibrated")
+    zero = SpecimenVariation(**{f.name: 0.0 for f in dataclasses.fields(SpecimenVariation)})
+    table = stepwise_reduction_table(geo, paper, 1, n_specimens=1, variation=zero, noise_sd_deg=0.0)
+    t = time.perf_counter()
+    res = calibrate(geo, reference_table(table), initial=paper)
+    t_cal = time.perf_counter() - t
+    fsus = [build_fsu(geo, res.charset if n == "calibrated" else load_characteristic_set(n))
+            for n in CHARACTERISTIC_SETS]
+    t = time.perf_counter()
+    n = conv = 0
+    for f in fsus:
+        sim = simulate_stepwise_reduction(f)
+        n += len(sim)
+        conv += int(sim["converged"].sum())
+    t_fwd = time.perf_counter() - t
+    print(json.dumps({
+        "calibration_wall_time_s": round(t_cal, 2), "calibration_target_s": 60,
+        "calibration_evaluations": int(res.summary["n_evaluations"].sum()),
+        "forward_equilibria": n, "forward_converged": conv,
+        "forward_time_s": round(t_fwd, 3), "forward_target_s": 2.0,
+        "omp_num_threads": os.environ.get("OMP_NUM_THREADS"),
+    }, indent=2))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,211 @@
+"""Muscle core: Millard curves, the myo-sim fascicle set, path lengths / moment arms, model Jacobian.
+
+Curve defaults (OpenSim 4.x source, opensim-org/opensim-core):
+* ActiveForceLengthCurve::constructProperties: min_norm_active_fiber_length 0.47-0.0259, transition 0.6259,
+  max_norm_active_fiber_length 1.8123, shallow_ascending_slope 0.8616, minimum_value 0.1; curviness 1 in
+  buildCurve; SmoothSegmentedFunctionFactory::createFiberActiveForceLengthCurve (plateau at 1 with zero
+  slope, ylow outside [lce0, lce3]).
+* SmoothSegmentedFunctionFactory::createFiberForceLengthCurve: (1+e0, 0, slope 0) to (1+e1, 1, slope kiso);
+  we use e0 = 0, e1 = 0.7 and kiso = 2/0.7, the values that reproduce the paper's quoted baseline tangent
+  modulus at 70 % strain (2.86 MPa with K = 1 MPa, Sect. 2.5).
+* SegmentedQuinticBezierToolkit::calcQuinticBezierCornerControlPoints (curviness scaled 0.1 + 0.8 c).
+"""
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from lumbar.muscles.millard import (ACTIVE_FL, FORCE_VELOCITY, PASSIVE_FL, active_force_length_curve,
+                                    passive_force_length_curve)
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+
+
+def test_active_force_length_defining_points():
+    y, d = ACTIVE_FL.value_and_slope(np.array([1.0, 0.4441, 0.3, 1.8123, 2.2]))
+    assert y[0] == pytest.approx(1.0, abs=1e-12) and d[0] == pytest.approx(0.0, abs=1e-9)
+    assert np.allclose(y[1:], 0.1, atol=1e-12) and np.allclose(d[1:], 0.0, atol=1e-9)
+    xs = np.linspace(0.45, 1.8, 300)
+    assert ACTIVE_FL(xs).max() <= 1.0 + 1e-12
+    # ascending limb passes the shoulder line at lce1 with the shallow slope region above it
+    assert 0.5 < ACTIVE_FL(0.6259) < 0.8
+
+
+def test_passive_force_length_defining_points():
+    y, d = PASSIVE_FL.value_and_slope(np.array([0.8, 1.0, 1.7, 2.0]))
+    assert y[0] == pytest.approx(0, abs=1e-12) and y[1] == pytest.approx(0, abs=1e-12) and d[1] == pytest.approx(0, abs=1e-9)
+    assert y[2] == pytest.approx(1.0, abs=1e-12) and d[2] == pytest.approx(2 / 0.7, rel=1e-9)
+    assert y[3] == pytest.approx(1 + 0.3 * 2 / 0.7, rel=1e-9)          # linear extrapolation
+    # paper Sect. 2.5: baseline tangent moduli 1.01 / 2.45 / 2.86 MPa at 30 / 50 / 70 % strain (K = 1 MPa)
+    _, slope = PASSIVE_FL.value_and_slope(1 + np.array([0.3, 0.5, 0.7]))
+    assert np.allclose(slope, [1.01, 2.45, 2.86], atol=0.2)
+
+
+def test_force_velocity_defining_points():
+    y, d = FORCE_VELOCITY.value_and_slope(np.array([-1.0, 0.0, 1.0]))
+    assert np.allclose(y, [0, 1, 1.4], atol=1e-12)
+    assert d[1] == pytest.approx(5.0, rel=1e-9) and abs(d[0]) < 1e-9 and abs(d[2]) < 1e-9
+
+
+@pytest.mark.parametrize("curve", [ACTIVE_FL, PASSIVE_FL, FORCE_VELOCITY], ids=lambda c: c.name)
+def test_curve_slope_matches_finite_differences(curve):
+    x = np.linspace(curve.x_lo - 0.1, curve.x_hi + 0.1, 157)
+    h = 1e-6
+    fd = (curve(x + h) - curve(x - h)) / (2 * h)
+    _, d = curve.value_and_slope(x)
+    assert np.allclose(d, fd, atol=1e-5 * max(1, np.abs(d).max()))
+
+
+def test_bad_curve_parameters_rejected():
+    with pytest.raises(ValueError, match="stiffness"):
+        passive_force_length_curve(kiso=1.0)
+    with pytest.raises(ValueError, match="lce"):
+        active_force_length_curve(x0=0.7, x1=0.6)
+
+
+@pytest.fixture(scope="module")
+def muscle_set():
+    from lumbar.muscles.muscle_set import load_muscle_set
+    return load_muscle_set()
+
+
+def test_muscle_set_groups_and_symmetry(muscle_set):
+    ms = muscle_set
+    assert sorted(ms.symmetrized) == ["LTpT_T12_l", "QL_mid_L2-12.1_l"]      # myo-sim 0.2.4 defects
+    assert ms.n == 210
+    counts = pd.Series(ms.groups).value_counts().to_dict()
+    assert counts == {"LT": 52, "MF": 50, "QL": 36, "IL": 24, "Ps": 22, "EO": 12, "IO": 12, "RA": 2}
+    names = list(ms.names)
+    for i, n in enumerate(names):
+        if n.endswith("_r"):
+            j = names.index(n[:-2] + "_l")
+            pr = np.array([p for _, p in ms.sites[i]])
+            pl = np.array([p for _, p in ms.sites[j]])
+            assert np.allclose(pr * [1, -1, 1], pl, atol=1e-6), n      # mirror about the sagittal plane
+            assert ms.f_max_n[i] == ms.f_max_n[j]
+
+
+def test_sites_lie_on_their_vertebrae(muscle_set):
+    """Frame check: sites on lumbar2-4 are within a few mm of the geometry module's meshes."""
+    import trimesh
+    from lumbar.geometry import load_geometry
+    geo = load_geometry("default", levels=["L2-L3", "L3-L4"])
+    for v in ("L2", "L3", "L4"):
+        pts = np.array([p for s in muscle_set.sites for b, p in s if b == v])
+        d = np.abs(trimesh.proximity.ProximityQuery(geo.vertebrae[v].mesh).signed_distance(pts))
+        assert np.median(d) < 0.015, (v, np.median(d))
+
+
+@pytest.fixture(scope="module")
+def model():
+    from lumbar.muscle_model import LumbarMuscleModel
+    return LumbarMuscleModel()
+
+
+def _pose(model, seed=0):
+    from lumbar import so3
+    rng = np.random.default_rng(seed)
+    x, R = model.reference_state()
+    x = x + rng.normal(0, 1e-3, x.shape)
+    R = so3.exp(rng.normal(0, 0.03, (1, model.nb, 3))) @ R
+    return x, R
+
+
+def test_moment_arms_equal_minus_dlength_dangle(model):
+    from lumbar import so3
+    x, R = _pose(model)
+    L, G = model.paths.lengths(x, R)
+    h = 1e-6
+    for b in range(model.nb):
+        for k in range(6):
+            d = np.zeros(6)
+            d[k] = h
+            xp, Rp, xm, Rm = x.copy(), R.copy(), x.copy(), R.copy()
+            xp[0, b] += d[:3]
+            xm[0, b] -= d[:3]
+            Rp[0, b] = so3.exp(d[3:]) @ R[0, b]
+            Rm[0, b] = so3.exp(-d[3:]) @ R[0, b]
+            fd = (model.paths.lengths(xp, Rp, False)[0] - model.paths.lengths(xm, Rm, False)[0]) / (2 * h)
+            assert np.allclose(G[0, :, b, k], fd[0], atol=1e-7)
+    # generalised force per newton = -dL/dq: a two-site L4-sacrum fascicle pulls L4 toward its sacral site
+    i = next(i for i, s in enumerate(model.ms.sites) if [b for b, _ in s] == ["S1", "L4"])
+    (_, p_s1), (_, p_l4) = model.ms.sites[i]
+    assert (-G[0, i, 3, :3]) @ (p_s1 - p_l4) > 0
+
+
+def test_model_jacobian_matches_finite_differences(model):
+    from lumbar import so3
+    x, R = _pose(model, 1)
+    rng = np.random.default_rng(2)
+    params = {"activation": rng.uniform(0, 0.3, (1, model.ms.n)), "forces": model.point_forces("crate_far")}
+    Q, J = model.evaluate(x, R, params=params)
+    h = 1e-7
+    n = model.nb * 6
+    Jfd = np.zeros((n, n))
+    for col in range(n):
+        b, k = divmod(col, 6)
+        out = []
+        for s in (1, -1):
+            xx, RR = x.copy(), R.copy()
+            d = np.zeros(6)
+            d[k] = s * h
+            xx[0, b] += d[:3]
+            RR[0, b] = so3.exp(d[3:]) @ R[0, b]
+            out.append(model.evaluate(xx, RR, params=params, jacobian=False)[0].reshape(-1))
+        Jfd[:, col] = (out[0] - out[1]) / (2 * h)
+    scale = np.abs(Jfd).max()
+    assert np.abs(J.reshape(n, n) - Jfd).max() < 1e-5 * scale
+
+
+def test_christophy_cross_check(muscle_set, model):
+    """Max forces, derived optimal fibre lengths and pennation vs Christophy et al. 2012 (../shared)."""
+    f = SHARED / "muscles" / "christophy2012_238_fascicles.csv"
+    if not f.is_file():
+        pytest.skip("../shared/muscles/christophy2012_238_fascicles.csv not present")
+    ref = pd.read_csv(f).set_index("name")
+    names = [n for n in muscle_set.names if n in ref.index]
+    assert len(names) >= 200
+    idx = [muscle_set.names.index(n) for n in names]
+    r_f = muscle_set.f_max_n[idx] / ref.loc[names, "max_force"].to_numpy()
+    assert 0.85 < np.median(r_f) < 1.2
+    lopt = model.props.l_opt_m[idx] / ref.loc[names, "optimal_fiber_length"].to_numpy()
+    # myo-sim scales the OpenSim bones by 0.87 and our fibre ratios are group medians
+    assert 0.6 < np.median(lopt) < 1.2
+    assert np.corrcoef(model.props.l_opt_m[idx], ref.loc[names, "optimal_fiber_length"])[0, 1] > 0.7
+    assert np.allclose(np.degrees(muscle_set.pennation_rad[idx]), ref.loc[names, "pennation_angle_deg"], atol=0.01)
+
+
+def test_reject_negative_pcsa(model):
+    with pytest.raises(ValueError, match="pcsa_m2"):
+        model.props.with_(pcsa_m2=-model.props.pcsa_m2)
+
+
+def test_reject_unknown_group(model):
+    from lumbar.muscle_model import group_mask
+    with pytest.raises(ValueError, match="groups"):
+        group_mask(model.ms, ("MF", "XX"))
+    with pytest.raises(ValueError, match="scenario"):
+        group_mask(model.ms, "BACK")
+
+
+def test_bad_ssl_rejected(model):
+    from lumbar.muscle_model import apply_parameter
+    with pytest.raises(ValueError, match="ssl_um"):
+        apply_parameter(model.props, model.ms, "ssl_um", 0.0, "MUL")
+    with pytest.raises(ValueError, match="ssl_um"):
+        apply_parameter(model.props, model.ms, "k_n_per_cm2", 100.0, "MUL", ssl_um=-1)
+
+
+def test_reject_unknown_activity():
+    from lumbar.muscle_model import get_activity
+    with pytest.raises(ValueError, match="activity"):
+        get_activity("jumping")
+
+
+def test_malformed_group_table(tmp_path):
+    from lumbar.muscles.muscle_set import read_group_table
+    p = tmp_path / "g.csv"
+    p.write_text("prefix,group,in_situ_sl_um,pennation_deg,fibre_ratio\nMF,ZZ,2.27,0,0.6\n")
+    with pytest.raises(ValueError, match="group"):
+        read_group_table(p)

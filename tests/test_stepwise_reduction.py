@@ -1,0 +1,169 @@
+"""Forward stepwise reduction (lumbar.stepwise_reduction): reference tables, derived disc-only rows,
+outlier rule, Table 4 on the default surrogate, and the workflow rules on config/test."""
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from lumbar import stepwise_reduction as sr
+from lumbar.calibration import derived_disc_only_rows
+from lumbar.characteristics import CHARACTERISTIC_SETS, load_characteristic_set
+from lumbar.io import TableError
+
+from conftest import ROOT
+
+DERIVED = ROOT / "data" / "experiments" / "heuer2007_disc_only_derived_from_published_fit.csv"
+EXPECTED = {"flexion": (4.93, 6.60, 8.43, 10.11, 13.41), "extension": (2.25, 4.93, 7.95, 10.29, 12.82),
+            "lateral_bending": (2.17, 3.68, 5.19, 6.51, 9.09), "axial_rotation": (1.29, 2.78, 4.45, 5.82, 7.73)}
+
+
+def test_derived_disc_only_rows_recomputed():
+    stored = sr.read_experiment_table(DERIVED)
+    again = derived_disc_only_rows(load_characteristic_set("calibrated").disc.torque)
+    assert len(stored) == 20 and set(stored["kind"]) == {"derived_from_published_fit"}
+    assert stored["rom_min_deg"].isna().all() and stored["rom_max_deg"].isna().all()
+    assert stored["source"].str.contains("Table 1").all()
+    for d, vals in EXPECTED.items():
+        s = stored[stored["direction"] == d].sort_values("moment_nm")["rom_mean_deg"].to_numpy()
+        a = again[again["direction"] == d].sort_values("moment_nm")["rom_mean_deg"].to_numpy()
+        np.testing.assert_allclose(s, vals, atol=0.01, err_msg=d)
+        np.testing.assert_allclose(a, s, atol=1e-4, err_msg=d)
+
+
+def _table(tmp_path, mutate=None, drop=None):
+    df = pd.read_csv(DERIVED)
+    if drop:
+        df = df.drop(columns=[drop])
+    if mutate:
+        mutate(df)
+    p = tmp_path / "measured.csv"
+    df.to_csv(p, index=False)
+    return p
+
+
+def test_reject_measured_table_missing_column(tmp_path):
+    p = _table(tmp_path, drop="rom_mean_deg")
+    with pytest.raises(TableError, match="rom_mean_deg") as e:
+        sr.read_experiment_table(p)
+    assert "measured.csv" in str(e.value)
+
+
+def test_reject_unknown_stage(tmp_path):
+    p = _table(tmp_path, lambda d: d.__setitem__("stage", ["wo_nuc"] + list(d["stage"][1:])))
+    with pytest.raises(TableError, match=r"measured.csv, row 1, column 'stage'"):
+        sr.read_experiment_table(p)
+
+
+def test_reject_negative_rom(tmp_path):
+    p = _table(tmp_path, lambda d: d.__setitem__("rom_mean_deg", [-1.0] + list(d["rom_mean_deg"][1:])))
+    with pytest.raises(TableError, match=r"row 1, column 'rom_mean_deg'"):
+        sr.read_experiment_table(p)
+
+
+def test_reject_zero_specimens_row(tmp_path):
+    p = _table(tmp_path, lambda d: d.__setitem__("n_specimens", [0] + list(d["n_specimens"][1:])))
+    with pytest.raises(TableError, match=r"row 1, column 'n_specimens'"):
+        sr.read_experiment_table(p)
+
+
+def test_malformed_range_mean_outside(tmp_path):
+    def m(d):
+        d["rom_min_deg"] = d["rom_mean_deg"] + 1.0
+        d["rom_max_deg"] = d["rom_mean_deg"] + 2.0
+    with pytest.raises(TableError, match="rom_mean_deg.*within"):
+        sr.read_experiment_table(_table(tmp_path, m))
+
+
+def test_bad_duplicate_scenario(tmp_path):
+    def m(d):
+        d.loc[1, "moment_nm"] = d.loc[0, "moment_nm"]
+    with pytest.raises(TableError, match="duplicate"):
+        sr.read_experiment_table(_table(tmp_path, m))
+
+
+def test_outlier_rule_ranges_tolerance_and_non_converged():
+    ref = pd.DataFrame({"stage": ["intact", "intact", "wo_all", "wo_all"], "direction": ["flexion"] * 4,
+                        "moment_nm": [1.0, 2.5, 1.0, 2.5], "rom_mean_deg": [1.0, 2.0, 5.0, 6.0],
+                        "rom_min_deg": [0.5, 1.5, np.nan, np.nan], "rom_max_deg": [1.5, 2.5, np.nan, np.nan],
+                        "kind": ["surrogate", "surrogate", "derived_from_published_fit", "derived_from_published_fit"]})
+    sim = ref[["stage", "direction", "moment_nm"]].assign(rom_deg=[1.4, np.nan, 5.4, 6.6],
+                                                         converged=[True, False, True, True])
+    out = sr.assess(sim, ref, "x", tolerance_deg=0.5)
+    assert list(out["outlier"]) == [False, True, False, True]
+    assert list(out["data_kind"]) == list(ref["kind"])
+    counts = sr.outlier_counts(out)
+    assert counts.loc[0, "n_outliers"] == 2 and counts.loc[0, "n_not_converged"] == 1
+
+
+def test_compare_with_paper_missing_file_leaves_column_empty(tmp_path, caplog):
+    counts = pd.DataFrame({"set": ["calibrated"], "n_scenarios": [160], "n_outliers": [3]})
+    out = sr.compare_with_paper(counts, tmp_path / "absent.csv")
+    assert out["paper_n_outliers"].isna().all()
+    assert "not found" in caplog.text
+
+
+def test_reference_table_replaces_surrogate_disc_only_rows():
+    der = sr.read_experiment_table(DERIVED)
+    sur = der.assign(kind="surrogate", rom_mean_deg=der["rom_mean_deg"] + 1, rom_min_deg=0.0, rom_max_deg=50.0)
+    sur = pd.concat([sur, sur.assign(stage="intact")], ignore_index=True)
+    ref = sr.reference_table(sur, der)
+    assert len(ref) == 40
+    assert set(ref.loc[ref["stage"] == "wo_all", "kind"]) == {"derived_from_published_fit"}
+    measured = sur.assign(kind="measured")
+    assert set(sr.reference_table(measured, der)["kind"]) == {"measured"}
+
+
+@pytest.fixture(scope="module")
+def default_synopsis():
+    """Default surrogate (8 specimens, variation + noise), calibration, forward for the six sets."""
+    from lumbar.calibration import calibrate
+    from lumbar.fsu import build_fsu
+    from lumbar.geometry import load_geometry
+    from lumbar.virtual_experiment import stepwise_reduction_table
+
+    geo = load_geometry("default", levels=["L4-L5"])
+    paper = load_characteristic_set("calibrated")
+    table = stepwise_reduction_table(geo, paper, 20261123, n_specimens=8, max_iter=30)
+    ref = sr.reference_table(table, sr.read_experiment_table(DERIVED))
+    res = calibrate(geo, ref, initial=paper)
+    parts = []
+    for name in CHARACTERISTIC_SETS:
+        cs = res.charset if name == "calibrated" else load_characteristic_set(name)
+        parts.append(sr.assess(sr.simulate_stepwise_reduction(build_fsu(geo, cs)), ref, name))
+    return pd.concat(parts, ignore_index=True)
+
+
+def test_calibrated_set_has_fewest_outliers_on_default_surrogate(default_synopsis):
+    counts = sr.outlier_counts(default_synopsis).set_index("set")["n_outliers"]
+    print("\noutliers on the default surrogate:", counts.to_dict())
+    assert (default_synopsis.groupby("set").size() == 160).all()
+    assert counts["calibrated"] <= 10
+    assert counts["calibrated"] == counts.min() and (counts.drop("calibrated") > counts["calibrated"]).all()
+
+
+def test_workflow_stepwise_reduction_rules_run(tmp_path):
+    """Surrogate -> calibrate -> forward -> Table 4 + figures on config/test, in a throw-away copy."""
+    for d in ("workflow", "config", "data"):
+        shutil.copytree(ROOT / d, tmp_path / d, ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copy(ROOT / "Snakefile", tmp_path / "Snakefile")
+    targets = ["results/tables/table4_vs_paper.csv", "results/figures/fig6_rom_stepwise_reduction.png",
+               "results/figures/fig4_disc_torque_angle.png", "results/figures/fig5_ligament_characteristics.png"]
+    r = subprocess.run([sys.executable, "-m", "snakemake", *targets, "--cores", "2",
+                        "--configfile", "config/test/config.yaml"], cwd=tmp_path, capture_output=True,
+                       text=True, timeout=300)
+    logs = "".join(p.read_text() for p in (tmp_path / "logs").glob("*.log")) if (tmp_path / "logs").exists() else ""
+    assert r.returncode == 0, r.stdout + r.stderr + logs
+    for t in targets:
+        assert (tmp_path / t).stat().st_size > 0
+    syn = pd.read_csv(tmp_path / "results/tables/table4_rom_synopsis.csv")
+    assert set(syn["set"]) == {"calibrated", "rupp2015"} and (syn.groupby("set").size() == 160).all()
+    assert set(syn["data_kind"]) == {"surrogate", "derived_from_published_fit"}
+    vs = pd.read_csv(tmp_path / "results/tables/table4_vs_paper.csv")
+    assert vs["paper_n_outliers"].isna().all()          # ../shared is not beside the copy: column empty, logged
+    assert "not found" in (tmp_path / "logs" / "table4.log").read_text()
+    sur = pd.read_csv(tmp_path / "results/experiments/stepwise_reduction_surrogate.csv")
+    assert set(sur["kind"]) == {"surrogate"} and (sur["n_specimens"] <= 2).all()
+    assert (tmp_path / "results/benchmarks/calibrate.tsv").exists()

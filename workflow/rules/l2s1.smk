@@ -1,0 +1,72 @@
+# L2-S1 lumbar spine with wire-cable muscles: L4-L5 IDP in 49 scenarios per characteristic set (Table 5,
+# Figs. 3 and 7). The surrogate reference table comes from rule idp_surrogate (virtual_experiment.smk).
+
+
+rule l2s1_idp:
+    input:
+        geometry_inputs,
+        characteristics=l2s1_characteristics,
+        cables=config["l2s1"]["cables"],
+    output:
+        "results/l2s1/idp_{set}.csv",
+    wildcard_constraints:
+        set="calibrated|chazal1985|shirazi_adl1986|white_panjabi1990|nolte1990|rupp2015",
+    params:
+        geometry=config["geometry"],
+        fsu=config["fsu"],
+        solver=config["solver"],
+        l2s1=config["l2s1"],
+    log:
+        "logs/l2s1_idp_{set}.log",
+    benchmark:
+        "results/benchmarks/l2s1_idp_{set}.tsv"
+    conda:
+        "../envs/lumbar.yaml"
+    script:
+        "../scripts/l2s1.py"
+
+
+rule table5:
+    input:
+        sims=expand("results/l2s1/idp_{set}.csv", set=config["l2s1"]["sets"]),
+        reference=l2s1_idp_reference,
+    output:
+        synopsis=report("results/tables/table5_idp_synopsis.csv", caption="../report/table5_idp_synopsis.rst",
+                        category="IDP (L2-S1)"),
+        counts=report("results/tables/table5_outlier_counts.csv", caption="../report/table5_outlier_counts.rst",
+                      category="IDP (L2-S1)"),
+        vs_paper=report("results/tables/table5_vs_paper.csv", caption="../report/table5_vs_paper.rst",
+                        category="IDP (L2-S1)"),
+        internal=report("results/tables/l2s1_internal_loads.csv", caption="../report/l2s1_internal_loads.rst",
+                        category="IDP (L2-S1)"),
+        grid=report("results/figures/table5_grid.png", caption="../report/table5_grid.rst", category="IDP (L2-S1)"),
+        fig7=report("results/figures/fig7_idp.png", caption="../report/fig7_idp.rst", category="IDP (L2-S1)"),
+    params:
+        l2s1=config["l2s1"],
+        published=config["paths"]["published_model_results"],
+    log:
+        "logs/table5.log",
+    conda:
+        "../envs/lumbar.yaml"
+    script:
+        "../scripts/l2s1.py"
+
+
+rule fig3_l2s1_cables:
+    input:
+        geometry_inputs,
+        cables=config["l2s1"]["cables"],
+    output:
+        report("results/figures/fig3_l2s1_cables.png", caption="../report/fig3_l2s1_cables.rst",
+               category="IDP (L2-S1)"),
+    params:
+        geometry=config["geometry"],
+        render=config["render"],
+    log:
+        "logs/fig3_l2s1_cables.log",
+    benchmark:
+        "results/benchmarks/fig3_l2s1_cables.tsv"
+    conda:
+        "../envs/lumbar.yaml"
+    script:
+        "../scripts/l2s1.py"

@@ -1,0 +1,75 @@
+rule stepwise_reduction_sim:
+    input:
+        geometry_inputs,
+        characteristics=stepwise_reduction_characteristics,
+    output:
+        "results/stepwise_reduction/rom_{set}.csv",
+    params:
+        geometry=config["geometry"],
+        fsu=config["fsu"],
+        solver=config["solver"],
+        sr=config["stepwise_reduction"],
+    wildcard_constraints:
+        set="calibrated|chazal1985|shirazi_adl1986|white_panjabi1990|nolte1990|rupp2015",
+    log:
+        "logs/stepwise_reduction_sim_{set}.log",
+    benchmark:
+        "results/benchmarks/stepwise_reduction_sim_{set}.tsv"
+    conda:
+        "../envs/lumbar.yaml"
+    script:
+        "../scripts/stepwise_reduction.py"
+
+
+rule table4:
+    input:
+        sims=expand("results/stepwise_reduction/rom_{set}.csv", set=config["characteristics"]["sets"]),
+        experiment=stepwise_reduction_experiment,
+        derived=stepwise_reduction_derived,
+    output:
+        report(
+            "results/tables/table4_rom_synopsis.csv",
+            caption="../report/table4_rom_synopsis.rst",
+            category="Stepwise reduction",
+        ),
+        report(
+            "results/tables/table4_outlier_counts.csv",
+            caption="../report/table4_outlier_counts.rst",
+            category="Stepwise reduction",
+        ),
+        report(
+            "results/tables/table4_vs_paper.csv",
+            caption="../report/table4_vs_paper.rst",
+            category="Stepwise reduction",
+        ),
+        report(
+            "results/figures/table4_grid.png",
+            caption="../report/table4_grid.rst",
+            category="Stepwise reduction",
+        ),
+    params:
+        sr=config["stepwise_reduction"],
+        published=config["paths"]["published_model_results"],
+    log:
+        "logs/table4.log",
+    conda:
+        "../envs/lumbar.yaml"
+    script:
+        "../scripts/stepwise_reduction.py"
+
+
+rule fig6_rom_stepwise_reduction:
+    input:
+        "results/tables/table4_rom_synopsis.csv",
+    output:
+        report(
+            "results/figures/fig6_rom_stepwise_reduction.png",
+            caption="../report/fig6_rom_stepwise_reduction.rst",
+            category="Stepwise reduction",
+        ),
+    log:
+        "logs/fig6_rom_stepwise_reduction.log",
+    conda:
+        "../envs/lumbar.yaml"
+    script:
+        "../scripts/stepwise_reduction.py"

@@ -1,0 +1,98 @@
+"""Calibration stage: rule calibrate (backward stepwise reduction: Tables 1-3, calibrated characteristic
+set) and the figures fig4_disc_torque_angle, fig5_ligament_characteristics.
+
+By hand: python workflow/scripts/calibration.py calibrate --configfile config/test/config.yaml
+"""
+import importlib.util
+from pathlib import Path
+
+import pandas as pd
+
+_spec = importlib.util.spec_from_file_location("_common", Path(__file__).resolve().parent / "_common.py")
+_common = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_common)
+
+CAL = "results/calibration"
+CHAR_FILES = ["disc.csv", "facet.csv", "ligament_prestrain.csv", "ligaments_softplus.csv",
+              "ligaments_rupp2015.csv", "rupp2015_shape_check.csv"]
+
+
+def _experiment(c):
+    sr = c["stepwise_reduction"]
+    return sr["measured_table"] or "results/experiments/stepwise_reduction_surrogate.csv"
+
+
+RULES = {
+    "calibrate": lambda c: dict(
+        input=dict(experiment=_experiment(c), derived=c["stepwise_reduction"]["disc_only_derived"] or [],
+                   characteristics=c["characteristics"]["data_dir"]),
+        output=dict(characteristics=[f"{CAL}/characteristics/{n}" for n in CHAR_FILES],
+                    summary=f"{CAL}/calibration_summary.csv", rom_fit=f"{CAL}/calibration_rom_fit.csv",
+                    disc_points=f"{CAL}/fig4_points.csv", ligament_points=f"{CAL}/fig5_points.csv",
+                    table1="results/tables/table1_disc_calibrated.csv",
+                    table2="results/tables/table2_facet_surfaces.csv",
+                    table3="results/tables/table3_ligaments_calibrated.csv"),
+        params=dict(geometry=c["geometry"], fsu=c["fsu"], solver=c["solver"], sr=c["stepwise_reduction"])),
+    "fig4_disc_torque_angle": lambda c: dict(
+        input=dict(points=f"{CAL}/fig4_points.csv", table="results/tables/table1_disc_calibrated.csv"),
+        output=["results/figures/fig4_disc_torque_angle.png"], params={}),
+    "fig5_ligament_characteristics": lambda c: dict(
+        input=dict(points=f"{CAL}/fig5_points.csv", table="results/tables/table3_ligaments_calibrated.csv"),
+        output=["results/figures/fig5_ligament_characteristics.png"], params={}),
+}
+
+if "snakemake" not in globals():
+    snakemake = _common.stand_in(RULES, __doc__)
+    if snakemake.rule == "calibrate":   # named outputs for the stand-in
+        spec = RULES["calibrate"](snakemake.config)["output"]
+        snakemake.output = _common._Named(**spec)
+
+log = _common.setup_logging(snakemake)
+
+from lumbar import calibration as cal  # noqa: E402
+from lumbar.io import write_table_atomic  # noqa: E402
+
+
+def _label(df):
+    kinds = sorted(set(df["data_kind"]))
+    return "+".join(kinds) + (" (SURROGATE reference data)" if "surrogate" in kinds else "")
+
+
+if snakemake.rule == "calibrate":
+    from lumbar.characteristics import load_characteristic_set
+    from lumbar.geometry import load_geometry
+    from lumbar.stepwise_reduction import read_experiment_table, reference_table
+
+    g, f, s, sr = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solver, snakemake.params.sr
+    exp = read_experiment_table(snakemake.input.experiment)
+    derived = read_experiment_table(_common.first(snakemake.input.derived)) \
+        if _common.first(snakemake.input.derived) else None
+    ref = reference_table(exp, derived)
+    data_kind = "surrogate" if (ref["kind"] == "surrogate").any() else "measured"
+    log.info("calibrating on %s (%d rows; kinds %s)", snakemake.input.experiment, len(ref),
+             dict(ref["kind"].value_counts()))
+    geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
+    paper = load_characteristic_set("calibrated", data_dir=snakemake.input.characteristics)
+    res = cal.calibrate(geo, ref, initial=paper, level=f["level"], k_shear=f.get("disc_shear_stiffness_n_per_m"),
+                        tolerance_deg=sr["outlier_tolerance_deg"], data_kind=data_kind, max_iter=s["max_iter"])
+    log.info("calibration wall time %.1f s", res.wall_time_s)
+    out_dir = Path(snakemake.output.characteristics[0]).parent
+    cal.write_characteristics(res, snakemake.input.characteristics, out_dir,
+                              reference_source=f"{snakemake.input.experiment} ({data_kind})")
+    load_characteristic_set("calibrated", data_dir=out_dir)   # round trip through the validated loader
+    res.summary.assign(data_kind=data_kind).pipe(write_table_atomic, snakemake.output.summary)
+    res.rom_fit.assign(data_kind=data_kind).pipe(write_table_atomic, snakemake.output.rom_fit)
+    res.disc_points.assign(data_kind=data_kind).pipe(write_table_atomic, snakemake.output.disc_points)
+    res.ligament_points.assign(data_kind=data_kind).pipe(write_table_atomic, snakemake.output.ligament_points)
+    write_table_atomic(cal.table1(res, paper), snakemake.output.table1)
+    write_table_atomic(cal.table2(res, paper), snakemake.output.table2)
+    write_table_atomic(cal.table3(res, paper), snakemake.output.table3)
+    log.info("wrote %s and tables 1-3", out_dir)
+elif snakemake.rule == "fig4_disc_torque_angle":
+    pts, tab = pd.read_csv(snakemake.input.points), pd.read_csv(snakemake.input.table)
+    cal.plot_disc_torque_angle(pts, tab, snakemake.output[0], data_label=_label(pts))
+    log.info("wrote %s", snakemake.output[0])
+elif snakemake.rule == "fig5_ligament_characteristics":
+    pts, tab = pd.read_csv(snakemake.input.points), pd.read_csv(snakemake.input.table)
+    cal.plot_ligament_characteristics(pts, tab, snakemake.output[0], data_label=_label(tab))
+    log.info("wrote %s", snakemake.output[0])

@@ -1,0 +1,130 @@
+"""L2-S1 IDP stage: rules idp_surrogate (virtual_experiment.smk), l2s1_idp (one characteristic set,
+49 scenarios), table5 (synopsis, outlier counts, comparison with the paper, internal loads, Table 5 grid,
+Fig. 7) and fig3_l2s1_cables.
+
+By hand: python workflow/scripts/l2s1.py l2s1_idp --configfile config/test/config.yaml \
+    --output /tmp/idp_rupp2015.csv      (the set is taken from the file name)
+"""
+import importlib.util
+import re
+from pathlib import Path
+
+import pandas as pd
+
+_spec = importlib.util.spec_from_file_location("_common", Path(__file__).resolve().parent / "_common.py")
+_common = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_common)
+
+OUT = "results/l2s1"
+SURROGATE = "results/experiments/idp_wilke1996_surrogate.csv"
+
+
+def _cal(c):
+    cal = c["l2s1"]["calibrated_characteristics"]
+    return cal if cal and Path(cal).is_dir() else c["characteristics"]["data_dir"]
+
+
+RULES = {
+    "idp_surrogate": lambda c: dict(
+        input=dict(characteristics=c["characteristics"]["data_dir"], cables=c["l2s1"]["cables"]),
+        output=[SURROGATE],
+        params=dict(geometry=c["geometry"], fsu=c["fsu"], solver=c["solver"], l2s1=c["l2s1"], seed=c["seed"])),
+    "l2s1_idp": lambda c: dict(
+        input=dict(characteristics=_cal(c), cables=c["l2s1"]["cables"]),
+        output=[f"{OUT}/idp_calibrated.csv"],
+        params=dict(geometry=c["geometry"], fsu=c["fsu"], solver=c["solver"], l2s1=c["l2s1"])),
+    "table5": lambda c: dict(
+        input=dict(sims=[f"{OUT}/idp_{s}.csv" for s in c["l2s1"]["sets"]],
+                   reference=c["l2s1"]["measured_table"] or SURROGATE),
+        output=["results/tables/table5_idp_synopsis.csv", "results/tables/table5_outlier_counts.csv",
+                "results/tables/table5_vs_paper.csv", "results/tables/l2s1_internal_loads.csv",
+                "results/figures/table5_grid.png", "results/figures/fig7_idp.png"],
+        params=dict(l2s1=c["l2s1"], published=c["paths"]["published_model_results"])),
+    "fig3_l2s1_cables": lambda c: dict(
+        input=dict(cables=c["l2s1"]["cables"]), output=["results/figures/fig3_l2s1_cables.png"],
+        params=dict(geometry=c["geometry"], render=c["render"])),
+}
+
+if "snakemake" not in globals():
+    snakemake = _common.stand_in(RULES, __doc__)
+
+log = _common.setup_logging(snakemake)
+
+from lumbar import l2s1  # noqa: E402
+from lumbar.characteristics import load_characteristic_set  # noqa: E402
+from lumbar.geometry import load_geometry  # noqa: E402
+from lumbar.io import write_table_atomic  # noqa: E402
+
+
+def _geometry(g):
+    return load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=list(l2s1.LEVELS))
+
+
+def _chardir(p):
+    p = Path(p)
+    return p if p.is_dir() else p.parent
+
+
+rule = snakemake.rule
+if rule == "idp_surrogate":
+    from lumbar.virtual_experiment import idp_table
+
+    p = snakemake.params.l2s1
+    cs = load_characteristic_set(p["generator_set"], data_dir=snakemake.input.characteristics)
+    geo = _geometry(snakemake.params.geometry)
+    df = idp_table(geo, cs, snakemake.params.seed, n_specimens=p["n_specimens"], variation=p["variation"],
+                   noise_sd_mpa=p["noise_sd_mpa"], cables=l2s1.derive_cables(snakemake.input.cables),
+                   idp_formula=p["idp_formula"], k_shear=snakemake.params.fsu.get("disc_shear_stiffness_n_per_m"),
+                   max_iter=snakemake.params.solver["max_iter"])
+    log.info("SURROGATE IDP table: %d rows from %d virtual specimens of set %s", len(df), p["n_specimens"],
+             p["generator_set"])
+    write_table_atomic(df, snakemake.output[0])
+elif rule == "l2s1_idp":
+    name = getattr(snakemake.wildcards, "set", None) or re.search(r"idp_(\w+)\.csv$", snakemake.output[0]).group(1)
+    p, s = snakemake.params.l2s1, snakemake.params.solver
+    d = _chardir(snakemake.input.characteristics)
+    log.info("set %s: characteristics from %s", name, d)
+    cs = load_characteristic_set(name, data_dir=d)
+    geo = _geometry(snakemake.params.geometry)
+    df, sol = l2s1.run_set(geo, cs, l2s1.derive_cables(snakemake.input.cables), idp_formula=p["idp_formula"],
+                           idp_kwargs={"area_m2": p["disc_area_m2"]} if p["idp_formula"] == "paper2" else None,
+                           facet_stiffness=snakemake.params.fsu["facet_stiffness_n_per_m"],
+                           k_shear=snakemake.params.fsu.get("disc_shear_stiffness_n_per_m"),
+                           load_steps=s["load_steps"], max_iter=s["max_iter"],
+                           tol=min(s["tol_force_n"], s["tol_moment_nm"]), moment_nm=p["moment_nm"])
+    rf, rm = l2s1.equilibrium_residual(sol)
+    df.insert(0, "set", name)
+    df.insert(1, "geometry", geo.name)
+    df["residual_force_n"], df["residual_moment_nm"] = rf, rm
+    log.info("set %s: %d scenarios, %d not converged, max residual %.2e N %.2e N*m", name, len(df),
+             int((~df["converged"]).sum()), rf[sol.converged].max(initial=0), rm[sol.converged].max(initial=0))
+    write_table_atomic(df, snakemake.output[0])
+elif rule == "table5":
+    sims = pd.concat([pd.read_csv(f) for f in snakemake.input.sims], ignore_index=True)
+    ref = l2s1.read_idp_table(snakemake.input.reference)
+    kinds = sorted(set(ref["kind"]))
+    log.info("reference IDP table %s, kind(s) %s%s", snakemake.input.reference, kinds,
+             " -- SURROGATE, not measured" if "surrogate" in kinds else "")
+    syn = l2s1.synopsis(sims, ref)
+    counts = l2s1.outlier_counts(syn)
+    vs = l2s1.versus_paper(counts, snakemake.params.published)
+    out = snakemake.output
+    write_table_atomic(syn, out[0])
+    write_table_atomic(counts, out[1])
+    write_table_atomic(vs, out[2])
+    internal = sims.drop(columns=["idp_mpa"]).merge(syn[["set", "muscle_setup", "load_case", "idp_sim_mpa",
+                                                         "outlier", "data_kind"]], on=["set", "muscle_setup", "load_case"])
+    write_table_atomic(internal, out[3])
+    l2s1.plot_table5_grid(syn, out[4])
+    l2s1.plot_fig7(syn, out[5])
+    for _, r in vs.iterrows():
+        log.info("set %s: %d outliers of %d (paper: %s) [reference %s]", r["set"], r["outliers"], r["scenarios"],
+                 r["paper_outliers"], r["data_kind"])
+elif rule == "fig3_l2s1_cables":
+    from lumbar.render_spine import render_spine
+
+    geo = _geometry(snakemake.params.geometry)
+    cab = l2s1.build_l2s1(geo, load_characteristic_set("rupp2015"), l2s1.derive_cables(snakemake.input.cables)).cables
+    used = render_spine(geo, l2s1.LEVELS, snakemake.output[0], cables=cab, backend=snakemake.params.render["backend"])
+    log.info("rendered %s with %s", snakemake.output[0], used)
+log.info("done: %s", ", ".join(map(str, snakemake.output)))

@@ -1,0 +1,91 @@
+"""Stepwise-reduction stage: rules stepwise_reduction_sim (one characteristic set, 160 scenarios),
+table4 (synopsis, outlier counts, comparison with the paper, check/cross grid) and
+fig6_rom_stepwise_reduction.
+
+By hand: python workflow/scripts/stepwise_reduction.py stepwise_reduction_sim --configfile config/test/config.yaml \
+    --output results/stepwise_reduction/rom_chazal1985.csv      (the set is taken from the file name)
+"""
+import importlib.util
+from pathlib import Path
+
+import pandas as pd
+
+_spec = importlib.util.spec_from_file_location("_common", Path(__file__).resolve().parent / "_common.py")
+_common = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_common)
+
+OUT = "results/stepwise_reduction"
+
+
+def _experiment(c):
+    return c["stepwise_reduction"]["measured_table"] or "results/experiments/stepwise_reduction_surrogate.csv"
+
+
+RULES = {
+    "stepwise_reduction_sim": lambda c: dict(
+        input=dict(characteristics="results/calibration/characteristics/disc.csv"),
+        output=[f"{OUT}/rom_calibrated.csv"],
+        params=dict(geometry=c["geometry"], fsu=c["fsu"], solver=c["solver"], sr=c["stepwise_reduction"])),
+    "table4": lambda c: dict(
+        input=dict(sims=[f"{OUT}/rom_{s}.csv" for s in c["characteristics"]["sets"]], experiment=_experiment(c),
+                   derived=c["stepwise_reduction"]["disc_only_derived"] or []),
+        output=["results/tables/table4_rom_synopsis.csv", "results/tables/table4_outlier_counts.csv",
+                "results/tables/table4_vs_paper.csv", "results/figures/table4_grid.png"],
+        params=dict(sr=c["stepwise_reduction"], published=c["paths"]["published_model_results"])),
+    "fig6_rom_stepwise_reduction": lambda c: dict(
+        input=["results/tables/table4_rom_synopsis.csv"],
+        output=["results/figures/fig6_rom_stepwise_reduction.png"], params={}),
+}
+
+if "snakemake" not in globals():
+    snakemake = _common.stand_in(RULES, __doc__)
+
+log = _common.setup_logging(snakemake)
+
+from lumbar import stepwise_reduction as sr_mod  # noqa: E402
+from lumbar.io import write_table_atomic  # noqa: E402
+
+if snakemake.rule == "stepwise_reduction_sim":
+    from lumbar.characteristics import load_characteristic_set
+    from lumbar.fsu import build_fsu
+    from lumbar.geometry import load_geometry
+
+    g, f, s, sr = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solver, snakemake.params.sr
+    set_name = getattr(snakemake.wildcards, "set", None) or Path(snakemake.output[0]).stem.replace("rom_", "", 1)
+    data_dir = Path(snakemake.input.characteristics)
+    data_dir = data_dir.parent if data_dir.is_file() else data_dir
+    geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
+    cs = load_characteristic_set(set_name, data_dir=data_dir)
+    fsu = build_fsu(geo, cs, f["level"], k_shear=f.get("disc_shear_stiffness_n_per_m"))
+    sim = sr_mod.simulate_stepwise_reduction(fsu, moments_nm=sr["moments_nm"], max_iter=s["max_iter"],
+                                             tol=min(s["tol_force_n"], s["tol_moment_nm"]), load_steps=s["load_steps"])
+    sim.insert(0, "set", set_name)
+    n_bad = int((~sim["converged"]).sum())
+    log.info("set %s (characteristics from %s): %d scenarios, %d not converged", set_name, data_dir, len(sim), n_bad)
+    write_table_atomic(sim, snakemake.output[0])
+elif snakemake.rule == "table4":
+    sr = snakemake.params.sr
+    exp = sr_mod.read_experiment_table(snakemake.input.experiment)
+    derived = sr_mod.read_experiment_table(_common.first(snakemake.input.derived)) \
+        if _common.first(snakemake.input.derived) else None
+    ref = sr_mod.reference_table(exp, derived)
+    parts = []
+    for p in snakemake.input.sims:
+        sim = pd.read_csv(p)
+        parts.append(sr_mod.assess(sim, ref, str(sim["set"].iloc[0]), sr["outlier_tolerance_deg"]))
+    syn = pd.concat(parts, ignore_index=True)
+    counts = sr_mod.outlier_counts(syn)
+    vs = sr_mod.compare_with_paper(counts, snakemake.params.published)
+    vs["our_reference_data"] = counts["data_kinds"].to_numpy()
+    for _, r in counts.iterrows():
+        log.info("set %-18s %3d outliers of %d (%d not converged; reference %s)", r["set"], r["n_outliers"],
+                 r["n_scenarios"], r["n_not_converged"], r["data_kinds"])
+    write_table_atomic(syn, snakemake.output[0])
+    write_table_atomic(counts, snakemake.output[1])
+    write_table_atomic(vs, snakemake.output[2])
+    sr_mod.plot_table4_grid(syn, snakemake.output[3])
+elif snakemake.rule == "fig6_rom_stepwise_reduction":
+    syn = pd.read_csv(snakemake.input[0])
+    set_name = "calibrated" if "calibrated" in set(syn["set"]) else str(syn["set"].iloc[0])
+    sr_mod.plot_rom_stepwise_reduction(syn, snakemake.output[0], set_name)
+    log.info("wrote %s", snakemake.output[0])

@@ -1,0 +1,45 @@
+"""Virtual-experiment stage: rule stepwise_reduction_surrogate, a SURROGATE stepwise-reduction ROM table
+from virtual specimens (the measured table of Heuer et al. 2007 is not available to the project).
+
+By hand: python workflow/scripts/virtual_experiment.py stepwise_reduction_surrogate \
+    --configfile config/test/config.yaml --output /tmp/stepwise_reduction_surrogate.csv
+"""
+import importlib.util
+from pathlib import Path
+
+_spec = importlib.util.spec_from_file_location("_common", Path(__file__).resolve().parent / "_common.py")
+_common = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_common)
+
+RULES = {
+    "stepwise_reduction_surrogate": lambda c: dict(
+        input=dict(characteristics=c["characteristics"]["data_dir"]),
+        output=["results/experiments/stepwise_reduction_surrogate.csv"],
+        params=dict(geometry=c["geometry"], fsu=c["fsu"], solver=c["solver"], sr=c["stepwise_reduction"],
+                    seed=c["seed"])),
+}
+
+if "snakemake" not in globals():
+    snakemake = _common.stand_in(RULES, __doc__)
+
+log = _common.setup_logging(snakemake)
+
+from lumbar.characteristics import load_characteristic_set  # noqa: E402
+from lumbar.geometry import load_geometry  # noqa: E402
+from lumbar.io import write_table_atomic  # noqa: E402
+from lumbar.virtual_experiment import stepwise_reduction_table  # noqa: E402
+
+g, f, s, sr = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solver, snakemake.params.sr
+geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
+cs = load_characteristic_set(sr["generator_set"], data_dir=snakemake.input.characteristics)
+effects = {k: v for k, v in sr["effects"].items() if v is not None}
+log.info("SURROGATE stepwise-reduction table: %d virtual specimens, seed %d, noise %.3g deg, set %s, effects %s",
+         sr["n_specimens"], snakemake.params.seed, sr["noise_sd_deg"], cs.name, effects or "none")
+df = stepwise_reduction_table(geo, cs, snakemake.params.seed, n_specimens=sr["n_specimens"],
+                              variation=sr["variation"], noise_sd_deg=sr["noise_sd_deg"],
+                              effects={"disc_tension": effects["disc_tension_n_per_m"]}
+                              if "disc_tension_n_per_m" in effects else None,
+                              moments_nm=sr["moments_nm"], level=f["level"],
+                              k_shear=f.get("disc_shear_stiffness_n_per_m"), max_iter=s["max_iter"])
+write_table_atomic(df, snakemake.output[0])
+log.info("wrote %s (%d rows, kind=surrogate)", snakemake.output[0], len(df))
