@@ -18,9 +18,12 @@ include: "workflow/rules/virtual_experiment.smk"
 include: "workflow/rules/calibration.smk"
 include: "workflow/rules/stepwise_reduction.smk"
 include: "workflow/rules/l2s1.smk"
+include: "workflow/rules/muscle_model.smk"
+include: "workflow/rules/discover.smk"
+include: "workflow/rules/report.smk"
 
 
 rule all:
+    default_target: True
     input:
         final_outputs(),
-    default_target: True

@@ -101,7 +101,11 @@ def test_write_characteristics_loadable(tmp_path, round_trip):
     sp = pd.read_csv(out / "ligaments_softplus.csv")
     assert set(sp.loc[sp["set"] == "calibrated", "kind"]) == {"calibrated_on_surrogate"}
     t1 = cal.table1(res, load_characteristic_set("calibrated"))
-    assert {"p1_nm", "paper_p1_nm", "data_kind"} <= set(t1.columns)
+    assert {"p1_nm", "paper_p1_nm", "data_kind", "fit_not_converged"} <= set(t1.columns)
+    t3 = cal.table3(res, load_characteristic_set("calibrated"))
+    n_nc = {r.structure: int(float(r.n_not_converged)) for r in res.summary.itertuples()}
+    assert t3.set_index("ligament")["fit_not_converged"].to_dict() == {k: n_nc[k] for k in t3["ligament"]}
+    assert t1["fit_not_converged"].tolist() == [n_nc[f"disc:{d}"] for d in t1["direction"]]
 
 
 def test_bad_disc_fit_too_few_points():

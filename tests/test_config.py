@@ -1,9 +1,11 @@
 """lumbar.config: the workflow schema validates, fills defaults and names the bad key."""
 import copy
+import re
 from pathlib import Path
 
 import pytest
 import yaml
+from jsonschema import Draft202012Validator
 
 from lumbar.config import ConfigError, default_schema_path, load_config
 
@@ -138,3 +140,131 @@ def test_every_schema_property_documented():
                 walk(sub, f"{where}.{name}")
 
     walk(schema, "<root>")
+
+
+# ---------------------------------------------------------------- every key of the schema, walked
+# (sections added later are checked too)
+_UNIT = re.compile(r"\[[^\]]+\]")                       # a unit in brackets: [N/m], [deg], [-], [count]
+_UNIT_SUFFIX = re.compile(r"_(n|nm|m|m2|mm|mpa|deg|rad|pct|kg|s|hz|n_per_m|n_per_rad|um|cm2)$")
+
+
+def _schema():
+    return yaml.safe_load(SCHEMA.read_text())
+
+
+def _types(node) -> set:
+    t = node.get("type", [])
+    return set(t if isinstance(t, list) else [t])
+
+
+def _walk(node, path=()):
+    """(key path tuple, property schema) for every property at every level, depth first."""
+    for name, sub in node.get("properties", {}).items():
+        yield path + (name,), sub
+        if "object" in _types(sub):
+            yield from _walk(sub, path + (name,))
+
+
+def _numeric(sub):
+    """The schema node holding the numeric bounds (the property or its array items), or None."""
+    if _types(sub) & {"number", "integer"}:
+        return sub
+    if "array" in _types(sub) and _types(sub.get("items", {})) & {"number", "integer"}:
+        return sub["items"]
+    return None
+
+
+def test_every_schema_key_has_description_type_default_unit_and_bounds():
+    problems = []
+    root = _schema()
+    if root.get("additionalProperties") is not False:
+        problems.append("<root>: additionalProperties is not false")
+    for path, sub in _walk(root):
+        key = ".".join(path)
+        for field in ("description", "type", "default"):
+            if field not in sub:
+                problems.append(f"{key}: no {field}")
+        if "object" in _types(sub) and sub.get("additionalProperties") is not False:
+            problems.append(f"{key}: object without additionalProperties: false")
+        num = _numeric(sub)
+        if num is not None:
+            if not _UNIT.search(sub.get("description", "")):
+                problems.append(f"{key}: numeric key without a [unit] in its description")
+            if not ({"minimum", "exclusiveMinimum"} & set(num)):
+                problems.append(f"{key}: numeric key without a lower bound")
+        if _UNIT_SUFFIX.search(path[-1]) and num is None and "object" not in _types(sub):
+            problems.append(f"{key}: unit-suffixed key is not numeric")
+        if "default" in sub and "object" not in _types(sub):
+            try:
+                Draft202012Validator({k: v for k, v in sub.items() if k != "default"}).validate(sub["default"])
+            except Exception as exc:  # noqa: BLE001
+                problems.append(f"{key}: default {sub['default']!r} violates its own schema ({exc.message})")
+    assert problems == [], "\n".join(problems)
+
+
+def _nest(path, value):
+    out = value
+    for name in reversed(path):
+        out = {name: out}
+    return out
+
+
+def _invalid_cases():
+    """One invalid value per constraint of every key: (id, config, key path in the message, text the
+    message must contain)."""
+    cases = []
+    for path, sub in _walk(_schema()):
+        key = ".".join(path)
+        if "object" in _types(sub):
+            cases.append((f"{key}-unknown-key", _nest(path, {"no_such_key": 1}), f"{key}.no_such_key",
+                          ["unknown key 'no_such_key'"] + [f"{k}" for k in sub.get("properties", {})]))
+            continue
+        is_array = "array" in _types(sub)
+        item = sub.get("items", {}) if is_array else sub
+        at = f"{key}[0]" if is_array else key
+        wrap = (lambda v: [v]) if is_array else (lambda v: v)
+        if "enum" in item:
+            cases.append((f"{key}-enum", _nest(path, wrap("not_a_valid_value")), at,
+                          ["is not allowed; allowed values"] + [str(e) for e in item["enum"] if e is not None]))
+        num = _numeric(sub)
+        if num is not None:
+            for bound, op, delta in (("minimum", ">=", -1), ("exclusiveMinimum", ">", 0),
+                                     ("maximum", "<=", 1), ("exclusiveMaximum", "<", 0)):
+                if bound in num:
+                    bad = num[bound] + delta
+                    if "integer" in _types(num) and "number" not in _types(num):
+                        bad = int(bad)
+                    cases.append((f"{key}-{bound}", _nest(path, wrap(bad)), at,
+                                  ["is out of range", f"expected a value {op} {num[bound]}"]))
+            cases.append((f"{key}-type", _nest(path, wrap("text")), at, ["has the wrong type"]))
+    return cases
+
+
+@pytest.mark.parametrize("cfg,where,texts", [c[1:] for c in _invalid_cases()],
+                         ids=[c[0] for c in _invalid_cases()])
+def test_reject_invalid_config_names_key_and_allowed_values(cfg, where, texts):
+    """load_config names the key path and the allowed values/bound; snakemake's validate rejects it too."""
+    msg = _error(cfg)
+    line = next((l for l in msg.splitlines() if l.strip().startswith(where + ":")), None)
+    assert line is not None, f"no error line for {where}:\n{msg}"
+    for t in texts:
+        assert t in line, f"{t!r} missing from {line!r}"
+
+
+_ONE_PER_CONSTRAINT = {}
+for _c in _invalid_cases():
+    _ONE_PER_CONSTRAINT.setdefault(_c[0].rsplit("-", 1)[-1], _c)
+
+
+@pytest.mark.parametrize("cfg,where", [c[1:3] for c in _ONE_PER_CONSTRAINT.values()], ids=list(_ONE_PER_CONSTRAINT))
+def test_reject_invalid_config_in_snakemake_validate(cfg, where):
+    """The workflow's validate (common.smk) rejects the same configs and names the key (one per constraint kind)."""
+    validate = pytest.importorskip("snakemake.utils").validate
+    with pytest.raises(Exception) as exc:   # snakemake.exceptions.WorkflowError
+        validate(copy.deepcopy(cfg), schema=str(SCHEMA))
+    assert "Error validating config file" in str(exc.value) and path_tail(where) in str(exc.value)
+
+
+def path_tail(where: str) -> str:
+    """The last key name of a path (snakemake's message quotes the schema path, not ours)."""
+    return re.sub(r"\[\d+\]$", "", where).rsplit(".", 1)[-1]

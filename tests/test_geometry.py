@@ -292,7 +292,7 @@ def test_reject_landmark_off_surface(tmp_path):
     df.loc[i, "x_m"] += 0.005                    # 5 mm anterior, off the bone
     p = tmp_path / "lm.csv"
     df.to_csv(p, index=False)
-    with pytest.raises(GeometryError, match=rf"lm\.csv: row {i + 2} .*x_m,y_m,z_m.*mm from the L4 mesh"):
+    with pytest.raises(GeometryError, match=rf"lm\.csv: row {i + 1} .*x_m,y_m,z_m.*mm from the L4 mesh"):
         load_geometry("default", path=p)
 
 

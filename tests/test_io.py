@@ -129,3 +129,27 @@ def test_atomic_write_keeps_old_content_when_writer_raises(tmp_path):
             f.flush()
             raise RuntimeError("writer died mid-way")
     assert target.read_text() == "old\n" and _leftovers(tmp_path) == []
+
+
+@pytest.mark.parametrize("suffix", ["png", "pdf", "svg"])
+def test_save_figure_atomic_deterministic_bytes(tmp_path, suffix):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from lumbar.io import save_figure_atomic
+
+    def draw(p):
+        fig, ax = plt.subplots(figsize=(2, 2))
+        ax.plot([0, 1], [0, 1], label="x")
+        ax.legend()
+        save_figure_atomic(fig, p, dpi=50)
+        plt.close(fig)
+
+    a, b = tmp_path / f"a.{suffix}", tmp_path / f"b.{suffix}"
+    draw(a)
+    draw(b)
+    assert a.read_bytes() == b.read_bytes() and a.stat().st_size > 100
+    assert b"tIME" not in a.read_bytes() and b"CreationDate" not in a.read_bytes()
+    assert b"Matplotlib v" not in a.read_bytes() and b"matplotlib.org" not in a.read_bytes()
+    assert _leftovers(tmp_path) == []

@@ -1,6 +1,5 @@
-"""The Snakemake workflow: dry run, lint, and the geometry rules run for real on config/test."""
+"""The Snakemake workflow: dry run, lint, and the geometry rules' outputs of the session DAG run on config/test."""
 import re
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -106,28 +105,21 @@ def _geometry_ready():
         pytest.skip(f"lumbar.geometry.load_geometry not available yet: {exc}")
 
 
-def test_geometry_rules_run(tmp_path):
-    """fsu_geometry and fig1_l4l5_model on config/test in a throw-away copy of the workflow."""
+def test_geometry_rules_run(dag_workdir):
+    """fsu_geometry and fig1_l4l5_model on config/test, from the session's DAG run (conftest.dag_workdir)."""
     _geometry_ready()
     import pandas as pd
 
-    for d in ("workflow", "config", "data"):
-        shutil.copytree(ROOT / d, tmp_path / d, ignore=shutil.ignore_patterns("__pycache__"))
-    shutil.copy(ROOT / "Snakefile", tmp_path / "Snakefile")
     targets = ["results/tables/fsu_geometry.csv", "results/figures/fig1_l4l5_model.png"]
-    r = _smk(*targets, "--cores", "2", "--configfile", TEST_CONFIG, cwd=tmp_path)  # --configfile takes nargs+
-    logs = "".join(p.read_text() for p in (tmp_path / "logs").glob("*.log")) if (tmp_path / "logs").exists() else ""
-    assert r.returncode == 0, r.stdout + r.stderr + logs
-
-    table = pd.read_csv(tmp_path / targets[0])
+    table = pd.read_csv(dag_workdir / targets[0])
     assert len(table) >= 1 and "L4-L5" in set(table["level"])
     row = table.set_index("level").loc["L4-L5"]
     assert 500 < row["disc_csa_mm2"] < 4000          # adult lumbar endplate area, mm^2
     assert 3 < row["disc_height_mm"] < 25
     assert np.isclose(np.linalg.norm(row[["disc_normal_x", "disc_normal_y", "disc_normal_z"]].astype(float)), 1, atol=1e-3)
-    assert _png_std(tmp_path / targets[1]) > 5.0
-    assert (tmp_path / "logs" / "fig1_l4l5_model.log").read_text().strip()
-    assert (tmp_path / "results" / "benchmarks" / "fig1_l4l5_model.tsv").exists()
+    assert _png_std(dag_workdir / targets[1]) > 5.0
+    assert (dag_workdir / "logs" / "fig1_l4l5_model.log").read_text().strip()
+    assert (dag_workdir / "results" / "benchmarks" / "fig1_l4l5_model.tsv").exists()
 
 
 def test_render_falls_back_when_offscreen_unavailable(tmp_path, synthetic_geometry, monkeypatch, caplog):

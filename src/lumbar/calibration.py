@@ -55,7 +55,7 @@ from scipy.optimize import least_squares
 from .characteristics import SoftplusLaw, load_characteristic_set
 from .elements.facet import fit_surface
 from .fsu import build_fsu
-from .io import write_table_atomic
+from .io import save_figure_atomic, write_table_atomic
 from .stepwise_reduction import MAIN_DIRECTIONS, StageSolver
 
 log = logging.getLogger(__name__)
@@ -359,13 +359,24 @@ def write_characteristics(result: CalibrationResult, src_dir, out_dir, reference
     return out
 
 
+def _fit_not_converged(result: CalibrationResult, structure: str) -> int:
+    """Scenarios of the calibration step fitting ``structure`` that had no equilibrium at the fitted values:
+    a table value fitted on them is marked (column ``fit_not_converged`` > 0) instead of looking clean."""
+    s = result.summary
+    if s is None or "structure" not in getattr(s, "columns", ()):
+        return 0
+    sel = s[s["structure"] == structure]
+    return int(pd.to_numeric(sel["n_not_converged"], errors="coerce").fillna(0).sum())
+
+
 def table1(result: CalibrationResult, paper) -> pd.DataFrame:
     rows = []
     for d in MAIN_DIRECTIONS:
         p, q = result.disc[d], paper.disc.torque[d]
         rows.append({"direction": d, "p1_nm": p[0], "p2_rad3": p[1], "p3_nm_per_rad": p[2],
                      "paper_p1_nm": q[0], "paper_p2_rad3": q[1], "paper_p3_nm_per_rad": q[2],
-                     "fit_stage": DISC_STAGE, "data_kind": result.data_kind})
+                     "fit_stage": DISC_STAGE, "fit_not_converged": _fit_not_converged(result, f"disc:{d}"),
+                     "data_kind": result.data_kind})
     return pd.DataFrame(rows)
 
 
@@ -398,7 +409,7 @@ def table3(result: CalibrationResult, paper) -> pd.DataFrame:
                      "prestrain_pct": result.charset.ligaments[k].prestrain_pct, "fit_stage": LIGAMENT_STAGE[k],
                      "paper_a_n": getattr(q, "a", np.nan), "paper_b_pct": getattr(q, "b", np.nan),
                      "paper_c_n": getattr(q, "c", np.nan), "paper_d_pct": getattr(q, "d", np.nan),
-                     "data_kind": result.data_kind})
+                     "fit_not_converged": _fit_not_converged(result, k), "data_kind": result.data_kind})
     return pd.DataFrame(rows)
 
 
@@ -456,7 +467,7 @@ def plot_disc_torque_angle(disc_points: pd.DataFrame, table: pd.DataFrame, path,
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure_atomic(fig, path, dpi=120)
     plt.close(fig)
 
 
@@ -484,5 +495,5 @@ def plot_ligament_characteristics(points: pd.DataFrame, table: pd.DataFrame, pat
     if data_label:
         fig.suptitle(f"Ligament characteristics calibrated on {data_label}", fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure_atomic(fig, path, dpi=110)
     plt.close(fig)

@@ -14,6 +14,7 @@ Invalid input raises :class:`ConfigError`, whose message names the key path
 from __future__ import annotations
 
 import copy
+import functools
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -115,6 +116,16 @@ def _read(path_or_dict) -> dict:
     return {} if data is None else data
 
 
+_SafeLoader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+@functools.lru_cache(maxsize=8)
+def _schema_doc(path: str, mtime_ns: int) -> dict:
+    """The parsed schema, cached by path and modification time (never modified: defaults are deep-copied)."""
+    with open(path) as fh:
+        return yaml.load(fh, Loader=_SafeLoader)
+
+
 def load_config(path_or_dict: str | Path | Mapping[str, Any], schema: str | Path | None = None) -> dict:
     """Load a YAML file (or copy a dict), validate it against the schema, fill defaults.
 
@@ -125,9 +136,7 @@ def load_config(path_or_dict: str | Path | Mapping[str, Any], schema: str | Path
     if not isinstance(data, dict):
         raise ConfigError([("<root>", f"expected a mapping of sections, got {type(data).__name__}")])
     schema_path = Path(schema) if schema is not None else default_schema_path()
-    with open(schema_path) as fh:
-        schema_doc = yaml.safe_load(fh)
-    validator = _DefaultFilling(schema_doc)
+    validator = _DefaultFilling(_schema_doc(str(schema_path.resolve()), schema_path.stat().st_mtime_ns))
     errors = sorted(validator.iter_errors(data), key=lambda e: (key_path(e.absolute_path), e.validator))
     if errors:
         raise ConfigError([_describe(e) for e in errors])

@@ -20,6 +20,8 @@ writing leaves the previous file (or no file) in place.
 CSV output is deterministic: ``index=False``, float format ``'%.6g'``,
 ``'\\n'`` line endings, UTF-8. JSON output is sorted, indented by 2 and ends
 with a newline; non-finite floats are rejected unless ``allow_nan=True``.
+``save_figure_atomic`` writes a matplotlib figure (PNG/PDF/SVG by suffix) atomically and without
+time stamps or version strings, so the same figure gives the same bytes.
 
 This module imports nothing from the rest of ``lumbar``.
 """
@@ -46,6 +48,7 @@ __all__ = [
     "write_text_atomic",
     "write_table_atomic",
     "write_json_atomic",
+    "save_figure_atomic",
     "CSV_FLOAT_FORMAT",
 ]
 
@@ -285,6 +288,26 @@ def write_json_atomic(obj: Any, path, *, allow_nan: bool = False) -> Path:
     text = json.dumps(obj, sort_keys=True, indent=2, allow_nan=allow_nan,
                       default=_json_default) + "\n"
     return write_text_atomic(text, path)
+
+
+# metadata keys that would differ between runs or versions, set to None (= left out) per format
+_FIGURE_METADATA = {"png": {"Software": None},
+                    "pdf": {"Creator": None, "Producer": None, "CreationDate": None, "ModDate": None},
+                    "svg": {"Creator": None, "Date": None}}
+
+
+def save_figure_atomic(fig, path, **savefig_kwargs) -> Path:
+    """``fig.savefig`` onto ``path`` atomically, format from the suffix, deterministic bytes (no time
+    stamp, no software version; SVG ids from a fixed hash salt)."""
+    path = Path(path)
+    fmt = savefig_kwargs.pop("format", None) or path.suffix.lstrip(".").lower() or "png"
+    meta = dict(_FIGURE_METADATA.get(fmt, {}))
+    meta.update(savefig_kwargs.pop("metadata", None) or {})
+    import matplotlib  # noqa: PLC0415  (only for figures)
+
+    with matplotlib.rc_context({"svg.hashsalt": "lumbar"}), atomic_writer(path, "wb") as f:
+        fig.savefig(f, format=fmt, metadata=meta, **savefig_kwargs)
+    return path
 
 
 def _json_default(o):

@@ -200,17 +200,29 @@ def _render_matplotlib(items, path: Path) -> None:
         lo, hi = allv.min(0), allv.max(0)
         half = 0.5 * float(np.max(hi - lo))
         mid = 0.5 * (lo + hi)
-        ax.set_xlim(mid[0] - half, mid[0] + half)
-        ax.set_ylim(mid[1] - half, mid[1] + half)
-        ax.set_zlim(mid[2] - half, mid[2] + half)
-        ax.set_box_aspect((1, 1, 1))
-        d = np.asarray(pos) - np.asarray(focal)
-        ax.view_init(elev=float(np.degrees(np.arcsin(d[2] / np.linalg.norm(d)))),
-                     azim=float(np.degrees(np.arctan2(d[1], d[0]))))
-        ax.set_xlabel("x anterior [mm]")
-        ax.set_ylabel("y left [mm]")
-        ax.set_zlabel("z superior [mm]")
-        ax.set_title(f"{items['title']}: {label}")
+        mpl_view(ax, mid, half, pos, focal, f"{items['title']}: {label}")
+    save_png_closing(fig, path)
+
+
+def mpl_view(ax, mid, half, pos, focal, title):
+    """Equal-aspect 3D axes around ``mid`` (half-width ``half``) seen from camera ``pos`` towards ``focal``,
+    labelled in the project frame (millimetres)."""
+    ax.set_xlim(mid[0] - half, mid[0] + half)
+    ax.set_ylim(mid[1] - half, mid[1] + half)
+    ax.set_zlim(mid[2] - half, mid[2] + half)
+    ax.set_box_aspect((1, 1, 1))
+    d = np.asarray(pos) - np.asarray(focal)
+    ax.view_init(elev=float(np.degrees(np.arcsin(d[2] / np.linalg.norm(d)))),
+                 azim=float(np.degrees(np.arctan2(d[1], d[0]))))
+    ax.set_xlabel("x anterior [mm]")
+    ax.set_ylabel("y left [mm]")
+    ax.set_zlabel("z superior [mm]")
+    ax.set_title(title)
+
+
+def save_png_closing(fig, path):
+    """Write ``fig`` atomically as PNG without time/software metadata, then close it."""
+    import matplotlib.pyplot as plt
     try:
         with atomic_writer(path, "wb") as f:
             fig.savefig(f, format="png", metadata={"Software": None})

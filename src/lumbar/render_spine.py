@@ -13,8 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .io import atomic_writer
-from .render import LIGAMENT_COLOUR, MM, WINDOW_SIZE, _atomic_png, offscreen_available
+from .render import LIGAMENT_COLOUR, MM, WINDOW_SIZE, _atomic_png, mpl_view, offscreen_available, save_png_closing
 
 __all__ = ["render_spine"]
 
@@ -116,22 +115,8 @@ def _render_matplotlib(items, path):
                 ax.plot(*np.vstack([a, b]).T, color=LIGAMENT_COLOUR, lw=0.8)
         for a, b in items["cables"]:
             ax.plot(*np.vstack([a, b]).T, color=CABLE_COLOUR, lw=2.0)
-        ax.set_xlim(mid[0] - half, mid[0] + half)
-        ax.set_ylim(mid[1] - half, mid[1] + half)
-        ax.set_zlim(mid[2] - half, mid[2] + half)
-        ax.set_box_aspect((1, 1, 1))
-        d = np.asarray(pos) - np.asarray(focal)
-        ax.view_init(elev=float(np.degrees(np.arcsin(d[2] / np.linalg.norm(d)))),
-                     azim=float(np.degrees(np.arctan2(d[1], d[0]))))
-        ax.set_xlabel("x anterior [mm]")
-        ax.set_ylabel("y left [mm]")
-        ax.set_zlabel("z superior [mm]")
-        ax.set_title(f"{items['title']}: {label}")
-    try:
-        with atomic_writer(path, "wb") as fh:
-            fig.savefig(fh, format="png", metadata={"Software": None})
-    finally:
-        plt.close(fig)
+        mpl_view(ax, mid, half, pos, focal, f"{items['title']}: {label}")
+    save_png_closing(fig, path)
 
 
 def render_spine(geometry, levels, path, cables=None, cable_draw_m=0.04, backend="auto") -> str:

@@ -31,7 +31,7 @@ import pandas as pd
 
 from . import so3
 from .fsu import DIRECTIONS, MAIN_DIRECTIONS, STAGES, moment_loads
-from .io import Column, TableError, TableSchema, read_table
+from .io import Column, TableError, TableSchema, read_table, save_figure_atomic
 from .solve import solve
 
 log = logging.getLogger(__name__)
@@ -131,6 +131,7 @@ class StageSolver:
                 cold = solve(m, loads[idx], fmask=fm[idx], cmask=cm[idx], params=sub,
                              retry_load_steps=self.retry, **self.kw)
                 res.x[idx], res.R[idx], res.converged[idx] = cold.x, cold.R, cold.converged
+                res.residual_force[idx], res.residual_moment[idx] = cold.residual_force, cold.residual_moment
         else:
             res = solve(m, loads, fmask=fm, cmask=cm, params=p, retry_load_steps=self.retry, **self.kw)
         self.n_solves += B
@@ -160,14 +161,27 @@ class StageSolver:
 
 def simulate_stepwise_reduction(fsu, stages=STAGES, directions=MAIN_DIRECTIONS, moments_nm=MOMENTS_NM,
                                 effects=None, max_iter=50, tol=1e-8, load_steps=1) -> pd.DataFrame:
-    """ROM of every (stage, direction, moment) scenario: stage, direction, moment_nm, rom_deg, converged."""
+    """ROM of every (stage, direction, moment) scenario: stage, direction, moment_nm, rom_deg, converged,
+    residual_force_n, residual_moment_nm (max residual of the loaded solve; the effects path may omit them).
+
+    ``effects`` {name: value}: names of ``lumbar.effects.EFFECTS`` (the discrepancy candidates) are solved
+    by ``lumbar.effects.simulate_stepwise_reduction``; other names must be registered in ``EFFECTS`` here."""
+    from . import effects as _fx
+    if effects and all(k in _fx.SOLVER_EFFECTS for k in effects):
+        out = _fx.simulate_stepwise_reduction(fsu, stages, directions, moments_nm, effects, max_iter=max_iter, tol=tol)
+        if not out["converged"].all():
+            log.warning("stepwise reduction: %d of %d scenario(s) did not converge (rom_deg NaN, converged=False)",
+                        int((~out["converged"]).sum()), len(out))
+        return out
     scen = scenario_grid(stages, directions, moments_nm)
     ss = StageSolver(fsu, scen, params=effect_params(fsu, effects), max_iter=max_iter, tol=tol,
                      load_steps=load_steps)
-    rom, conv, _ = ss.run()
+    rom, conv, res = ss.run()
     out = scen.copy()
     out["rom_deg"] = rom
     out["converged"] = conv
+    out["residual_force_n"] = res.residual_force      # of the loaded solve (the 0 N*m state has its own)
+    out["residual_moment_nm"] = res.residual_moment
     if not conv.all():
         log.warning("stepwise reduction: %d of %d scenario(s) did not converge (rom_deg NaN, converged=False)",
                     int((~conv).sum()), len(conv))
@@ -317,7 +331,7 @@ def plot_table4_grid(synopsis: pd.DataFrame, path, sets=None) -> None:
     kinds = "+".join(sorted(set(synopsis["data_kind"])))
     ax.set_title(f"Outliers (x), not converged (NC), within range (v); reference data: {kinds}", fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=130)
+    save_figure_atomic(fig, path, dpi=130)
     plt.close(fig)
 
 
@@ -354,5 +368,5 @@ def plot_rom_stepwise_reduction(synopsis: pd.DataFrame, path, set_name="calibrat
     fig.suptitle(f"Stepwise reduction, set '{set_name}': {n_out} outlier(s) of {len(syn)}; bars: reference "
                  f"({kinds}; hatched = derived from the published Eq. 3 fit, no range)", fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure_atomic(fig, path, dpi=110)
     plt.close(fig)

@@ -212,6 +212,13 @@ def stepwise_reduction_table(geometry, charset, seed, n_specimens=8, variation=N
 
 
 # ---------------------------------------------------------------- in-vitro IDP surrogate (issue 4)
+def _fx_idp_per_newton(geometry, idp_formula, area_m2=18e-4):
+    """d IDP / d axial force [Pa/N] of the IDP formula (for the axial-preload effect)."""
+    if idp_formula == "paper1":
+        return 1.68 / geometry.levels["L4-L5"].disc_csa
+    return 0.85 / (area_m2 * 0.66)
+
+
 def idp_table(geometry, charset, seed, n_specimens=7, variation=None, noise_sd_mpa=0.02, effects=None,
               cables=None, idp_formula="paper1", k_shear=None, max_iter=50, tol=1e-8):
     """Surrogate L4-L5 IDP table (Wilke et al. 1996 layout: 7 muscle set-ups x 7 load cases, L2-S1).
@@ -220,9 +227,10 @@ def idp_table(geometry, charset, seed, n_specimens=7, variation=None, noise_sd_m
     with ``rng`` from ``specimen_rngs(seed, n_specimens)``; its 49 scenarios are solved with
     ``lumbar.l2s1.run_set`` and Gaussian measurement noise of ``noise_sd_mpa`` [MPa] is added per specimen
     and scenario. ``effects``: optional {"muscle_setup/load_case": delta_mpa} ("*" matches any) added to
-    every specimen's IDP, for effects the model lacks (default none). Per scenario: mean and sample SD over
-    the specimens that reached equilibrium; a specimen without equilibrium is dropped from that row with a
-    log line and ``n_specimens`` reduced; a row no specimen reached is left out (logged).
+    every specimen's IDP, for effects the model lacks (default none), or {name: value} of an IDP effect of
+    ``lumbar.effects`` (axial_preload, idp_moment_term, disc_load_share; hidden-effect fixtures).
+    Per scenario: mean and sample SD over the specimens that reached equilibrium; a specimen without
+    equilibrium is dropped from that row with a log line and ``n_specimens`` reduced; a row no specimen reached is left out (logged).
     Columns: muscle_setup, load_case, idp_mean_mpa, idp_sd_mpa, n_specimens, kind (= "surrogate"), source.
     """
     import logging
@@ -238,6 +246,13 @@ def idp_table(geometry, charset, seed, n_specimens=7, variation=None, noise_sd_m
         raise ValueError(f"n_specimens must be >= 1, got {n_specimens}")
     if not np.isfinite(noise_sd_mpa) or noise_sd_mpa < 0:
         raise ValueError(f"noise_sd_mpa must be finite and >= 0 MPa, got {noise_sd_mpa}")
+    from . import effects as _fx
+    for key, delta in (effects or {}).items():
+        if key in _fx.EFFECTS:
+            _fx.check_effect(key, delta)
+            if "idp_invitro" not in _fx.EFFECTS[key].experiments or key not in _fx.effect_names(kind="idp"):
+                raise ValueError(f"effect {key!r} does not act on the IDP from the disc loads; IDP effects: "
+                                 f"{_fx.effect_names(kind='idp')}")
     v = _variation(variation)
     cables = derive_cables() if cables is None else cables
     vals = []
@@ -246,6 +261,11 @@ def idp_table(geometry, charset, seed, n_specimens=7, variation=None, noise_sd_m
         sim, _ = run_set(geo_k, cs_k, cables, idp_formula=idp_formula, k_shear=k_shear, max_iter=max_iter, tol=tol)
         idp = sim["idp_mpa"].to_numpy(float) + rng.normal(0.0, noise_sd_mpa, len(sim))
         for key, delta in (effects or {}).items():
+            if key in _fx.EFFECTS:      # a discrepancy candidate acting on the IDP from the disc loads
+                idp = idp + _fx.idp_delta(key, float(delta), sim["idp_mpa"].to_numpy(float) * 1e6,
+                                          sim["disc_moment_sagittal_nm"].to_numpy(float),
+                                          _fx_idp_per_newton(geo_k, idp_formula)) / 1e6 - sim["idp_mpa"].to_numpy(float)
+                continue
             ms, lc = (str(key).split("/") + ["*"])[:2]
             hit = ((sim["muscle_setup"] == ms) | (ms == "*")) & ((sim["load_case"] == lc) | (lc == "*"))
             idp = idp + np.where(hit.to_numpy(), float(delta), 0.0)

@@ -38,17 +38,17 @@ rule calibrate:
             caption="../report/table3_ligaments_calibrated.rst",
             category="Stepwise reduction",
         ),
-    params:
-        geometry=config["geometry"],
-        fsu=config["fsu"],
-        solver=config["solver"],
-        sr=config["stepwise_reduction"],
     log:
         "logs/calibrate.log",
     benchmark:
         "results/benchmarks/calibrate.tsv"
     conda:
         "../envs/lumbar.yaml"
+    params:
+        geometry=config["geometry"],
+        fsu=config["fsu"],
+        solver=config["solver"],
+        sr=config["stepwise_reduction"],
     script:
         "../scripts/calibration.py"
 

@@ -3,8 +3,23 @@ from pathlib import Path
 
 from snakemake.utils import validate
 
-
 validate(config, schema="../schemas/config.schema.yaml")
+
+
+def _sorted_keys(x):
+    """Nested dicts with their keys sorted: rule params built from the config then compare equal however
+    the config file orders its keys (Snakemake's params rerun trigger compares their text).
+    """
+    if isinstance(x, dict):
+        return {k: _sorted_keys(x[k]) for k in sorted(x)}
+    if isinstance(x, list):
+        return [_sorted_keys(v) for v in x]
+    return x
+
+
+_canonical_config = _sorted_keys(config)
+config.clear()
+config.update(_canonical_config)
 
 
 def final_outputs():
@@ -32,12 +47,32 @@ def final_outputs():
         "results/tables/l2s1_internal_loads.csv",
         "results/figures/table5_grid.png",
         "results/figures/fig7_idp.png",
+        # muscle-driven model (issue 5, workflow/rules/muscle_model.smk): validation, sensitivity, Sobol
+        "results/tables/muscle_model_segment_loads.csv",
+        "results/tables/in_vivo_validation.csv",
+        "results/muscle_model/in_vivo_metrics.json",
+        "results/tables/flexion_relaxation.csv",
+        "results/figures/muscle_in_vivo_validation.png",
+        "results/tables/sensitivity_idp.csv",
+        "results/figures/muscle_sensitivity_ssl_um.png",
+        "results/figures/muscle_sensitivity_k_n_per_cm2.png",
+        "results/figures/muscle_sensitivity_in_situ_sl_um.png",
+        "results/figures/muscle_sensitivity_spt_n_per_cm2.png",
+        "results/figures/muscle_sensitivity_pennation_deg.png",
+        "results/tables/sobol_indices.csv",
+        "results/figures/muscle_sobol.png",
+        # discrepancy discovery (issue 6, workflow/rules/discover.smk)
+        *discovery_final_outputs(),
+        # paper-style report (issue 7, workflow/rules/report.smk): reads every output above
+        "results/report/paper.html",
+        "results/report/paper.pdf",
     ]
 
 
 def geometry_inputs(wildcards):
     """Files the geometry is read from: the Visible Human directory, or the project landmarks
-    that go with the myo-sim meshes (the meshes themselves come with the pinned myo-sim package)."""
+    that go with the myo-sim meshes (the meshes themselves come with the pinned myo-sim package).
+    """
     if config["geometry"]["kind"] == "visible_human":
         return [config["geometry"]["path"]]
     return sorted(glob("data/landmarks/*.csv"))
@@ -48,7 +83,9 @@ def stepwise_reduction_experiment(wildcards):
     """The ROM table to calibrate on and compare with: the user's measured table when
     stepwise_reduction.measured_table is set, else the workflow's surrogate."""
     measured = config["stepwise_reduction"]["measured_table"]
-    return measured if measured else "results/experiments/stepwise_reduction_surrogate.csv"
+    return (
+        measured if measured else "results/experiments/stepwise_reduction_surrogate.csv"
+    )
 
 
 def stepwise_reduction_derived(wildcards):
@@ -64,10 +101,56 @@ def stepwise_reduction_characteristics(wildcards):
     return config["characteristics"]["data_dir"]
 
 
+# ---- paper-style report (issue 7, workflow/rules/report.smk)
+REPORT_OPTIONAL = [
+    "results/calibration/calibration_summary.csv",
+    "results/muscle_model/in_vivo_metrics.json",
+    "results/tables/muscle_model_segment_loads.csv",
+    "results/tables/in_vivo_validation.csv",
+    "results/tables/flexion_relaxation.csv",
+    "results/tables/sensitivity_idp.csv",
+    "results/tables/sobol_indices.csv",
+    "results/figures/muscle_in_vivo_validation.png",
+    "results/figures/muscle_sobol.png",
+    "results/discrepancy/benchmark.csv",
+    "results/discrepancy/benchmark_summary.json",
+    "results/figures/discrepancy_benchmark.png",
+] + [
+    f"results/discrepancy/{case}/{name}"
+    for case in ("default", "in_vivo", "va_artefact")
+    for name in (
+        "discovery.json",
+        "disagreement_map.png",
+        "ranking.png",
+        "before_after.png",
+        "section.md",
+    )
+]
+
+
+def report_inputs(wildcards):
+    """Every final output except the report itself, the reference tables, and those of the files the report
+    reads (REPORT_OPTIONAL) that some rule of this workflow produces; a file absent here is reported as
+    "not built in this configuration"."""
+    results = [p for p in final_outputs() if not p.startswith("results/report/")]
+    extra = [stepwise_reduction_experiment(wildcards), l2s1_idp_reference(wildcards)]
+    extra += [
+        p
+        for p in REPORT_OPTIONAL
+        if any(r.is_producer(p) for r in workflow.rules)
+        # discovery runs whose inputs no rule makes (in vivo before the muscle model) are not requested
+        and (not p.startswith("results/discrepancy/") or p in discovery_final_outputs())
+    ]
+    return results + [p for p in dict.fromkeys(extra) if p not in results]
+
+
 # ---- L2-S1 IDP experiment (issue 4)
 def l2s1_idp_reference(wildcards):
     """The IDP table Table 5 compares with: l2s1.measured_table when set, else the surrogate."""
-    return config["l2s1"]["measured_table"] or "results/experiments/idp_wilke1996_surrogate.csv"
+    return (
+        config["l2s1"]["measured_table"]
+        or "results/experiments/idp_wilke1996_surrogate.csv"
+    )
 
 
 def l2s1_characteristics(wildcards):
@@ -86,3 +169,86 @@ def l2s1_characteristics(wildcards):
         return str(cal_dir.joinpath("disc.csv"))
     return cal if cal_dir.is_dir() else data_dir
 
+
+# ---- discrepancy discovery (issue 6, workflow/rules/discover.smk)
+DISCOVERY_FILES = (
+    "discovery.json",
+    "disagreement_map.png",
+    "ranking.png",
+    "before_after.png",
+    "section.md",
+)
+
+
+def discovery_config(wildcards):
+    """The config sections lumbar.discover reads (canonical key order, see _sorted_keys)."""
+    keys = ("geometry", "characteristics", "fsu", "solver", "l2s1", "discovery", "seed")
+    cfg = {k: config[k] for k in keys if k in config}
+    # lumbar.discover reads only characteristics.data_dir: a changed list of sets must not re-run discovery
+    cfg["characteristics"] = {"data_dir": config["characteristics"]["data_dir"]}
+    return cfg
+
+
+def discovery_case_outputs(case):
+    """Named outputs of one discovery run: report items (category Discrepancy) + the per-scenario table."""
+    d = f"results/discrepancy/{case}"
+    caption = {
+        "discovery.json": "discovery_json",
+        "section.md": "discovery_json",
+        "disagreement_map.png": "discovery_disagreement_map",
+        "ranking.png": "discovery_ranking",
+        "before_after.png": "discovery_before_after",
+    }
+    out = {
+        f.split(".")[0]: report(
+            f"{d}/{f}",
+            caption=f"../report/{caption[f]}.rst",
+            category="Discrepancy",
+            subcategory=case,
+        )
+        for f in DISCOVERY_FILES
+    }
+    out["scenarios"] = f"{d}/scenarios.csv"
+    return out
+
+
+def discovery_benchmark_jobs():
+    """One benchmark job per hidden effect, plus one for the null datasets."""
+    b = config["discovery"]["benchmark"]
+    return list(b["effects"]) + (["null"] if b["n_null"] > 0 else [])
+
+
+def discovery_benchmark_idp_model(wildcards):
+    """The nominal L2-S1 model table, for the benchmark jobs with in-vitro IDP cases (lumbar.discover.benchmark_cases:
+    the IDP effects, and the null datasets from the second one on, which alternate between the experiments).
+    """
+    b = config["discovery"]["benchmark"]
+    if "idp_invitro" not in b["experiments"]:
+        return []
+    idp = wildcards.job in ("axial_preload", "idp_moment_term", "disc_load_share")
+    null = wildcards.job == "null" and (
+        b["experiments"] == ["idp_invitro"] or b["n_null"] >= 2
+    )
+    return ["results/discrepancy/model/idp_invitro_model.csv"] if idp or null else []
+
+
+def discovery_final_outputs():
+    """Discovery outputs of the default target; the in-vivo run only when the muscle model's tables are
+    produced by a rule of this workflow or present (the rule discovery_in_vivo declares them anyway).
+    """
+    cases = ["default", "va_artefact"]
+    muscle = (
+        "results/tables/in_vivo_validation.csv",
+        config["discovery"]["in_vivo_segment_loads"],
+    )
+    if all(
+        any(r.is_producer(p) for r in workflow.rules) or Path(p).is_file()
+        for p in muscle
+    ):
+        cases.append("in_vivo")
+    out = [f"results/discrepancy/{c}/{f}" for c in cases for f in DISCOVERY_FILES]
+    return out + [
+        "results/discrepancy/benchmark.csv",
+        "results/discrepancy/benchmark_summary.json",
+        "results/figures/discrepancy_benchmark.png",
+    ]

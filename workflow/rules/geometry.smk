@@ -2,13 +2,17 @@ rule fsu_geometry:
     input:
         geometry_inputs,
     output:
-        "results/tables/fsu_geometry.csv",
-    params:
-        geometry=config["geometry"],
+        report(
+            "results/tables/fsu_geometry.csv",
+            caption="../report/fsu_geometry.rst",
+            category="Geometry",
+        ),
     log:
         "logs/fsu_geometry.log",
     conda:
         "../envs/lumbar.yaml"
+    params:
+        geometry=config["geometry"],
     script:
         "../scripts/geometry.py"
 
@@ -22,15 +26,15 @@ rule fig1_l4l5_model:
             caption="../report/fig1_l4l5_model.rst",
             category="Geometry",
         ),
-    params:
-        geometry=config["geometry"],
-        level=config["fsu"]["level"],
-        backend=config["render"]["backend"],
     log:
         "logs/fig1_l4l5_model.log",
     benchmark:
         "results/benchmarks/fig1_l4l5_model.tsv"
     conda:
         "../envs/lumbar.yaml"
+    params:
+        geometry=config["geometry"],
+        level=config["fsu"]["level"],
+        backend=config["render"]["backend"],
     script:
         "../scripts/geometry.py"

@@ -9,19 +9,19 @@ rule l2s1_idp:
         cables=config["l2s1"]["cables"],
     output:
         "results/l2s1/idp_{set}.csv",
+    log:
+        "logs/l2s1_idp_{set}.log",
+    benchmark:
+        "results/benchmarks/l2s1_idp_{set}.tsv"
     wildcard_constraints:
         set="calibrated|chazal1985|shirazi_adl1986|white_panjabi1990|nolte1990|rupp2015",
+    conda:
+        "../envs/lumbar.yaml"
     params:
         geometry=config["geometry"],
         fsu=config["fsu"],
         solver=config["solver"],
         l2s1=config["l2s1"],
-    log:
-        "logs/l2s1_idp_{set}.log",
-    benchmark:
-        "results/benchmarks/l2s1_idp_{set}.tsv"
-    conda:
-        "../envs/lumbar.yaml"
     script:
         "../scripts/l2s1.py"
 
@@ -31,23 +31,43 @@ rule table5:
         sims=expand("results/l2s1/idp_{set}.csv", set=config["l2s1"]["sets"]),
         reference=l2s1_idp_reference,
     output:
-        synopsis=report("results/tables/table5_idp_synopsis.csv", caption="../report/table5_idp_synopsis.rst",
-                        category="IDP (L2-S1)"),
-        counts=report("results/tables/table5_outlier_counts.csv", caption="../report/table5_outlier_counts.rst",
-                      category="IDP (L2-S1)"),
-        vs_paper=report("results/tables/table5_vs_paper.csv", caption="../report/table5_vs_paper.rst",
-                        category="IDP (L2-S1)"),
-        internal=report("results/tables/l2s1_internal_loads.csv", caption="../report/l2s1_internal_loads.rst",
-                        category="IDP (L2-S1)"),
-        grid=report("results/figures/table5_grid.png", caption="../report/table5_grid.rst", category="IDP (L2-S1)"),
-        fig7=report("results/figures/fig7_idp.png", caption="../report/fig7_idp.rst", category="IDP (L2-S1)"),
-    params:
-        l2s1=config["l2s1"],
-        published=config["paths"]["published_model_results"],
+        synopsis=report(
+            "results/tables/table5_idp_synopsis.csv",
+            caption="../report/table5_idp_synopsis.rst",
+            category="IDP (L2-S1)",
+        ),
+        counts=report(
+            "results/tables/table5_outlier_counts.csv",
+            caption="../report/table5_outlier_counts.rst",
+            category="IDP (L2-S1)",
+        ),
+        vs_paper=report(
+            "results/tables/table5_vs_paper.csv",
+            caption="../report/table5_vs_paper.rst",
+            category="IDP (L2-S1)",
+        ),
+        internal=report(
+            "results/tables/l2s1_internal_loads.csv",
+            caption="../report/l2s1_internal_loads.rst",
+            category="IDP (L2-S1)",
+        ),
+        grid=report(
+            "results/figures/table5_grid.png",
+            caption="../report/table5_grid.rst",
+            category="IDP (L2-S1)",
+        ),
+        fig7=report(
+            "results/figures/fig7_idp.png",
+            caption="../report/fig7_idp.rst",
+            category="IDP (L2-S1)",
+        ),
     log:
         "logs/table5.log",
     conda:
         "../envs/lumbar.yaml"
+    params:
+        l2s1=config["l2s1"],
+        published=config["paths"]["published_model_results"],
     script:
         "../scripts/l2s1.py"
 
@@ -57,16 +77,19 @@ rule fig3_l2s1_cables:
         geometry_inputs,
         cables=config["l2s1"]["cables"],
     output:
-        report("results/figures/fig3_l2s1_cables.png", caption="../report/fig3_l2s1_cables.rst",
-               category="IDP (L2-S1)"),
-    params:
-        geometry=config["geometry"],
-        render=config["render"],
+        report(
+            "results/figures/fig3_l2s1_cables.png",
+            caption="../report/fig3_l2s1_cables.rst",
+            category="IDP (L2-S1)",
+        ),
     log:
         "logs/fig3_l2s1_cables.log",
     benchmark:
         "results/benchmarks/fig3_l2s1_cables.tsv"
     conda:
         "../envs/lumbar.yaml"
+    params:
+        geometry=config["geometry"],
+        render=config["render"],
     script:
         "../scripts/l2s1.py"

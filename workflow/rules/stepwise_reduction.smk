@@ -4,26 +4,29 @@ rule stepwise_reduction_sim:
         characteristics=stepwise_reduction_characteristics,
     output:
         "results/stepwise_reduction/rom_{set}.csv",
+    log:
+        "logs/stepwise_reduction_sim_{set}.log",
+    benchmark:
+        "results/benchmarks/stepwise_reduction_sim_{set}.tsv"
+    wildcard_constraints:
+        set="calibrated|chazal1985|shirazi_adl1986|white_panjabi1990|nolte1990|rupp2015",
+    conda:
+        "../envs/lumbar.yaml"
     params:
         geometry=config["geometry"],
         fsu=config["fsu"],
         solver=config["solver"],
         sr=config["stepwise_reduction"],
-    wildcard_constraints:
-        set="calibrated|chazal1985|shirazi_adl1986|white_panjabi1990|nolte1990|rupp2015",
-    log:
-        "logs/stepwise_reduction_sim_{set}.log",
-    benchmark:
-        "results/benchmarks/stepwise_reduction_sim_{set}.tsv"
-    conda:
-        "../envs/lumbar.yaml"
     script:
         "../scripts/stepwise_reduction.py"
 
 
 rule table4:
     input:
-        sims=expand("results/stepwise_reduction/rom_{set}.csv", set=config["characteristics"]["sets"]),
+        sims=expand(
+            "results/stepwise_reduction/rom_{set}.csv",
+            set=config["characteristics"]["sets"],
+        ),
         experiment=stepwise_reduction_experiment,
         derived=stepwise_reduction_derived,
     output:
@@ -47,13 +50,13 @@ rule table4:
             caption="../report/table4_grid.rst",
             category="Stepwise reduction",
         ),
-    params:
-        sr=config["stepwise_reduction"],
-        published=config["paths"]["published_model_results"],
     log:
         "logs/table4.log",
     conda:
         "../envs/lumbar.yaml"
+    params:
+        sr=config["stepwise_reduction"],
+        published=config["paths"]["published_model_results"],
     script:
         "../scripts/stepwise_reduction.py"
 

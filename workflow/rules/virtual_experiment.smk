@@ -4,18 +4,18 @@ rule stepwise_reduction_surrogate:
         characteristics=config["characteristics"]["data_dir"],
     output:
         "results/experiments/stepwise_reduction_surrogate.csv",
-    params:
-        geometry=config["geometry"],
-        fsu=config["fsu"],
-        solver=config["solver"],
-        sr=config["stepwise_reduction"],
-        seed=config["seed"],
     log:
         "logs/stepwise_reduction_surrogate.log",
     benchmark:
         "results/benchmarks/stepwise_reduction_surrogate.tsv"
     conda:
         "../envs/lumbar.yaml"
+    params:
+        geometry=config["geometry"],
+        fsu=config["fsu"],
+        solver=config["solver"],
+        sr=config["stepwise_reduction"],
+        seed=config["seed"],
     script:
         "../scripts/virtual_experiment.py"
 
@@ -27,17 +27,17 @@ rule idp_surrogate:
         cables=config["l2s1"]["cables"],
     output:
         "results/experiments/idp_wilke1996_surrogate.csv",
-    params:
-        geometry=config["geometry"],
-        fsu=config["fsu"],
-        solver=config["solver"],
-        l2s1=config["l2s1"],
-        seed=config["seed"],
     log:
         "logs/idp_surrogate.log",
     benchmark:
         "results/benchmarks/idp_surrogate.tsv"
     conda:
         "../envs/lumbar.yaml"
+    params:
+        geometry=config["geometry"],
+        fsu=config["fsu"],
+        solver=config["solver"],
+        l2s1=config["l2s1"],
+        seed=config["seed"],
     script:
         "../scripts/l2s1.py"

@@ -67,7 +67,16 @@ def setup_logging(smk) -> logging.Logger:
     logging.basicConfig(level=logging.INFO, handlers=handlers, force=True,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     logging.captureWarnings(True)
-    return logging.getLogger(f"lumbar.workflow.{smk.rule}")
+    log = logging.getLogger(f"lumbar.workflow.{smk.rule}")
+    previous = sys.__excepthook__       # not sys.excepthook: calling setup_logging twice must not chain
+
+    def log_uncaught(exc_type, exc, tb):   # the failure (file, row, column) goes into the rule's log too
+        if not issubclass(exc_type, KeyboardInterrupt):
+            log.error("rule %s failed: %s", smk.rule, exc, exc_info=(exc_type, exc, tb))
+        previous(exc_type, exc, tb)
+
+    sys.excepthook = log_uncaught
+    return log
 
 
 def first(item):

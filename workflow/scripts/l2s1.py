@@ -100,8 +100,8 @@ elif rule == "l2s1_idp":
              int((~df["converged"]).sum()), rf[sol.converged].max(initial=0), rm[sol.converged].max(initial=0))
     write_table_atomic(df, snakemake.output[0])
 elif rule == "table5":
+    ref = l2s1.read_idp_table(snakemake.input.reference)   # the user's table first: fail fast on bad input
     sims = pd.concat([pd.read_csv(f) for f in snakemake.input.sims], ignore_index=True)
-    ref = l2s1.read_idp_table(snakemake.input.reference)
     kinds = sorted(set(ref["kind"]))
     log.info("reference IDP table %s, kind(s) %s%s", snakemake.input.reference, kinds,
              " -- SURROGATE, not measured" if "surrogate" in kinds else "")

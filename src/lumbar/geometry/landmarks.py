@@ -76,6 +76,9 @@ def _facet_clusters(fu: _Feat, fl: _Feat, s: float):
     return iap, sap
 
 
+LATERAL_LIMIT_DEG = 70.0   # joint direction fallback, see facet_grid
+
+
 def facet_grid(fu, fl, s, step=3 * MM):
     """9 points on each articular surface of the joint on side ``s`` (+1 left, -1 right).
 
@@ -84,7 +87,8 @@ def facet_grid(fu, fl, s, step=3 * MM):
     vertical and normal to nj, through the midpoint c of the clusters.  For each surface a 3x3 grid in that
     plane (horizontal pitch ``step``, vertical pitch min(step, 30 % of the cluster's height), centred at c
     horizontally and at the cluster's mean height) is projected on the surface by rays along +nj (SAP,
-    medial face) or -nj (IAP, lateral face)."""
+    medial face) or -nj (IAP, lateral face).  Where nj is more than ``LATERAL_LIMIT_DEG`` from the lateral
+    direction, the clusters are not facing each other across the joint and nj = (0, s, 0) is used."""
     iap, sap = _facet_clusters(fu, fl, s)
     ci, cs = iap.mean(axis=0), sap.mean(axis=0)
     c = 0.5 * (ci + cs)
@@ -93,6 +97,11 @@ def facet_grid(fu, fl, s, step=3 * MM):
     if np.linalg.norm(nj) < 1e-4:
         nj = np.array([0.0, s, 0.0])
     nj /= np.linalg.norm(nj)
+    if abs(nj[1]) < np.cos(np.radians(LATERAL_LIMIT_DEG)):
+        # clusters separated antero-posteriorly rather than across the joint (myo-sim L1-L2: the coarse L1
+        # IAP cluster lies 9 mm behind the L2 SAP cluster, which put the grids on a coronal plane and made
+        # the two landmark sets overlap by up to 22 mm): use the pure lateral direction instead
+        nj = np.array([0.0, float(s), 0.0])
     u = np.cross(EZ, nj)
     u /= np.linalg.norm(u)
 
@@ -271,18 +280,18 @@ def read_landmarks(path, meshes: dict) -> pd.DataFrame:
     if not p.is_file():
         raise GeometryError(f"{p}: landmark CSV missing")
     try:
-        df = pd.read_csv(p)
+        header = list(pd.read_csv(p, nrows=0).columns)
     except Exception as exc:
         raise GeometryError(f"{p}: not readable as CSV ({exc})") from exc
-    missing = [c for c in COLUMNS if c not in df.columns]
+    missing = [c for c in COLUMNS if c not in header]
     if missing:
         raise GeometryError(f"{p}: missing column(s) {missing}; expected columns {COLUMNS}")
-    for c in ("x_m", "y_m", "z_m"):
-        bad = pd.to_numeric(df[c], errors="coerce").isna()
-        if bad.any():
-            r = int(np.argmax(bad.values))
-            raise GeometryError(f"{p}: row {r + 2} column {c}: expected a number in metres, got {df[c].iloc[r]!r}")
-    df[["x_m", "y_m", "z_m"]] = df[["x_m", "y_m", "z_m"]].astype(float)
+    from ..io import TableError, read_table  # noqa: PLC0415
+    from ..tables import LANDMARKS  # noqa: PLC0415
+    try:   # every cell: file, 1-based data row, column and expected form (metres, project frame)
+        df = read_table(p, LANDMARKS)
+    except TableError as exc:
+        raise GeometryError(str(exc)) from None
     for body, sub in df.groupby("body"):
         if body not in meshes:
             continue
@@ -292,7 +301,7 @@ def read_landmarks(path, meshes: dict) -> pd.DataFrame:
             j = int(np.argmax(dist > SURFACE_TOL_M))
             r = int(sub.index[j])
             raise GeometryError(
-                f"{p}: row {r + 2} (level {sub['level'].iloc[j]}, {sub['structure'].iloc[j]}, body {body}) "
+                f"{p}: row {r + 1} (level {sub['level'].iloc[j]}, {sub['structure'].iloc[j]}, body {body}) "
                 f"columns x_m,y_m,z_m: point is {dist[j] * 1e3:.2f} mm from the {body} mesh surface; "
                 f"expected within {SURFACE_TOL_M * 1e3:.0f} mm (metres, project frame)")
     return df

@@ -32,16 +32,23 @@ def load_geometry(kind: str = "default", path=None, levels=None) -> SpineGeometr
     """
     k = str(kind).lower()
     if k in ("default", "myo_sim", "myo-sim"):
-        return load_myo_sim(landmarks_csv=path, levels=levels)
+        return _checked(load_myo_sim(landmarks_csv=path, levels=levels))
     if k in ("visible_human", "visible-human", "vh"):
         if path is None:
             raise GeometryError("kind='visible_human' needs path= the visible_human_lss folder")
         from .visible_human import load_visible_human  # noqa: PLC0415
-        return load_visible_human(path, levels=levels)
+        return _checked(load_visible_human(path, levels=levels))
     if k == "synthetic":
         from .synthetic import symmetric_fsu  # noqa: PLC0415
         return symmetric_fsu()
     raise GeometryError(f"unknown geometry kind {kind!r}; expected 'default'/'myo_sim', 'visible_human' or 'synthetic'")
+
+
+def _checked(geo: SpineGeometry) -> SpineGeometry:
+    """Units, closedness and frame of every vertebra mesh (lumbar.geometry.checks)."""
+    from .checks import check_spine  # noqa: PLC0415
+    check_spine(geo)
+    return geo
 
 
 def _body_centroid(mesh: trimesh.Trimesh, x_post: float) -> np.ndarray:

@@ -171,6 +171,9 @@ def _grid_on_nodes(nodes: np.ndarray) -> np.ndarray:
 
 def load_visible_human(path, levels=None) -> SpineGeometry:
     from .loader import _levels_and_vertebrae  # noqa: PLC0415
+    if not Path(path).is_dir():
+        raise GeometryError(f"{path}: visible_human geometry directory missing; expected the visible_human_lss "
+                            "folder (workflow config key geometry.path, or path= of load_geometry)")
     folder = require_dir(path, "visible_human geometry")
     for sub in ("meshes", "ligaments", "disc_fe", "facet_fe"):
         require_dir(folder / sub, f"visible_human '{sub}'")

@@ -79,6 +79,8 @@ class MuscleSet:
 
 def read_group_table(path=None) -> pd.DataFrame:
     path = Path(path) if path is not None else DATA_DIR / "muscle_groups.csv"
+    from lumbar.tables import read_kind  # noqa: PLC0415
+    read_kind(path, "muscle_groups")   # schema: file, row, column and expected form of a bad cell
     df = pd.read_csv(path)
     need = {"prefix", "group", "in_situ_sl_um", "pennation_deg", "fibre_ratio"}
     miss = need - set(df.columns)

@@ -1,0 +1,115 @@
+"""Benchmark: cold wall time of the whole Snakemake DAG (target ``all``) on 2 cores, in a fresh copy of the repository.
+
+Prints one JSON object: the wall time and its ratio to the 600 s target, the per-job times Snakemake measured
+(``benchmark:`` files, ``results/benchmarks/*.tsv`` of the copy), and the sum of the calibration, forward
+(stepwise reduction, one job per set) and IDP (L2-S1, one job per set) stages against the 60 s target.
+The copy leaves the repository's own results/ untouched; ``../shared`` is linked beside the copy so that config
+paths relative to the repository (``../shared/...``) resolve as they do in the repository. Usage::
+
+    python benchmarks/bench_dag.py                                   # config/config.yaml (the paper's)
+    python benchmarks/bench_dag.py --configfile config/test/config.yaml --cores 2 [--keep]
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import platform
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+IGNORE = shutil.ignore_patterns(".git", "results", ".snakemake", "logs", ".venv", "__pycache__", "*.egg-info",
+                                ".pytest_cache", ".hypothesis")
+TARGET_S = 600.0
+STAGES_TARGET_S = 60.0
+# stage -> regular expression of the benchmark file names (= rule name, plus _<set> for per-set jobs)
+STAGES = {"calibration": r"calibrate", "forward": r"stepwise_reduction_sim_.+", "idp": r"l2s1_idp_.+"}
+
+
+def read_benchmarks(bench_dir: Path) -> dict[str, float]:
+    """Wall seconds of every job from Snakemake's benchmark TSV files (first row, column ``s``)."""
+    out = {}
+    for p in sorted(bench_dir.glob("*.tsv")):
+        with p.open() as f:
+            rows = list(csv.DictReader(f, delimiter="\t"))
+        if rows and "s" in rows[0]:
+            out[p.stem] = round(float(rows[0]["s"]), 3)
+    return out
+
+
+def stage_sums(per_job: dict[str, float]) -> dict[str, float]:
+    return {stage: round(sum(t for name, t in per_job.items() if re.fullmatch(rx, name)), 3)
+            for stage, rx in STAGES.items()}
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--configfile", default=None, help="config file, relative to the repository (default: the "
+                    "Snakefile's config/config.yaml)")
+    ap.add_argument("--cores", type=int, default=2)
+    ap.add_argument("--keep", action="store_true", help="keep the temporary copy (its path is in the JSON)")
+    ap.add_argument("--timeout", type=float, default=3600.0, help="seconds before the run is stopped")
+    a = ap.parse_args(argv)
+
+    tmp = Path(tempfile.mkdtemp(prefix="lumbar_bench_dag_"))
+    work = tmp / ROOT.name
+    shutil.copytree(ROOT, work, ignore=IGNORE, symlinks=True)
+    shared = ROOT.parent / "shared"
+    if shared.is_dir():
+        (tmp / "shared").symlink_to(shared, target_is_directory=True)
+    cmd = [sys.executable, "-m", "snakemake", "--cores", str(a.cores)]
+    if a.configfile:
+        cmd += ["--configfile", a.configfile]
+    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    load_before = os.getloadavg()
+    t0 = time.perf_counter()
+    try:
+        r = subprocess.run(cmd, cwd=work, capture_output=True, text=True, timeout=a.timeout, env=env)
+        rc, err = r.returncode, r.stderr
+    except subprocess.TimeoutExpired as e:
+        rc, err = None, f"timeout after {a.timeout} s: {e}"
+    wall = time.perf_counter() - t0
+    per_job = read_benchmarks(work / "results" / "benchmarks")
+    stages = stage_sums(per_job)
+    n_jobs = re.findall(r"(\d+) of (\d+) steps \(100%\) done", err or "")
+    out = {
+        "benchmark": "dag_cold",
+        "configfile": a.configfile or "config/config.yaml (Snakefile default)",
+        "cores": a.cores,
+        "success": rc == 0,
+        "jobs": int(n_jobs[-1][1]) if n_jobs else None,
+        "wall_time_s": round(wall, 2),
+        "target_s": TARGET_S,
+        "ratio_to_target": round(wall / TARGET_S, 4),
+        "stages_s": stages,
+        "stages_sum_s": round(sum(stages.values()), 3),
+        "stages_target_s": STAGES_TARGET_S,
+        "stages_ratio_to_target": round(sum(stages.values()) / STAGES_TARGET_S, 4),
+        "stages_note": "sum of the job wall times of rules calibrate, stepwise_reduction_sim (every set) and "
+                       "l2s1_idp (every set), from their benchmark files; jobs may overlap in time on 2 cores",
+        "per_job_s": per_job,
+        "python": platform.python_version(),
+        "machine": platform.machine(),
+        "cpu_count": os.cpu_count(),
+        # other processes on the machine inflate every time: the 1-minute load average before and after the run
+        "load_average_1min_before_after": [round(load_before[0], 2), round(os.getloadavg()[0], 2)],
+    }
+    if rc != 0:   # a failed run has no meaningful time: no ratios
+        out.update(ratio_to_target=None, stages_ratio_to_target=None, error_tail=(err or "")[-2000:])
+    if a.keep:
+        out["workdir"] = str(work)
+    else:
+        shutil.rmtree(tmp, ignore_errors=True)
+    print(json.dumps(out, indent=2))
+    return 0 if rc == 0 else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

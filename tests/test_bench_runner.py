@@ -1,0 +1,45 @@
+"""benchmarks/run_all.py and benchmarks/bench_dag.py helpers (no benchmark is timed here)."""
+import importlib.util
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _load(name):
+    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_parse_json_whole_or_last_object():
+    run_all = _load("run_all")
+    assert run_all.parse_json('{"a": 1}\n') == {"a": 1}
+    assert run_all.parse_json('log line {not json}\n{"a": {"b": 2}}\n') == {"a": {"b": 2}}
+    assert run_all.parse_json("no json here") is None
+
+
+def test_dag_stage_sums_from_benchmark_files(tmp_path):
+    bench_dag = _load("bench_dag")
+    for name, s in (("calibrate", 12.5), ("stepwise_reduction_sim_rupp2015", 2.0),
+                    ("stepwise_reduction_sim_calibrated", 3.0), ("l2s1_idp_rupp2015", 4.0), ("fsu_rom", 9.0)):
+        (tmp_path / f"{name}.tsv").write_text(f"s\th:m:s\tmax_rss\n{s}\t0:00:01\t1.0\n")
+    per_job = bench_dag.read_benchmarks(tmp_path)
+    assert per_job["fsu_rom"] == 9.0
+    assert bench_dag.stage_sums(per_job) == {"calibration": 12.5, "forward": 5.0, "idp": 4.0}
+
+
+def test_run_all_skips_opensim_cleanly(tmp_path):
+    """Without opensim in the given interpreter the OpenSim benchmark is recorded as skipped, exit 0."""
+    fake = tmp_path / "nopython"
+    r = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "run_all.py"), "--only", "opensim",
+                        "--opensim-python", str(fake), "--out-dir", str(tmp_path / "out")],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    res = json.loads((tmp_path / "out" / "opensim.json").read_text())
+    assert res["skipped"] is True and "opensim" in res["reason"]
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["opensim"]["result"]["skipped"] is True

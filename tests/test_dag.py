@@ -1,0 +1,153 @@
+"""The whole default DAG on config/test (fixture ``dag_workdir`` in conftest.py, run once per session):
+every final output exists, a second run in a fresh copy is byte-identical, a re-run is a no-op,
+a config change re-runs only its dependents, and a deleted intermediate is rebuilt with its dependents only.
+
+Cost: the fixture's run plus one more full run (reproducibility); the rest are dry runs (~3 s each)
+and one small resume run.
+"""
+import os
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+import yaml
+
+from conftest import TEST_CONFIG, run_dag, snakemake
+
+# compared byte for byte between two runs (results/benchmarks holds timings and is not compared)
+COMPARED = (".csv", ".json", ".png", ".pdf", ".html", ".svg", ".txt", ".tsv")
+
+
+def dry_jobs(workdir, *args) -> set[tuple[str, str]]:
+    """Jobs a dry run would execute, as (rule, wildcards) pairs; empty when nothing is to be done."""
+    r = snakemake("-n", "--configfile", TEST_CONFIG, *args, cwd=workdir, timeout=300)
+    out = r.stdout + r.stderr
+    assert r.returncode == 0, out
+    return parse_jobs(out)
+
+
+def parse_jobs(out: str) -> set[tuple[str, str]]:
+    jobs, current = set(), None
+    for line in out.splitlines():
+        m = re.match(r"^(?:local)?rule (\S+):$", line)
+        if m:
+            if current:
+                jobs.add(tuple(current))
+            current = [m.group(1), ""]
+        elif current and line.strip().startswith("wildcards:"):
+            current[1] = line.split(":", 1)[1].strip()
+    if current:
+        jobs.add(tuple(current))
+    return jobs
+
+
+def final_outputs(workdir) -> list[str]:
+    """The input files of rule ``all`` (common.smk's final_outputs()), from a forced dry run."""
+    r = snakemake("all", "-n", "--forceall", "--configfile", TEST_CONFIG, cwd=workdir, timeout=300)
+    m = re.search(r"^(?:local)?rule all:\n\s+input: (.+)$", r.stdout, re.M)
+    assert m, r.stdout + r.stderr
+    return [s.strip() for s in m.group(1).split(",")]
+
+
+def result_files(workdir: Path) -> dict[str, bytes]:
+    res = workdir / "results"
+    return {str(p.relative_to(workdir)): p.read_bytes() for p in sorted(res.rglob("*"))
+            if p.is_file() and p.suffix.lower() in COMPARED and "benchmarks" not in p.relative_to(res).parts}
+
+
+@pytest.fixture
+def dag_copy(dag_workdir, tmp_path):
+    """A copy of the finished DAG workdir (results, logs and .snakemake metadata, mtimes kept) to modify."""
+    dest = tmp_path / "repo"
+    shutil.copytree(dag_workdir, dest, symlinks=True, ignore=shutil.ignore_patterns("__pycache__"))
+    return dest
+
+
+def test_dag_every_final_output_exists_and_is_not_empty(dag_workdir):
+    targets = final_outputs(dag_workdir)
+    assert len(targets) >= 20, targets
+    missing = [t for t in targets if not (dag_workdir / t).is_file()]
+    empty = [t for t in targets if (dag_workdir / t).is_file() and (dag_workdir / t).stat().st_size == 0]
+    assert not missing and not empty, f"missing: {missing}; empty: {empty}"
+    leftovers = [str(p) for p in (dag_workdir / "results").rglob("*.tmp")]
+    assert leftovers == [], "temporary files of atomic writes left behind"
+
+
+def test_dag_reproducible_byte_identical(dag_workdir, dag_second_workdir):
+    """Two runs of the test-config DAG in two fresh copies (two directories) give identical tables, JSON
+    and figure bytes (results/benchmarks, which holds timings, is not compared)."""
+    a, b = result_files(dag_workdir), result_files(dag_second_workdir)
+    assert sorted(a) == sorted(b), set(a) ^ set(b)
+    differ = sorted(k for k in a if a[k] != b[k])
+    assert differ == [], f"{len(differ)} of {len(a)} result files differ between two runs: {differ}\n" + \
+        "\n".join(first_difference(a[k], b[k], k) for k in differ)
+
+
+def first_difference(x: bytes, y: bytes, name: str) -> str:
+    i = next((j for j in range(min(len(x), len(y))) if x[j] != y[j]), min(len(x), len(y)))
+    return f"{name}: {len(x)} vs {len(y)} bytes, first difference at byte {i}: {x[max(0, i - 80):i + 80]!r} vs " \
+           f"{y[max(0, i - 80):i + 80]!r}"
+
+
+def test_dag_rerun_is_noop(dag_workdir):
+    r = snakemake("-n", "--configfile", TEST_CONFIG, cwd=dag_workdir, timeout=300)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "Nothing to be done" in r.stdout + r.stderr, r.stdout + r.stderr
+    assert parse_jobs(r.stdout) == set()
+
+
+def test_dag_changed_characteristic_set_reruns_only_dependents(dag_workdir, tmp_path):
+    """Dropping one literature set from characteristics.sets re-runs the jobs that use the set list
+    (fsu_rom, table4 and what depends on them), not geometry, calibration, surrogates or L2-S1."""
+    cfg = yaml.safe_load((dag_workdir / TEST_CONFIG).read_text())
+    assert "rupp2015" in cfg["characteristics"]["sets"]
+    cfg["characteristics"]["sets"] = [s for s in cfg["characteristics"]["sets"] if s != "rupp2015"]
+    changed = tmp_path / "changed.yaml"
+    changed.write_text(yaml.safe_dump(cfg))
+    jobs = dry_jobs(dag_workdir, "--configfile", str(changed))
+    rules = {r for r, _ in jobs}
+    assert {"fsu_rom", "table4"} <= rules, jobs
+    dependents = dry_jobs(dag_workdir, "--forcerun", "fsu_rom", "table4")
+    assert jobs <= dependents, f"re-run although independent of characteristics.sets: {sorted(jobs - dependents)}"
+    for independent in ("fsu_geometry", "fig1_l4l5_model", "calibrate", "stepwise_reduction_surrogate",
+                        "stepwise_reduction_sim", "idp_surrogate", "l2s1_idp", "table5"):
+        assert independent not in rules, jobs
+
+
+def test_dag_changed_input_file_reruns_only_dependents(dag_copy):
+    """An edited cable table (data/cables) re-runs the jobs that read it and their dependents only.
+    (Only touching it re-runs nothing: Snakemake compares the checksums of small inputs.)"""
+    cables = dag_copy / "data" / "cables" / "wilke1996_cables.csv"
+    os.utime(cables)
+    assert dry_jobs(dag_copy) == set()
+    cables.write_text(cables.read_text() + "\n")           # same rows, new content
+    jobs = dry_jobs(dag_copy)
+    rules = {r for r, _ in jobs}
+    assert {"idp_surrogate", "l2s1_idp", "fig3_l2s1_cables", "table5"} <= rules, jobs
+    dependents = dry_jobs(dag_copy, "--forcerun", "idp_surrogate", "l2s1_idp", "fig3_l2s1_cables")
+    assert jobs <= dependents, sorted(jobs - dependents)
+    assert not rules & {"fsu_geometry", "fsu_rom", "calibrate", "stepwise_reduction_sim", "table4"}, jobs
+
+
+def test_dag_resume_after_interruption(dag_copy):
+    """A run interrupted after some jobs: one set's stepwise-reduction ROM and Table 4 (which needs it) are
+    missing. ``snakemake --cores 2`` runs exactly those jobs and their dependents, writes the same bytes,
+    and the run is complete afterwards. (A missing intermediate alone, with everything downstream up to
+    date, is not rebuilt: nothing is lost, so nothing is to be done.)"""
+    target = "results/stepwise_reduction/rom_rupp2015.csv"
+    before = result_files(dag_copy)
+    (dag_copy / target).unlink()
+    assert dry_jobs(dag_copy) == set()
+    for t in ("table4_rom_synopsis.csv", "table4_outlier_counts.csv", "table4_vs_paper.csv"):
+        (dag_copy / "results" / "tables" / t).unlink()
+    jobs = dry_jobs(dag_copy)
+    expected = dry_jobs(dag_copy, "--forcerun", target)
+    assert ("stepwise_reduction_sim", "set=rupp2015") in jobs, jobs
+    assert jobs == expected, (sorted(jobs), sorted(expected))
+    assert not {r for r, _ in jobs} & {"calibrate", "stepwise_reduction_surrogate", "l2s1_idp", "fsu_rom"}
+    r = run_dag(dag_copy)
+    assert parse_jobs(r.stdout + r.stderr) == jobs
+    assert dry_jobs(dag_copy) == set()
+    after = result_files(dag_copy)
+    assert [k for k in before if before[k] != after.get(k)] == []

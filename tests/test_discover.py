@@ -1,0 +1,302 @@
+"""Discrepancy discovery (issue 6): candidate effects (lumbar.effects) and lumbar.discover.
+
+Datasets with a planted effect are TEST FIXTURES made in the tests (lumbar.discover.make_hidden_effect_dataset,
+or the synthetic L2-S1 / muscle-model tables below), never data.
+"""
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from lumbar import discover as D
+from lumbar import effects as fx
+from lumbar import so3
+
+ROOT = Path(__file__).resolve().parents[1]
+VA_FILE = ROOT / "data" / "experiments" / "heuer2007_va_artefact_original_text.csv"
+# a small ROM scenario set: stages where every solver effect acts, two moments
+SMALL = {"stages": ["intact", "wo_cl", "wo_va", "wo_pll"], "moments_nm": [2.5, 7.5], "n_specimens": 8,
+         "noise_sd_deg": 0.3, "noise_sd_mpa": 0.02}
+
+
+def config(tmp_path=None, **disc):
+    d = {"grid_points": 7, "benchmark": dict(SMALL)}
+    d.update(disc)
+    return {"seed": 7, "characteristics": {"data_dir": str(ROOT / "data" / "characteristics")}, "discovery": d}
+
+
+@pytest.fixture(scope="module")
+def fv():
+    return D.fsu_variants_from_config(config())
+
+
+# ------------------------------------------------------------------ fixtures of the L2-S1 and muscle-model schemas
+@pytest.fixture(scope="module")
+def idp_model_fixture():
+    """TEST FIXTURE in the schema of the nominal L2-S1 model table (rule discovery_idp_model): 49 scenarios
+    with a disc force and sagittal moment pattern like the solved model's (not data)."""
+    from lumbar.l2s1 import scenario_grid
+    grid = scenario_grid()
+    rng = np.random.default_rng(3)
+    F = 150 + 250 * rng.random(len(grid))
+    M = np.array([{"flexion": 0.0, "extension": -5.0}.get(lc, -1.5) for _, lc in grid]) + rng.normal(0, 0.8, len(grid))
+    per_n = 1.68 / 1.6e-3
+    return pd.DataFrame({"muscle_setup": [g[0] for g in grid], "load_case": [g[1] for g in grid],
+                         "converged": True, "idp_mpa": F * per_n / 1e6, "disc_axial_force_n": F,
+                         "disc_moment_sagittal_nm": M, "idp_per_newton_pa": per_n})
+
+
+def in_vivo_fixture(tmp_path, k_moment=0.0, seed=0):
+    """TEST FIXTURE of the muscle model's output tables (contract of issue 5), with an optional hidden moment
+    term: results/tables/in_vivo_validation.csv and muscle_model_segment_loads.csv schemas."""
+    acts = ["extension_20deg", "relaxed_standing", "crate_close_chest", "crate_far_60cm", "flexion_36deg",
+            "lift_round_back", "sitting_max_flexion", "lying_prone"]
+    F = np.array([450, 400, 700, 1200, 900, 1500, 600, 120.0])
+    M = np.array([-8, 1, 12, 45, 35, 60, 20, 0.0])
+    per_n = 0.85 / (18e-4 * 0.66)
+    sim = F * per_n / 1e6
+    rng = np.random.default_rng(seed)
+    meas = sim + k_moment * np.abs(M) / 1e6 + rng.normal(0, 0.03, len(acts))
+    val = pd.DataFrame({"activity": acts, "idp_sim_mpa": sim, "idp_in_vivo_mpa": meas,
+                        "source": "TEST FIXTURE", "converged": True})
+    loads = pd.DataFrame({"level": "L4-L5", "activity": acts, "compressive_n": F, "shear_n": 50.0, "moment_nm": M,
+                          "converged": True})
+    pv, pl = tmp_path / "in_vivo_validation_fixture.csv", tmp_path / "muscle_model_segment_loads_fixture.csv"
+    val.to_csv(pv, index=False)
+    loads.to_csv(pl, index=False)
+    return pv, pl
+
+
+# ------------------------------------------------------------------ effects vanish at 0, exact Jacobians
+SOLVER = ["ligament_prestrain", "va_neutral_offset", "itl", "passive_muscle", "axial_preload", "disc_tension"]
+
+
+def _state(m, seed=1):
+    rng = np.random.default_rng(seed)
+    x, R = m.reference_state(2)
+    x = x + rng.normal(0, 3e-4, x.shape)
+    x[:, :, 2] -= 5e-4
+    return x, so3.exp(rng.normal(0, 0.04, (2, m.nb, 3))) @ R
+
+
+def test_each_effect_vanishes_at_zero(fv):
+    base = fv.fsu.model
+    x, R = _state(base)
+    stages = ["wo_cl", "wo_va"]
+    fb, cb = fv.fsu.masks(stages)
+    Q0, J0 = base.evaluate(x, R, None, fb, cb)
+    for name in SOLVER:
+        fm, cm, params, G = fv.masks_params(stages, {name: np.zeros(1)})
+        Q, J = fv.model.evaluate(x, R, None, fm, cm, params=params)
+        assert np.array_equal(Q, Q0) and np.array_equal(J, J0), name
+    idp = np.array([3e5, 5e5])
+    for name in fx.effect_names(kind="idp"):
+        assert np.array_equal(fx.idp_delta(name, 0.0, idp, np.array([2.0, -3.0]), 1e3), idp), name
+
+
+@pytest.mark.parametrize("name", SOLVER)
+def test_effect_jacobian_matches_finite_differences(fv, name):
+    lo, hi = fx.EFFECTS[name].bounds
+    value = fx.EFFECTS[name].magnitudes[-1] if fx.EFFECTS[name].experiments else 0.5 * hi
+    stages = ["wo_cl", "wo_va"]
+    fm, cm, params, _ = fv.masks_params(stages, {name: np.full(1, value)})
+    m = fv.model
+    x, R = _state(m)
+    loads = np.random.default_rng(2).normal(0, 1, (2, m.nb, 6))
+    Q, J = m.evaluate(x, R, loads, fm, cm, params=params)
+    h = 1e-7
+    Jfd = np.zeros_like(J)
+    for k in range(6):
+        d = np.zeros((2, m.nb, 6))
+        d[:, 0, k] = h
+        Qp, _ = m.evaluate(x + d[..., :3], so3.exp(d[..., 3:]) @ R, loads, fm, cm, jacobian=False, params=params)
+        Qm, _ = m.evaluate(x - d[..., :3], so3.exp(-d[..., 3:]) @ R, loads, fm, cm, jacobian=False, params=params)
+        Jfd[:, :, :, 0, k] = (Qp - Qm) / (2 * h)
+    assert np.abs(J - Jfd).max() < 1e-6 * np.abs(J).max() + 1e-3, name
+
+
+def test_generator_switches_an_effect_on():
+    """lumbar.virtual_experiment.stepwise_reduction_table(effects=...) makes data with a hidden effect."""
+    from lumbar.characteristics import load_characteristic_set
+    from lumbar.geometry import load_geometry
+    from lumbar.virtual_experiment import stepwise_reduction_table
+    geo = load_geometry("default", levels=["L4-L5"])
+    cs = load_characteristic_set("calibrated")
+    kw = dict(n_specimens=1, noise_sd_deg=0.0, moments_nm=(5.0,))
+    a = stepwise_reduction_table(geo, cs, 3, **kw)
+    b = stepwise_reduction_table(geo, cs, 3, effects={"passive_muscle": 20.0}, **kw)
+    d = (b["rom_mean_deg"] - a["rom_mean_deg"]).abs()
+    arch = a["stage"].isin(fx.ARCH_STAGES)
+    assert d[~arch].max() > 0.2 and d[arch].max() < 1e-6
+    assert "passive_muscle" in b["source"].iat[0]
+
+
+def test_idp_generator_rejects_an_effect_without_idp_form():
+    from lumbar.virtual_experiment import idp_table
+    with pytest.raises(ValueError, match="effect 'itl' does not act on the IDP from the disc loads"):
+        idp_table(None, None, 1, effects={"itl": 0.1})
+
+
+# ------------------------------------------------------------------ discovery: planted effects and nulls
+def test_planted_rom_effect_is_named_with_parameter_within_20pct_and_gap_shrinks():
+    cfg = config()
+    true = 0.03
+    df = D.make_hidden_effect_dataset(cfg, "stepwise_rom", "ligament_prestrain", true, seed=11)
+    assert "TEST FIXTURE" in df["source"].iat[0]
+    out = D.discover(D.build_problem("stepwise_rom", df, cfg), D.discovery_settings(cfg))
+    r = out["result"]
+    assert r["named_effect"] == "ligament_prestrain"
+    assert abs(r["parameter_estimate"]["value"] - true) <= 0.2 * true
+    assert r["gap_after"] < 0.5 * r["gap_before"]
+    assert r["forward_batches"] == 3
+    assert r["ranking"][0][0] == "ligament_prestrain" and r["confidence"] > 0.9
+
+
+def test_rom_null_is_not_named():
+    cfg = config()
+    df = D.make_hidden_effect_dataset(cfg, "stepwise_rom", "none", 0.0, seed=12)
+    r = D.discover(D.build_problem("stepwise_rom", df, cfg), D.discovery_settings(cfg))["result"]
+    assert r["named_effect"] is None and r["parameter_estimate"] is None
+    assert r["gap_after"] == r["gap_before"]
+    assert r["decision"].startswith("nothing named")
+
+
+@pytest.mark.parametrize("name", ["axial_preload", "idp_moment_term", "disc_load_share"])
+def test_planted_idp_effect_is_named(idp_model_fixture, name):
+    cfg = config()
+    true = fx.EFFECTS[name].magnitudes[0]
+    df = D.make_hidden_effect_dataset(cfg, "idp_invitro", name, true, seed=5, idp_model=idp_model_fixture)
+    r = D.discover(D.build_problem("idp_invitro", df, cfg, idp_model=idp_model_fixture),
+                   D.discovery_settings(cfg))["result"]
+    assert r["named_effect"] == name
+    assert abs(r["parameter_estimate"]["value"] - true) <= 0.2 * true
+    assert r["gap_after"] < 0.3 * r["gap_before"]
+
+
+@pytest.mark.parametrize("seed", [21, 22, 23])
+def test_idp_nulls_are_not_named(idp_model_fixture, seed):
+    cfg = config()
+    df = D.make_hidden_effect_dataset(cfg, "idp_invitro", "none", 0.0, seed=seed, idp_model=idp_model_fixture)
+    r = D.discover(D.build_problem("idp_invitro", df, cfg, idp_model=idp_model_fixture),
+                   D.discovery_settings(cfg))["result"]
+    assert r["named_effect"] is None
+
+
+def test_benchmark_summary_and_targets():
+    bench = pd.DataFrame({"case": ["a", "b", "n"], "experiment": "stepwise_rom",
+                          "hidden_effect": ["itl", "itl", "none"], "magnitude": [0.1, 0.2, 0.0],
+                          "named_effect": ["itl", "none", "none"], "correct": [True, False, True],
+                          "param_true": [0.1, 0.2, np.nan], "param_est": [0.11, 0.3, np.nan],
+                          "gap_before": [10.0, 4.0, 1.0], "gap_after": [1.0, 4.0, 1.0]})
+    s = D.summarise_benchmark(bench)
+    assert s["naming_accuracy"] == 0.5 and s["null_specificity"] == 1.0 and s["param_within_20pct"] == 0.5
+    assert s["pass"] == {"naming_accuracy": False, "null_specificity": True, "param_within_20pct": False,
+                         "median_gap_reduction": False}
+
+
+# ------------------------------------------------------------------ CLI, published artefact, in vivo
+def test_cli_writes_discovery_json_for_the_va_artefact(tmp_path, capsys):
+    out = tmp_path / "va"
+    rc = D.main(["--config", str(ROOT / "config" / "test" / "config.yaml"), "--measured", str(VA_FILE),
+                 "--out", str(out)])
+    assert rc == 0
+    r = json.loads((out / "discovery.json").read_text())
+    for k in ("named_effect", "parameter_estimate", "gap_before", "gap_after", "ranking", "confidence"):
+        assert k in r
+    assert r["experiment"] == "neutral_angle"
+    assert r["named_effect"] == "va_neutral_offset" and r["parameter_estimate"]["unit"] == "rad"
+    for f in ("disagreement_map.png", "ranking.png", "before_after.png", "section.md", "scenarios.csv"):
+        assert (out / f).stat().st_size > 100, f
+    assert "va_neutral_offset" in capsys.readouterr().out
+
+
+def test_in_vivo_planted_moment_term_is_named_and_null_is_not(tmp_path):
+    pv, pl = in_vivo_fixture(tmp_path, k_moment=0.02e6)
+    cfg = config(in_vivo_segment_loads=str(pl))
+    r = D.run(cfg, pv, tmp_path / "out")
+    assert r["named_effect"] == "idp_moment_term"
+    assert abs(r["parameter_estimate"]["value"] - 0.02e6) <= 0.2 * 0.02e6
+    pv0, _ = in_vivo_fixture(tmp_path, k_moment=0.0, seed=1)
+    assert D.run(cfg, pv0, tmp_path / "out0")["named_effect"] is None
+
+
+# ------------------------------------------------------------------ bad input: clear messages before any solve
+def test_reject_missing_measured_file(tmp_path):
+    with pytest.raises(D.DiscoveryInputError, match=r"^measured file not found: .*nope\.csv$"):
+        D.read_measured(tmp_path / "nope.csv")
+
+
+def test_reject_table_of_unknown_schema(tmp_path):
+    p = tmp_path / "bad.csv"
+    p.write_text("a,b\n1,2\n")
+    with pytest.raises(D.DiscoveryInputError) as e:
+        D.read_measured(p)
+    assert str(e.value) == (f"{p}: columns ['a', 'b'] match no experiment schema; expected one of "
+                            "stepwise_rom: ['stage', 'direction', 'moment_nm', 'rom_mean_deg', 'rom_min_deg', "
+                            "'rom_max_deg', 'n_specimens']; idp_invitro: ['muscle_setup', 'load_case', 'idp_mean_mpa', "
+                            "'idp_sd_mpa', 'n_specimens']; in_vivo: ['activity', 'idp_sim_mpa', 'idp_in_vivo_mpa', "
+                            "'converged']; neutral_angle: ['stage', 'lordosis_deg']")
+
+
+def test_reject_rom_table_missing_a_column(tmp_path):
+    p = tmp_path / "rom.csv"
+    p.write_text("stage,direction,moment_nm,rom_mean_deg,n_specimens\nintact,flexion,5,3,8\n")
+    with pytest.raises(D.DiscoveryInputError) as e:
+        D.read_measured(p)
+    assert str(e.value) == (f"{p}: looks like a stepwise_rom table but column(s) ['rom_min_deg', 'rom_max_deg'] are "
+                            "missing; expected columns ['stage', 'direction', 'moment_nm', 'rom_mean_deg', "
+                            "'rom_min_deg', 'rom_max_deg', 'n_specimens']")
+
+
+def test_reject_malformed_value_in_in_vivo_table(tmp_path):
+    p = tmp_path / "iv.csv"
+    p.write_text("activity,idp_sim_mpa,idp_in_vivo_mpa,source,converged\nstanding,0.5,abc,x,True\n")
+    with pytest.raises(D.DiscoveryInputError) as e:
+        D.read_measured(p)
+    assert str(e.value) == f"{p}: row 1, column idp_in_vivo_mpa: 'abc' is not a finite number; expected a number"
+
+
+def test_reject_invalid_stage_in_neutral_angle_table(tmp_path):
+    p = tmp_path / "na.csv"
+    p.write_text("stage,lordosis_deg\nwo_cl,0.66\nwo_arch,2.2\n")
+    with pytest.raises(D.DiscoveryInputError) as e:
+        D.read_measured(p)
+    assert str(e.value) == (f"{p}: column stage: 'wo_arch' is not a reduction stage; expected one of ['intact', "
+                            "'wo_ssl', 'wo_isl', 'wo_fl', 'wo_cl', 'wo_va', 'wo_pll', 'wo_all']")
+
+
+def test_reject_rom_table_with_bad_value_names_row_and_column(tmp_path):
+    p = tmp_path / "rom.csv"
+    p.write_text("stage,direction,moment_nm,rom_mean_deg,rom_min_deg,rom_max_deg,n_specimens,kind,source\n"
+                 "intact,flexion,5,3,4,5,8,surrogate,x\n")
+    with pytest.raises(D.DiscoveryInputError, match="rom_mean_deg 3 is not within"):
+        D.read_measured(p)
+
+
+def test_reject_missing_segment_loads_for_in_vivo(tmp_path):
+    pv, _ = in_vivo_fixture(tmp_path)
+    cfg = config(in_vivo_segment_loads=str(tmp_path / "missing.csv"))
+    with pytest.raises(D.DiscoveryInputError) as e:
+        D.run(cfg, pv, tmp_path / "o")
+    assert str(e.value) == (f"segment-load table not found: {tmp_path / 'missing.csv'} (config "
+                            "discovery.in_vivo_segment_loads); the in-vivo discovery needs the muscle model's segment "
+                            "loads with columns ['level', 'activity', 'compressive_n', 'shear_n', 'moment_nm', "
+                            "'converged']")
+    assert not (tmp_path / "o").exists()
+
+
+def test_reject_unknown_or_out_of_bounds_effect():
+    with pytest.raises(ValueError, match=r"^unknown effect 'gravity'; known effects: \["):
+        fx.check_effect("gravity")
+    with pytest.raises(ValueError) as e:
+        fx.check_effect("itl", 5.0)
+    assert str(e.value) == "effect itl: itl_force_scale = 5.0 1 is outside its bounds [0, 1]"
+
+
+def test_cli_bad_input_exits_2_with_message(tmp_path, capsys):
+    rc = D.main(["--config", str(ROOT / "config" / "test" / "config.yaml"), "--measured",
+                 str(tmp_path / "none.csv"), "--out", str(tmp_path / "o")])
+    assert rc == 2
+    assert capsys.readouterr().err.strip() == f"error: measured file not found: {tmp_path / 'none.csv'}"

@@ -1,0 +1,132 @@
+# Discrepancy discovery (issue 6): lumbar.discover on the default stepwise-reduction table, the published
+# vertebral-arch artefact and the in-vivo validation of the muscle model; the hidden-effect benchmark
+# (test fixtures) split into one job per hidden effect (+ one for the null datasets).
+
+
+rule discovery_idp_model:
+    input:
+        geometry_inputs,
+        characteristics=config["characteristics"]["data_dir"],
+        cables=config["l2s1"]["cables"],
+    output:
+        "results/discrepancy/model/idp_invitro_model.csv",
+    log:
+        "logs/discovery_idp_model.log",
+    benchmark:
+        "results/benchmarks/discovery_idp_model.tsv"
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        cfg=discovery_config,
+    script:
+        "../scripts/discover.py"
+
+
+rule discovery_default:
+    input:
+        geometry_inputs,
+        measured=stepwise_reduction_experiment,
+        characteristics=config["characteristics"]["data_dir"],
+    output:
+        **discovery_case_outputs("default"),
+    log:
+        "logs/discovery_default.log",
+    benchmark:
+        "results/benchmarks/discovery_default.tsv"
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        cfg=discovery_config,
+    script:
+        "../scripts/discover.py"
+
+
+rule discovery_va_artefact:
+    input:
+        geometry_inputs,
+        measured=config["discovery"]["va_artefact"],
+        characteristics=config["characteristics"]["data_dir"],
+    output:
+        **discovery_case_outputs("va_artefact"),
+    log:
+        "logs/discovery_va_artefact.log",
+    benchmark:
+        "results/benchmarks/discovery_va_artefact.tsv"
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        cfg=discovery_config,
+    script:
+        "../scripts/discover.py"
+
+
+# chains on the muscle model (issue 5) by path: its rules produce these two tables
+rule discovery_in_vivo:
+    input:
+        measured="results/tables/in_vivo_validation.csv",
+        segment_loads=config["discovery"]["in_vivo_segment_loads"],
+    output:
+        **discovery_case_outputs("in_vivo"),
+    log:
+        "logs/discovery_in_vivo.log",
+    benchmark:
+        "results/benchmarks/discovery_in_vivo.tsv"
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        cfg=discovery_config,
+    script:
+        "../scripts/discover.py"
+
+
+rule discovery_benchmark_job:
+    input:
+        geometry_inputs,
+        characteristics=config["characteristics"]["data_dir"],
+        idp_model=discovery_benchmark_idp_model,
+    output:
+        table="results/discrepancy/benchmark/{job}.csv",
+        fixtures=directory("results/discrepancy/benchmark/{job}_fixtures"),
+    log:
+        "logs/discovery_benchmark_job_{job}.log",
+    benchmark:
+        "results/benchmarks/discovery_benchmark_job_{job}.tsv"
+    wildcard_constraints:
+        job="[a-z_]+",
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        cfg=discovery_config,
+    script:
+        "../scripts/discover.py"
+
+
+rule discovery_benchmark:
+    input:
+        jobs=expand(
+            "results/discrepancy/benchmark/{job}.csv", job=discovery_benchmark_jobs()
+        ),
+    output:
+        table=report(
+            "results/discrepancy/benchmark.csv",
+            caption="../report/discrepancy_benchmark_table.rst",
+            category="Discrepancy",
+        ),
+        summary=report(
+            "results/discrepancy/benchmark_summary.json",
+            caption="../report/discrepancy_benchmark_table.rst",
+            category="Discrepancy",
+        ),
+        figure=report(
+            "results/figures/discrepancy_benchmark.png",
+            caption="../report/discrepancy_benchmark.rst",
+            category="Discrepancy",
+        ),
+    log:
+        "logs/discovery_benchmark.log",
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        cfg=discovery_config,
+    script:
+        "../scripts/discover.py"

@@ -1,0 +1,145 @@
+# Muscle-driven L1-S1 model (paper 2, issue 5): validation against in-vivo L4-L5 IDP (Table 1, Fig. 3,
+# flexion-relaxation), the one-at-a-time sensitivity sweep (Figs. 5-11; one job per Paramspace chunk)
+# and a variance-based (Sobol) sensitivity study. Library: lumbar.muscle_model, lumbar.muscles.
+import pandas as pd
+from snakemake.utils import Paramspace
+
+_mm_sens = config["muscle_model"]["sensitivity"]
+MUSCLE_CHUNKS = Paramspace(
+    pd.DataFrame(
+        [
+            ("ssl_um", "none"),
+            ("k_n_per_cm2", "none"),
+            ("k_n_per_cm2", str(_mm_sens["interplay_ssl_um"])),
+            ("in_situ_sl_um", "none"),
+            ("in_situ_sl_um", str(_mm_sens["interplay_ssl_um"])),
+            ("spt_n_per_cm2", "none"),
+            ("pennation_deg", "none"),
+        ],
+        columns=["parameter", "ssl_um"],
+    ),
+    filename_params="*",
+)
+MUSCLE_FIGURE_PARAMETERS = [
+    "ssl_um",
+    "k_n_per_cm2",
+    "in_situ_sl_um",
+    "spt_n_per_cm2",
+    "pennation_deg",
+]
+
+
+rule muscle_validation:
+    input:
+        in_vivo=config["muscle_model"]["in_vivo_table"],
+        landmarks=geometry_inputs,
+    output:
+        segment_loads=report(
+            "results/tables/muscle_model_segment_loads.csv",
+            caption="../report/muscle_model_segment_loads.rst",
+            category="Muscle model",
+        ),
+        validation=report(
+            "results/tables/in_vivo_validation.csv",
+            caption="../report/in_vivo_validation.rst",
+            category="Muscle model",
+        ),
+        metrics="results/muscle_model/in_vivo_metrics.json",
+        flexion_relaxation=report(
+            "results/tables/flexion_relaxation.csv",
+            caption="../report/flexion_relaxation.rst",
+            category="Muscle model",
+        ),
+        figure=report(
+            "results/figures/muscle_in_vivo_validation.png",
+            caption="../report/muscle_in_vivo_validation.rst",
+            category="Muscle model",
+        ),
+        baseline="results/muscle_model/baseline.npz",
+        fascicles="results/tables/muscle_fascicles.csv",
+    log:
+        "logs/muscle_validation.log",
+    benchmark:
+        "results/benchmarks/muscle_validation.tsv"
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        muscle_model=config["muscle_model"],
+        published=config["paths"]["published_model_results"],
+    script:
+        "../scripts/muscle_model.py"
+
+
+rule muscle_sensitivity:
+    input:
+        baseline="results/muscle_model/baseline.npz",
+    output:
+        f"results/muscle_model/sensitivity/{MUSCLE_CHUNKS.wildcard_pattern}.csv",
+    log:
+        f"logs/muscle_sensitivity/{MUSCLE_CHUNKS.wildcard_pattern}.log",
+    benchmark:
+        f"results/benchmarks/muscle_sensitivity/{MUSCLE_CHUNKS.wildcard_pattern}.tsv"
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        muscle_model=config["muscle_model"],
+    script:
+        "../scripts/muscle_model.py"
+
+
+rule muscle_sensitivity_table:
+    input:
+        chunks=expand(
+            "results/muscle_model/sensitivity/{params}.csv",
+            params=MUSCLE_CHUNKS.instance_patterns,
+        ),
+        baseline_table="results/tables/in_vivo_validation.csv",
+    output:
+        table=report(
+            "results/tables/sensitivity_idp.csv",
+            caption="../report/sensitivity_idp.rst",
+            category="Muscle model",
+        ),
+        figures=report(
+            expand(
+                "results/figures/muscle_sensitivity_{parameter}.png",
+                parameter=MUSCLE_FIGURE_PARAMETERS,
+            ),
+            caption="../report/muscle_sensitivity.rst",
+            category="Muscle model",
+        ),
+    log:
+        "logs/muscle_sensitivity_table.log",
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        muscle_model=config["muscle_model"],
+    script:
+        "../scripts/muscle_model.py"
+
+
+rule muscle_sobol:
+    input:
+        baseline="results/muscle_model/baseline.npz",
+    output:
+        table=report(
+            "results/tables/sobol_indices.csv",
+            caption="../report/sobol_indices.rst",
+            category="Muscle model",
+        ),
+        figure=report(
+            "results/figures/muscle_sobol.png",
+            caption="../report/muscle_sobol.rst",
+            category="Muscle model",
+        ),
+    log:
+        "logs/muscle_sobol.log",
+    benchmark:
+        "results/benchmarks/muscle_sobol.tsv"
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        muscle_model=config["muscle_model"],
+        seed=config["seed"],
+    script:
+        "../scripts/muscle_model.py"

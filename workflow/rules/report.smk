@@ -1,0 +1,33 @@
+# Paper-style report (issue 7): results/report/paper.html (self-contained) and paper.pdf, from every final
+# output. A file that is not among the inputs (a stage not in this configuration) becomes a one-line
+# "not built in this configuration" note in the report, not an error.
+
+
+rule paper_report:
+    input:
+        results=report_inputs,
+        derived=stepwise_reduction_derived(None),
+        data=sorted(glob("data/**/*.csv", recursive=True)),
+        captions=sorted(glob("workflow/report/*.rst")),
+    output:
+        html=report(
+            "results/report/paper.html",
+            caption="../report/paper_report.rst",
+            category="Paper-style report",
+        ),
+        pdf=report(
+            "results/report/paper.pdf",
+            caption="../report/paper_report.rst",
+            category="Paper-style report",
+        ),
+    log:
+        "logs/paper_report.log",
+    benchmark:
+        "results/benchmarks/paper_report.tsv"
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        config=config,
+        published=config["paths"]["published_model_results"],
+    script:
+        "../scripts/report.py"

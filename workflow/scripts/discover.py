@@ -1,0 +1,108 @@
+"""Discrepancy stage (issue 6): rules discovery_idp_model, discovery_default, discovery_va_artefact,
+discovery_in_vivo, discovery_benchmark_job (one hidden effect, or "null"), discovery_benchmark.
+
+By hand: python workflow/scripts/discover.py discovery_va_artefact --configfile config/test/config.yaml \
+    --output /tmp/va/discovery.json /tmp/va/disagreement_map.png /tmp/va/ranking.png \
+             /tmp/va/before_after.png /tmp/va/section.md /tmp/va/scenarios.csv
+         python workflow/scripts/discover.py discovery_benchmark_job --configfile config/test/config.yaml \
+    --output /tmp/bench/ligament_prestrain.csv /tmp/bench/ligament_prestrain_fixtures   (job = file stem)
+"""
+import importlib.util
+from pathlib import Path
+
+_spec = importlib.util.spec_from_file_location("_common", Path(__file__).resolve().parent / "_common.py")
+_common = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_common)
+
+FILES = ("discovery.json", "disagreement_map.png", "ranking.png", "before_after.png", "section.md", "scenarios.csv")
+IDP_MODEL = "results/discrepancy/model/idp_invitro_model.csv"
+
+
+def _cfg(c):
+    return {k: c[k] for k in ("geometry", "characteristics", "fsu", "solver", "l2s1", "discovery", "seed") if k in c}
+
+
+def _case(case, measured, **extra):
+    return lambda c: dict(input=dict(measured=measured(c), **{k: v(c) for k, v in extra.items()}),
+                          output=[f"results/discrepancy/{case}/{f}" for f in FILES], params=dict(cfg=_cfg(c)))
+
+
+RULES = {
+    "discovery_idp_model": lambda c: dict(input=dict(characteristics=c["characteristics"]["data_dir"]),
+                                          output=[IDP_MODEL], params=dict(cfg=_cfg(c))),
+    "discovery_default": _case("default", lambda c: c["stepwise_reduction"]["measured_table"]
+                               or "results/experiments/stepwise_reduction_surrogate.csv"),
+    "discovery_va_artefact": _case("va_artefact", lambda c: c["discovery"]["va_artefact"]),
+    "discovery_in_vivo": _case("in_vivo", lambda c: "results/tables/in_vivo_validation.csv",
+                               segment_loads=lambda c: c["discovery"]["in_vivo_segment_loads"]),
+    "discovery_benchmark_job": lambda c: dict(
+        input=dict(idp_model=IDP_MODEL),
+        output=["results/discrepancy/benchmark/ligament_prestrain.csv",
+                "results/discrepancy/benchmark/ligament_prestrain_fixtures"], params=dict(cfg=_cfg(c))),
+    "discovery_benchmark": lambda c: dict(
+        input=dict(jobs=[f"results/discrepancy/benchmark/{j}.csv" for j in
+                         list(c["discovery"]["benchmark"]["effects"]) + ["null"]]),
+        output=["results/discrepancy/benchmark.csv", "results/discrepancy/benchmark_summary.json",
+                "results/figures/discrepancy_benchmark.png"], params=dict(cfg=_cfg(c))),
+}
+
+if "snakemake" not in globals():
+    snakemake = _common.stand_in(RULES, __doc__)
+
+log = _common.setup_logging(snakemake)
+
+import copy  # noqa: E402
+import time  # noqa: E402
+
+import pandas as pd  # noqa: E402
+
+from lumbar import discover  # noqa: E402
+from lumbar.io import write_json_atomic, write_table_atomic  # noqa: E402
+
+rule = snakemake.rule
+cfg = copy.deepcopy(dict(snakemake.params.cfg))
+idp_model = _common.first(getattr(snakemake.input, "idp_model", []))
+if idp_model and Path(idp_model).is_file():
+    cfg["discovery"]["idp_model_table"] = str(idp_model)
+t0 = time.perf_counter()
+
+if rule == "discovery_idp_model":
+    sim = discover.solve_idp_model(cfg)
+    write_table_atomic(sim, snakemake.output[0], float_format="%.9g")
+    log.info("nominal L2-S1 model (set %s): %d scenarios, %d converged", cfg["discovery"]["characteristic_set"],
+             len(sim), int(sim["converged"].sum()))
+elif rule in ("discovery_default", "discovery_va_artefact", "discovery_in_vivo"):
+    if rule == "discovery_in_vivo":
+        cfg["discovery"]["in_vivo_segment_loads"] = str(snakemake.input.segment_loads)
+    out_dir = Path(snakemake.output[0]).parent
+    r = discover.run(cfg, snakemake.input.measured, out_dir)
+    log.info("%s on %s: named %s (estimate %s), gap %.2f -> %.2f; %s", rule, snakemake.input.measured,
+             r["named_effect"], r["parameter_estimate"], r["gap_before"], r["gap_after"], r["decision"])
+    for p in snakemake.output:
+        if not Path(p).is_file():
+            raise RuntimeError(f"{rule}: expected output {p} was not written (outputs go to {out_dir})")
+elif rule == "discovery_benchmark_job":
+    job = Path(snakemake.output[0]).stem
+    cases = discover.benchmark_cases(cfg)
+    sel = cases[cases["hidden_effect"] == ("none" if job == "null" else job)]
+    if sel.empty:
+        raise ValueError(f"benchmark job {job!r} has no case; hidden effects: {sorted(set(cases['hidden_effect']))}")
+    bench = discover.run_benchmark_cases(cfg, sel, snakemake.output[1], worked_cases=1)
+    log.info("seconds per discovery: %s", bench.pop("seconds").round(2).tolist())   # timings only in the log
+    write_table_atomic(bench, snakemake.output[0], float_format="%.6g")
+    log.info("benchmark job %s: %d case(s), %d named correctly", job, len(bench), int(bench["correct"].sum()))
+elif rule == "discovery_benchmark":
+    bench = pd.concat([pd.read_csv(p) for p in snakemake.input.jobs], ignore_index=True)
+    bench = bench.sort_values("case", kind="stable").reset_index(drop=True)
+    summary = discover.summarise_benchmark(bench, discover.benchmark_settings(cfg)["generator"])
+    cols = ["case", "experiment", "hidden_effect", "magnitude", "named_effect", "correct", "param_true", "param_est",
+            "gap_before", "gap_after", "confidence", "fixture"]
+    write_table_atomic(bench[cols], snakemake.output[0], float_format="%.6g")
+    write_json_atomic(summary, snakemake.output[1], allow_nan=True)
+    discover.plot_benchmark(bench, summary, snakemake.output[2])
+    log.info("benchmark: accuracy %.2f, null specificity %.2f, parameters within 20%% %.2f, median gap reduction "
+             "%.2f, all targets met: %s", summary["naming_accuracy"], summary["null_specificity"],
+             summary["param_within_20pct"], summary["median_gap_reduction"], summary["all_pass"])
+else:
+    raise ValueError(f"unknown rule {rule!r}")
+log.info("%s done in %.1f s", rule, time.perf_counter() - t0)
