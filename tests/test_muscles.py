@@ -5,9 +5,10 @@ Curve defaults (OpenSim 4.x source, opensim-org/opensim-core):
   max_norm_active_fiber_length 1.8123, shallow_ascending_slope 0.8616, minimum_value 0.1; curviness 1 in
   buildCurve; SmoothSegmentedFunctionFactory::createFiberActiveForceLengthCurve (plateau at 1 with zero
   slope, ylow outside [lce0, lce3]).
-* SmoothSegmentedFunctionFactory::createFiberForceLengthCurve: (1+e0, 0, slope 0) to (1+e1, 1, slope kiso);
-  we use e0 = 0, e1 = 0.7 and kiso = 2/0.7, the values that reproduce the paper's quoted baseline tangent
-  modulus at 70 % strain (2.86 MPa with K = 1 MPa, Sect. 2.5).
+* SmoothSegmentedFunctionFactory::createFiberForceLengthCurve (OpenSim 4): (1+e0, 0, slope 0) to
+  (xlow, ylow, slope klow) to (1+e1, 1, slope kiso), xlow = 1+e0+min(0.1/kiso, 0.1(e1-e0)),
+  ylow = klow (xlow-1-e0)/2; FiberForceLengthCurve defaults e0 = 0, e1 = 0.7, klow = 0.2, kiso = 2/0.7,
+  curviness 0.75 (they also reproduce the paper's quoted baseline tangent moduli, Sect. 2.5).
 * SegmentedQuinticBezierToolkit::calcQuinticBezierCornerControlPoints (curviness scaled 0.1 + 0.8 c).
 """
 from pathlib import Path
@@ -37,9 +38,12 @@ def test_passive_force_length_defining_points():
     assert y[0] == pytest.approx(0, abs=1e-12) and y[1] == pytest.approx(0, abs=1e-12) and d[1] == pytest.approx(0, abs=1e-9)
     assert y[2] == pytest.approx(1.0, abs=1e-12) and d[2] == pytest.approx(2 / 0.7, rel=1e-9)
     assert y[3] == pytest.approx(1 + 0.3 * 2 / 0.7, rel=1e-9)          # linear extrapolation
-    # paper Sect. 2.5: baseline tangent moduli 1.01 / 2.45 / 2.86 MPa at 30 / 50 / 70 % strain (K = 1 MPa)
-    _, slope = PASSIVE_FL.value_and_slope(1 + np.array([0.3, 0.5, 0.7]))
-    assert np.allclose(slope, [1.01, 2.45, 2.86], atol=0.2)
+    # end of the toe segment: x = 1 + min(0.1/kiso, 0.07) = 1.035, y = 0.2 * 0.035 / 2, slope klow = 0.2
+    yl, dl = PASSIVE_FL.value_and_slope(np.array([1.035]))
+    assert yl[0] == pytest.approx(0.2 * 0.035 / 2, rel=1e-9) and dl[0] == pytest.approx(0.2, rel=1e-9)
+    # paper Sect. 2.5: baseline tangent moduli 0.26 / 1.01 / 2.45 / 2.86 MPa at 10 / 30 / 50 / 70 % strain (K = 1 MPa)
+    _, slope = PASSIVE_FL.value_and_slope(1 + np.array([0.1, 0.3, 0.5, 0.7]))
+    assert np.allclose(slope, [0.26, 1.01, 2.45, 2.86], atol=0.16)
 
 
 def test_force_velocity_defining_points():
@@ -60,6 +64,8 @@ def test_curve_slope_matches_finite_differences(curve):
 def test_bad_curve_parameters_rejected():
     with pytest.raises(ValueError, match="stiffness"):
         passive_force_length_curve(kiso=1.0)
+    with pytest.raises(ValueError, match="klow"):
+        passive_force_length_curve(klow=0.0)
     with pytest.raises(ValueError, match="lce"):
         active_force_length_curve(x0=0.7, x1=0.6)
 

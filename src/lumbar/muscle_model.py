@@ -447,15 +447,21 @@ def read_in_vivo(path) -> pd.DataFrame:
 
 
 def flexion_relaxation(model, sols, names):
-    """Sum of active and passive extensor (and abdominal active) forces [N] per solved posture."""
+    """Sum of active and passive extensor (and abdominal active) forces [N] per solved posture, with the
+    extensors' sarcomere lengths (PCSA-weighted mean and max [um]) and the PCSA fraction beyond their slack
+    sarcomere length (where passive force starts)."""
     rows = []
     ext = np.isin(model.ms.groups, EXTENSORS)
     abd = np.isin(model.ms.groups, ABDOMINALS)
+    w = model.props.pcsa_m2[ext]
     for name, s in zip(names, sols):
-        _, _, act, pas, _ = model.muscle_forces(s.x[None], s.R[None], s.a)
+        _, _, act, pas, sl = model.muscle_forces(s.x[None], s.R[None], s.a)
+        se = sl[0, ext]
         rows.append({"activity": name, "extensor_active_n": float(act[0, ext].sum()),
                      "extensor_passive_n": float(pas[0, ext].sum()),
-                     "abdominal_active_n": float(act[0, abd].sum()), "converged": s.converged})
+                     "abdominal_active_n": float(act[0, abd].sum()), "converged": s.converged,
+                     "extensor_sl_mean_um": float(np.sum(w * se) / np.sum(w)), "extensor_sl_max_um": float(se.max()),
+                     "extensor_pcsa_fraction_beyond_ssl": float(np.sum(w[se > model.props.ssl_um[ext]]) / np.sum(w))})
     return pd.DataFrame(rows)
 
 

@@ -381,8 +381,13 @@ class _Builder:
         if not self.has(rel):
             return f"Muscle model, in-vivo validation: {NOT_BUILT}."
         m = json.loads(self.path(rel).read_text())
+        n_tot = m.get("n_total", m.get("n"))
         s = (f"Muscle model (paper 2): predicted vs in-vivo L4-L5 intradiscal pressure over {fmt(m.get('n'))} "
-             f"activities, R2 = {fmt(m.get('r2'), 3)}, RMSE = {fmt(m.get('rmse_mpa'), 3)} MPa")
+             f"converged of {fmt(n_tot)} activities, ")
+        if m.get("r2") is None or m.get("rmse_mpa") is None:
+            s += "R2 and RMSE not computed (too few converged activities)"
+        else:
+            s += f"R2 = {fmt(m.get('r2'), 3)}, RMSE = {fmt(m.get('rmse_mpa'), 3)} MPa"
         pub = self.published.get("idp_validation_r2")
         if pub is not None:
             s += f" (paper: R2 = {fmt(pub['value'])}, {pub['source']})"

@@ -112,6 +112,12 @@ if rule == "muscle_validation":
     fr["paper_extensor_passive_n"] = [paper[a][1] for a in fr["activity"]]
     fr["paper_abdominal_active_n"] = [paper[a][2] for a in fr["activity"]]
     fr["paper_source"] = "paraspinal_muscle_properties_spinal_loading.md, Sect. 3.1 (original_text)"
+    fr["note"] = ("as the paper (Sect. 2.1): pelvis fixed, all 36 deg of thorax rotation in L1-S1; SL = in-situ SL x "
+                  "fibre length / its length in the as-segmented myo-sim posture (Christophy 2012 normalisation; "
+                  "optimal fibre and path lengths within 3 % of Christophy's table; MuJoCo wrapping changes extensor "
+                  "lengths by < 3 mm). Extensor fibres stretch ~20-30 % from in-situ 2.2-2.4 um and reach only the "
+                  "toe of the passive curve; 334 N over the extensors' PCSA would need SL ~3.5 um in all of them "
+                  "(25 % beyond SSL 2.8). Not tuned; README, Muscle-driven model.")
     write_table_atomic(seg[["level", "activity", "compressive_n", "shear_n", "moment_nm", "converged",
                             "lateral_moment_nm", "axial_moment_nm"]], snakemake.output[0])
     write_table_atomic(val2, snakemake.output[1])

@@ -9,10 +9,12 @@ quintic polynomials, u is found from x by safeguarded Newton, and dy/dx = y'(u)/
 Curves and their parameters (OpenSim defaults, cited in tests/test_muscles.py):
 * active force-length (ActiveForceLengthCurve): lce0 = 0.47-0.0259 = 0.4441, lce1 = 0.6259, lce2 = 1,
   lce3 = 1.8123, shallow ascending slope 0.8616, minimum value 0.1, curviness 1;
-* passive (fibre) force-length (FiberForceLengthCurve / createFiberForceLengthCurve): zero below strain
-  e0 = 0, 1 at strain e1 = 0.7 with stiffness kiso = 2/0.7 at that point and curviness 0.75 (the
-  parameters that reproduce the tangent moduli the paper quotes for its baseline, Sect. 2.5: 0.26, 1.01,
-  2.45 and 2.86 MPa at 10, 30, 50 and 70 % strain with K = 1 MPa; checked in the tests);
+* passive (fibre) force-length (FiberForceLengthCurve / createFiberForceLengthCurve, OpenSim 4 defaults):
+  zero below strain e0 = 0, a toe segment to strain min(0.1/kiso, 0.1 e1) = 0.035 with stiffness at low
+  force klow = 0.2, then 1 at strain e1 = 0.7 with stiffness kiso = 2/0.7, curviness 0.75. Tangent moduli
+  with K = 1 MPa: 0.23, 1.07, 2.30, 2.86 MPa at 10, 30, 50, 70 % strain, beside the paper's baseline
+  0.26, 1.01, 2.45, 2.86 (Sect. 2.5; checked in the tests). (Until 2026-11-23 the toe segment was missing:
+  a single corner from (1, 0, slope 0) gave 0.08 MPa at 10 % strain and 3-30x less force below 10 %.)
 * force-velocity (createFiberForceVelocityCurve, for completeness; the static model does not use it):
   fmaxE 1.4, slopes 0 at -vmax, 5 at isometric, 0 at +vmax, curviness 0.6 (concentric) / 0.9 (eccentric).
 """
@@ -153,14 +155,23 @@ def active_force_length_curve(x0=0.4441, x1=0.6259, x2=1.0, x3=1.8123, ylow=0.1,
     return SmoothSegmentedCurve("active_force_length", [p[0] for p in pts], [p[1] for p in pts])
 
 
-def passive_force_length_curve(e0=0.0, e1=0.7, kiso=2.0 / 0.7, curviness=0.75) -> SmoothSegmentedCurve:
-    """Normalised passive fibre force-length curve (createFiberForceLengthCurve); x = 1 + strain."""
+def passive_force_length_curve(e0=0.0, e1=0.7, klow=0.2, kiso=2.0 / 0.7, curviness=0.75) -> SmoothSegmentedCurve:
+    """Normalised passive fibre force-length curve (createFiberForceLengthCurve); x = 1 + strain.
+
+    Two corner segments as in OpenSim 4: (1+e0, 0, slope 0) -> (xlow, ylow, slope klow) -> (1+e1, 1, kiso)
+    with ``xlow = 1+e0 + dx``, ``dx = min(0.1/kiso, 0.1 (e1-e0))``, ``ylow = klow dx / 2`` (the toe)."""
     if not e1 > e0:
         raise ValueError("strain at one normalised force must exceed the strain at zero force")
     if not kiso > 1.0 / (e1 - e0):
         raise ValueError(f"stiffness at one normalised force must exceed 1/(e1-e0) = {1 / (e1 - e0):.4g}")
-    px, py = corner_control_points(1 + e0, 0.0, 0.0, 1 + e1, 1.0, kiso, curviness)
-    return SmoothSegmentedCurve("passive_force_length", px, py)
+    if not 0.0 < klow < 1.0 / (e1 - e0):
+        raise ValueError(f"stiffness at low force (klow) must be in (0, 1/(e1-e0) = {1 / (e1 - e0):.4g})")
+    x0, xiso = 1.0 + e0, 1.0 + e1
+    dx = min(0.1 / kiso, 0.1 * (xiso - x0))
+    xlow, ylow = x0 + dx, klow * 0.5 * dx
+    p0 = corner_control_points(x0, 0.0, 0.0, xlow, ylow, klow, curviness)
+    p1 = corner_control_points(xlow, ylow, klow, xiso, 1.0, kiso, curviness)
+    return SmoothSegmentedCurve("passive_force_length", [p0[0], p1[0]], [p0[1], p1[1]])
 
 
 def force_velocity_curve(fmax_e=1.4, dydx_c=0.0, dydx_iso=5.0, dydx_e=0.0, curv_c=0.6,

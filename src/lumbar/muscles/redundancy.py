@@ -19,7 +19,8 @@ Method: sequential quadratic programming with exact first derivatives, in two ph
   is eliminated exactly (J is invertible), ``dq = -J^-1 (Q + B da)``; the remaining bound-constrained linear
   least squares in ``da`` is solved exactly by :func:`box_lsq`. Steps are capped (1 mm, 0.02 rad) and
   accepted by an Armijo test on the L1 merit ``cost + mu |Q|_1`` over six step lengths evaluated as one
-  batch. Stop when the QP's predicted cost decrease is below ``rel_cost_tol`` (relative) with a residual
+  batch; if none decreases it while out of equilibrium, ``mu`` (below the equilibrium multipliers, so the
+  step was no descent direction) is raised tenfold up to ``mu_max`` and the step retried. Stop when the QP's predicted cost decrease is below ``rel_cost_tol`` (relative) with a residual
   below ``polish_from``; a plain Newton polish on the poses (activations fixed) then brings the residual
   of every free body below ``tol`` (1e-8 N and N*m).
 
@@ -164,6 +165,7 @@ class RedundancySolver:
         self.qvar = np.tile(np.r_[np.full(3, 1e-3), np.full(3, 1e-2)], nb)   # QP pose variables: mm, 10 mrad
         self.dq_max = np.full(6 * nb, 2.0)                           # |dq| <= 2 mm, 20 mrad at D = trust0
         self.mu0 = 1.0                                              # L1 merit weight per N of residual
+        self.mu_max = 1.0e6          # the merit weight is raised x10 (up to this) when a step fails the search
         self.accept_suboptimal = False
         self.line_search = (1.0, 0.5, 0.25, 0.1, 0.03, 0.01)
         self.free = np.setdiff1d(np.arange(6 * nb), self.rot)
@@ -290,7 +292,7 @@ class RedundancySolver:
         allidx = np.arange(B)
         if x0 is None or a0 is None:   # start: equilibrium of the free vertebrae with the thorax held
             res = solve(_ThoraxHeld(m), np.zeros((B, m.nb, 6)), x0=x, R0=R, params=self._params(params, a, allidx),
-                        max_iter=40, tol_force=1e-6, tol_moment=1e-6, retry_load_steps=(4,))
+                        max_iter=40, tol_force=1e-6, tol_moment=1e-6, retry_load_steps=())
             x, R = res.x, res.R
         st = self._state(x, R, a, params, allidx, targets)
         D = np.full(B, self.trust0)
@@ -368,11 +370,19 @@ class RedundancySolver:
                     elif resid < self.tol and ((stepa < self.step_tol and stepq < 1e-6)
                                                or pred[k] < 1e-9 * (1.0 + st["c"][i])):
                         done[i] = optimal[i] = True
+                elif np.abs(self._qres(st, i, held)).max() >= self.tol and mu[i] < self.mu_max:
+                    # away from equilibrium the SQP step (which satisfies the linearised equilibrium) is a
+                    # descent direction of the L1 merit only if mu exceeds the equilibrium multipliers;
+                    # raise it and retry from the same point (a tenfold step per failed search)
+                    mu[i] *= 10.0
                 elif held:
                     stop[i] = True
                 else:
                     done[i] = True
-                    if resid < self.tol and pred[k] < 1e-8 * (1.0 + st["c"][i]):
+                    # at equilibrium: stationary if the QP's predicted cost decrease is below the same
+                    # relative tolerance as the regular stop (pred also holds mu |Q|_1, inflated by a raised mu)
+                    if resid < self.tol and (pred[k] < 1e-8 * (1.0 + st["c"][i])
+                                             or abs(predc[k]) < self.rel_cost_tol * (1.0 + st["c"][i])):
                         optimal[i] = True
                     else:
                         msg[i] = "line search failed (no decrease of the merit function)"
