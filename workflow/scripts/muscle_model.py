@@ -132,9 +132,12 @@ if rule == "muscle_validation":
     ax.bar(xs - 0.2, val2["idp_moment_mpa"], 0.4, bottom=val2["idp_force_mpa"], color="#8fb0d9",
            label="model: sagittal moment part")
     ax.bar(xs + 0.2, val2["idp_in_vivo_mpa"], 0.4, color="#555555", label="in vivo (Wilke et al.)")
+    starred = False
     for k, ok in enumerate(val2["converged"]):
         if not ok:
-            ax.plot(xs[k] - 0.2, val2["idp_sim_mpa"].iloc[k] + 0.05, "r*", ms=12)
+            ax.plot(xs[k] - 0.2, val2["idp_sim_mpa"].iloc[k] + 0.05, "r*", ms=12,
+                    label=None if starred else "not converged (excluded from R2)")
+            starred = True
     ax.set_xticks(xs, [a.replace("_", "\n") for a in val2["activity"]], fontsize=8)
     ax.set_ylabel("L4-L5 IDP [MPa]")
     r2 = metrics["r2"]
