@@ -1,0 +1,499 @@
+"""Backward calibration of the L4-L5 unit on a stepwise-reduction ROM table (paper 1, Sect. 2.2.2-2.2.4, 3.1.1).
+
+The reduction experiment is replayed backwards; each structure is fitted on the stage in which it is
+the newest structure present (every other structure of that stage is already calibrated):
+
+=====  =========================  ===========  ==============================================
+step   structure                  fit stage    parameters
+=====  =========================  ===========  ==============================================
+1      disc (Eq. 3, per direction) ``wo_all``  p1, p2, p3 per direction (flexion, extension,
+                                                lateral_bending, axial_rotation): T(phi_meas) = M
+2      ALL (Eq. 7)                ``wo_pll``   a, b, d
+3      PLL                        ``wo_va``    a, b, d
+4      facet stiffness (Eq. 5)    ``wo_cl``    c_stiff (the facets go with the vertebral arch;
+                                                the ITL goes too but has no Table 3 row: the
+                                                calibrated set keeps the ITL absent, as the paper)
+5      CL                         ``wo_fl``    a, b, d
+6      FL                         ``wo_isl``   a, b, d
+7      ISL                        ``wo_ssl``   a, b, d
+8      SSL                        ``intact``   a, b, d
+=====  =========================  ===========  ==============================================
+
+Disc (step 1): the disc-only unit is in equilibrium where the disc torque equals the applied moment,
+so Eq. 3 is fitted to the points (phi = measured mean ROM, T = M) by ``least_squares(method="trf")``;
+start values from a grid over p2 with p1, p3 solved linearly (variable projection), then refined.
+Lateral bending and axial rotation are symmetric (one law each), flexion and extension separate.
+
+Ligaments (steps 2-8): Eq. 7 has four parameters, but (a, b, c, d) are not identifiable from ROM
+(a shift of c trades against a and b). Project parametrisation: ``c = -a*ln(1 + exp(b/d))`` so that the
+law is zero at 0 % strain (F(0) = 0, tension-only rule of ``lumbar.elements.ligament`` unchanged), and
+(a, b, d) are fitted with bounds a in [0.01, 5000] N, b in [-60, 40] %, d in [0.05, 50] % (d > 0:
+monotone laws; the paper's concave FL, d < 0, is outside this family by design). The prestrains stay the
+paper's (Sect. 2.2.4). Each fit is a ``least_squares(method="trf")`` with finite differences over that
+stage's 20 scenarios (5 moments x 4 directions); each evaluation solves the stage's FSU batch (warm
+started). Residual = (ROM_sim - ROM_mean) / width with width = max - min where the row has a range,
+else 2 x ``tolerance_deg``; a scenario without equilibrium contributes a fixed penalty of 10.
+
+The facet stiffness (step 4) is one parameter (log-scaled, bounds 100 N/m - 1e6 N/m).
+This module never imports snakemake.
+"""
+from __future__ import annotations
+
+import copy
+import dataclasses
+import logging
+import math
+import shutil
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from scipy.optimize import least_squares
+
+from .characteristics import SoftplusLaw, load_characteristic_set
+from .elements.facet import fit_surface
+from .fsu import build_fsu
+from .io import save_figure_atomic, write_table_atomic
+from .stepwise_reduction import MAIN_DIRECTIONS, StageSolver
+
+log = logging.getLogger(__name__)
+
+DISC_STAGE = "wo_all"
+FACET_STAGE = "wo_cl"
+LIGAMENT_STAGE = {"ALL": "wo_pll", "PLL": "wo_va", "CL": "wo_fl", "FL": "wo_isl", "ISL": "wo_ssl", "SSL": "intact"}
+ORDER = [("disc", DISC_STAGE), ("ALL", "wo_pll"), ("PLL", "wo_va"), ("facets", FACET_STAGE),
+         ("CL", "wo_fl"), ("FL", "wo_isl"), ("ISL", "wo_ssl"), ("SSL", "intact")]
+CALIBRATED_LIGAMENTS = ("ALL", "PLL", "FL", "CL", "ISL", "SSL")
+A_BOUNDS, B_BOUNDS, D_BOUNDS = (0.01, 5000.0), (-60.0, 40.0), (0.05, 50.0)
+K_FACET_BOUNDS = (100.0, 1.0e6)
+F0_BOUNDS = (0.0, 300.0)
+CONCAVE_CANDIDATES = ("FL",)
+PENALTY = 10.0
+
+
+def c_zero(a, b, d):
+    """c of Eq. 7 such that F(0 %) = 0."""
+    return -a * float(np.logaddexp(0.0, b / d))
+
+
+def softplus_zero_law(eps_pct, a, b, d):
+    """Eq. 7 with c = c_zero(a, b, d) (raw law, no tension-only rule) [N]."""
+    return a * (np.logaddexp(0.0, (np.asarray(eps_pct, float) + b) / d) - np.logaddexp(0.0, b / d))
+
+
+def eq3(phi_rad, p):
+    p1, p2, p3 = p
+    return p1 * np.tanh(np.asarray(phi_rad) ** 3 / p2) + p3 * np.asarray(phi_rad)
+
+
+# ------------------------------------------------------------------ disc
+def fit_disc_direction(phi_rad, torque_nm):
+    """Eq. 3 parameters (p1 [N*m], p2 [rad^3], p3 [N*m/rad]) with T(phi) = torque, least squares (trf)."""
+    phi = np.asarray(phi_rad, float)
+    M = np.asarray(torque_nm, float)
+    ok = np.isfinite(phi) & np.isfinite(M)
+    phi, M = phi[ok], M[ok]
+    if phi.size < 3:
+        raise ValueError(f"disc fit needs >= 3 finite (ROM, moment) points, got {phi.size}")
+    best = None
+    for lp2 in np.linspace(-8, 0, 81):          # variable projection start: p1, p3 linear for fixed p2
+        p2 = 10.0 ** lp2
+        A = np.column_stack([np.tanh(phi**3 / p2), phi])
+        (p1, p3), *_ = np.linalg.lstsq(A, M, rcond=None)
+        r = float(np.sum((A @ [p1, p3] - M) ** 2))
+        if best is None or r < best[0]:
+            best = (r, (p1, p2, p3))
+    p0 = np.array(best[1])
+
+    def res(q):
+        return eq3(phi, (q[0], 10.0 ** q[1], q[2])) - M
+
+    sol = least_squares(res, [p0[0], math.log10(p0[1]), p0[2]], method="trf",
+                        bounds=([-1e3, -9, -1e3], [1e3, 1, 1e3]), x_scale=[1.0, 0.1, 1.0],
+                        xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=2000)
+    return float(sol.x[0]), float(10.0 ** sol.x[1]), float(sol.x[2])
+
+
+# ------------------------------------------------------------------ result container
+@dataclass
+class CalibrationResult:
+    charset: object                                  # CharacteristicSet with the fitted values
+    disc: dict                                       # direction -> (p1, p2, p3)
+    facet_stiffness: float                           # N/m
+    ligaments: dict                                  # kind -> (a, b, c, d) [N, %]
+    summary: pd.DataFrame                            # one row per calibration step
+    rom_fit: pd.DataFrame                            # per scenario: simulated vs reference at the fit stage
+    disc_points: pd.DataFrame                        # Fig. 4 data
+    ligament_points: pd.DataFrame                    # Fig. 5 data
+    facet_surfaces: pd.DataFrame                     # Table 2 data (Eq. 4 coefficients per side)
+    data_kind: str = "surrogate"
+    wall_time_s: float = 0.0
+    info: dict = field(default_factory=dict)
+
+
+def _replace(obj, **kw):
+    if dataclasses.is_dataclass(obj):
+        return dataclasses.replace(obj, **kw)
+    out = copy.copy(obj)
+    for k, v in kw.items():
+        setattr(out, k, v)
+    return out
+
+
+def _kind_groups(model, kind):
+    return [g for g, (_, k, _) in enumerate(model.fibre_groups) if k == kind]
+
+
+def _set_law(model, kind, a, b, d):
+    sel = np.isin(model.f_group, _kind_groups(model, kind))
+    model.f_par[sel, :4] = (a, b, c_zero(a, b, d), d)
+
+
+def _stage_rows(ref, stage):
+    r = ref[ref["stage"] == stage].reset_index(drop=True)
+    if r.empty:
+        raise ValueError(f"reference table has no rows for stage {stage!r} (needed to calibrate it)")
+    return r
+
+
+def _widths(rows, tolerance_deg):
+    lo, hi = rows["rom_min_deg"].to_numpy(float), rows["rom_max_deg"].to_numpy(float)
+    w = np.where(np.isfinite(lo) & np.isfinite(hi), hi - lo, 2.0 * tolerance_deg)
+    return np.maximum(w, 0.05)
+
+
+def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_shear=None,
+              tolerance_deg=0.5, data_kind="surrogate", max_iter=50, tol=1e-9, max_nfev=60,
+              start=None, concave=CONCAVE_CANDIDATES) -> CalibrationResult:
+    """Calibrate disc, facet stiffness and ligaments on ``reference`` (see module doc).
+
+    ``initial``: characteristic set providing everything that is not fitted (axial disc law, shear
+    stiffness, prestrains, damping); default ``load_characteristic_set("calibrated")``.
+    ``start``: optional {kind: (a, b, d)} start values of the ligament fits (default a = 20 N,
+    b = -prestrain, d = 2 %: the knee at the reference length).
+    """
+    t0 = time.perf_counter()
+    base = initial if initial is not None else load_characteristic_set("calibrated")
+    steps = []
+    # ---- step 1: disc
+    rows = _stage_rows(reference, DISC_STAGE)
+    torque = dict(base.disc.torque)
+    disc_pts = []
+    for d in MAIN_DIRECTIONS:
+        r = rows[rows["direction"] == d]
+        if len(r) < 3:
+            raise ValueError(f"stage {DISC_STAGE}: direction {d!r} has {len(r)} rows; the disc fit needs >= 3")
+        phi = np.radians(r["rom_mean_deg"].to_numpy(float))
+        M = r["moment_nm"].to_numpy(float)
+        p = fit_disc_direction(phi, M)
+        torque[d] = p
+        for ph, m in zip(phi, M):
+            disc_pts.append({"direction": d, "moment_nm": m, "rom_deg": math.degrees(ph),
+                             "torque_fit_nm": float(eq3(ph, p))})
+        resid = eq3(phi, p) - M
+        steps.append({"step": 1, "structure": f"disc:{d}", "stage": DISC_STAGE, "n_scenarios": len(r),
+                      "parameters": "p1,p2,p3", "rms_residual": float(np.sqrt(np.mean(resid**2))),
+                      "residual_unit": "N*m", "n_not_converged": 0, "n_evaluations": 1})
+    disc = _replace(base.disc, torque=torque)
+    # ---- model with every calibrated ligament (start values); unfitted ones are masked by the stages
+    start = dict(start or {})
+    ligs = {}
+    for kind in CALIBRATED_LIGAMENTS:
+        pre = base.ligaments[kind].prestrain_pct if kind in base.ligaments else 0.0
+        a, b, d = start.get(kind, (20.0, -pre, 2.0))
+        ligs[kind] = SoftplusLaw(a, b, c_zero(a, b, d), d, pre, source="calibration start")
+    cs = _replace(base, name="calibrated", disc=disc, ligaments=ligs,
+                             absent={"ITL": "no Table 3 row; the stepwise-reduction experiment does not isolate the ITL"})
+    k_fac0 = float(base.facet.stiffness)
+    fsu = build_fsu(geometry, cs, level, facet_stiffness=k_fac0, k_shear=k_shear)
+    m = fsu.model
+    k_stiff0 = m.k_stiff.copy()
+    fitted = {}
+    rom_fit, lig_pts = [], []
+    k_fac = k_fac0
+    for step, (what, stage) in enumerate(ORDER[1:], start=2):
+        rows = _stage_rows(reference, stage)
+        w = _widths(rows, tolerance_deg)
+        target = rows["rom_mean_deg"].to_numpy(float)
+        ss = StageSolver(fsu, rows[["stage", "direction", "moment_nm"]], max_iter=max_iter, tol=tol)
+        n_eval = [0]
+
+        def residual(q, apply):
+            apply(q)
+            n_eval[0] += 1
+            rom, conv, _ = ss.run()
+            return np.where(conv, (rom - target) / w, PENALTY)
+
+        candidates = []
+        if what == "facets":
+            def apply_f(q):
+                m.k_stiff[:] = k_stiff0 * (10.0 ** q[0] / k_fac0)
+            candidates.append((apply_f, [math.log10(k_fac)], [math.log10(K_FACET_BOUNDS[0])],
+                               [math.log10(K_FACET_BOUNDS[1])], [0.3], None))
+        else:
+            kind = what
+
+            def apply_m(q, kind=kind):          # monotone branch: d > 0, F(0) = 0
+                _set_law(m, kind, 10.0 ** q[0], q[1], 10.0 ** q[2])
+            law = ligs[kind]
+            candidates.append((apply_m, [math.log10(law.a), law.b, math.log10(law.d)],
+                               [math.log10(A_BOUNDS[0]), B_BOUNDS[0], math.log10(D_BOUNDS[0])],
+                               [math.log10(A_BOUNDS[1]), B_BOUNDS[1], math.log10(D_BOUNDS[1])], [0.3, 2.0, 0.3],
+                               lambda q: (10.0 ** q[0], q[1], c_zero(10.0 ** q[0], q[1], 10.0 ** q[2]), 10.0 ** q[2])))
+            if kind in concave:
+                def apply_c(q, kind=kind):      # concave branch: d < 0, F(0) = F0 >= 0 fitted
+                    a, b, d, f0 = 10.0 ** q[0], q[1], -(10.0 ** q[2]), q[3]
+                    sel = np.isin(m.f_group, _kind_groups(m, kind))
+                    m.f_par[sel, :4] = (a, b, f0 + c_zero(a, b, d), d)
+                candidates.append((apply_c, [1.5, 0.0, 1.0, 50.0],
+                                   [math.log10(A_BOUNDS[0]), B_BOUNDS[0], math.log10(D_BOUNDS[0]), F0_BOUNDS[0]],
+                                   [math.log10(A_BOUNDS[1]), B_BOUNDS[1], math.log10(D_BOUNDS[1]), F0_BOUNDS[1]],
+                                   [0.3, 2.0, 0.3, 20.0],
+                                   lambda q: (10.0 ** q[0], q[1],
+                                              q[3] + c_zero(10.0 ** q[0], q[1], -(10.0 ** q[2])), -(10.0 ** q[2]))))
+        best = None
+        for apply, x0, lb, ub, xs, to_law in candidates:
+            x0 = np.clip(x0, lb, ub)
+            sol = least_squares(lambda q: residual(q, apply), x0, method="trf", bounds=(lb, ub), x_scale=xs,
+                                diff_step=1e-5, xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=max_nfev)
+            if best is None or sol.cost < best[0].cost - 1e-12:
+                best = (sol, apply, to_law)
+        sol, apply, to_law = best
+        apply(sol.x)
+        rom, conv, res = ss.run()
+        if what == "facets":
+            k_fac = 10.0 ** sol.x[0]
+            params = f"c_stiff={k_fac:.6g} N/m"
+        else:
+            fitted[what] = tuple(float(v) for v in to_law(sol.x))
+            params = "a={:.5g} N, b={:.5g} %, c={:.5g} N, d={:.5g} %".format(*fitted[what])
+            # Fig. 5 data: group strain and force at the stage's solutions (and its 0 N*m state)
+            _, strain, *_ = m.fibre_state(res.x, res.R)
+            gf = m.group_forces(res.x, res.R)
+            for g in _kind_groups(m, what):
+                sel = m.f_group == g
+                for i in range(len(rows)):
+                    if conv[i]:
+                        lig_pts.append({"ligament": what, "group": m.fibre_groups[g][0], "stage": stage,
+                                        "direction": rows["direction"][i], "moment_nm": rows["moment_nm"][i],
+                                        "strain_pct": float(strain[i, sel].mean()), "force_n": float(gf[i, g])})
+        err = rom - target
+        steps.append({"step": step, "structure": what, "stage": stage, "n_scenarios": len(rows),
+                      "parameters": params, "rms_residual": float(np.sqrt(np.nanmean(err**2))),
+                      "residual_unit": "deg", "n_not_converged": int((~conv).sum()), "n_evaluations": n_eval[0]})
+        log.info("calibration step %d (%s on %s): %s; rms ROM error %.4f deg, %d evaluations",
+                 step, what, stage, params, steps[-1]["rms_residual"], n_eval[0])
+        rom_fit.append(pd.DataFrame({"structure": what, "stage": stage, "direction": rows["direction"],
+                                     "moment_nm": rows["moment_nm"], "rom_sim_deg": rom,
+                                     "rom_mean_deg": target, "converged": conv}))
+    # ---- final set
+    final_ligs = {k: SoftplusLaw(*fitted[k], ligs[k].prestrain_pct, source=f"calibrated on {LIGAMENT_STAGE[k]}")
+                  for k in CALIBRATED_LIGAMENTS}
+    facet = _replace(base.facet, stiffness=k_fac)
+    cal = _replace(cs, ligaments=final_ligs, facet=facet, alternatives={})
+    surf_rows = []
+    lev = geometry.levels[level]
+    for side in ("left", "right"):
+        fl = lev.facets.get(side)
+        if fl is None:
+            continue
+        medial = np.array([0.0, -1.0 if side == "left" else 1.0, 0.0])
+        s = fit_surface(fl.superior, fl.inferior, medial_hint=medial)
+        p30, p03, p20, p02, p00 = s.coef
+        # Eq. 4 in mm: f_mm = p30*1e-6 x_mm^3 + p03*1e-6 y^3 + p20*1e-3 x^2 + p02*1e-3 y^2 + p00*1e3
+        for name, v, unit in (("p30", p30 * 1e-6, "1/mm^2"), ("p03", p03 * 1e-6, "1/mm^2"),
+                              ("p20", p20 * 1e-3, "1/mm"), ("p02", p02 * 1e-3, "1/mm"), ("p00", p00 * 1e3, "mm")):
+            surf_rows.append({"parameter": name, "side": side, "value": float(v), "unit": unit,
+                              "rms_landmark_mm": s.rms_m * 1e3})
+    return CalibrationResult(
+        charset=cal, disc=torque, facet_stiffness=k_fac, ligaments=fitted,
+        summary=pd.DataFrame(steps), rom_fit=pd.concat(rom_fit, ignore_index=True),
+        disc_points=pd.DataFrame(disc_pts), ligament_points=pd.DataFrame(lig_pts),
+        facet_surfaces=pd.DataFrame(surf_rows), data_kind=data_kind,
+        wall_time_s=time.perf_counter() - t0)
+
+
+# ------------------------------------------------------------------ output
+def write_characteristics(result: CalibrationResult, src_dir, out_dir, reference_source: str = "") -> Path:
+    """Copy ``src_dir`` (data/characteristics) to ``out_dir`` with the calibrated rows replaced.
+
+    disc.csv torque rows and facet.csv stiffness (shared by all sets in that directory) and the
+    ``calibrated`` rows of ligaments_softplus.csv get kind ``calibrated_on_<data kind>``; the paper's
+    'SSL neg.' alternative row is dropped (it belongs to the paper's calibration, not this one).
+    ``load_characteristic_set("calibrated", data_dir=out_dir)`` loads the result.
+    """
+    src, out = Path(src_dir), Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    kind = "calibrated_on_measured" if result.data_kind == "measured" else "calibrated_on_surrogate"
+    src_note = f"lumbar.calibration.calibrate on {reference_source or 'the stepwise-reduction reference table'}"
+    for f in sorted(src.glob("*.csv")):
+        if f.name not in ("disc.csv", "facet.csv", "ligaments_softplus.csv"):
+            shutil.copyfile(f, out / f.name)
+    disc = pd.read_csv(src / "disc.csv", dtype=str, keep_default_na=False)
+    for i, r in disc.iterrows():
+        if r["parameter"] in ("torque_p1", "torque_p2", "torque_p3") and r["direction"] in result.disc:
+            k = int(r["parameter"][-1]) - 1
+            disc.loc[i, "value"] = repr(float(result.disc[r["direction"]][k]))
+            disc.loc[i, ["kind", "source"]] = [kind, src_note]
+            disc.loc[i, "note"] = f"Eq. 3 fitted (trf) to T(ROM_mean) = M on stage {DISC_STAGE}"
+    write_table_atomic(disc, out / "disc.csv")
+    fac = pd.read_csv(src / "facet.csv", dtype=str, keep_default_na=False)
+    for i, r in fac.iterrows():
+        if r["parameter"] == "stiffness":
+            fac.loc[i, ["value", "unit", "kind", "source"]] = [repr(float(result.facet_stiffness)), "N/m", kind, src_note]
+            fac.loc[i, "note"] = f"1-parameter fit on stage {FACET_STAGE} (facets removed with the vertebral arch)"
+    write_table_atomic(fac, out / "facet.csv")
+    sp = pd.read_csv(src / "ligaments_softplus.csv", dtype=str, keep_default_na=False)
+    sp = sp[sp["set"] != "calibrated"]
+    new = []
+    for kind_l in CALIBRATED_LIGAMENTS:
+        for p, v in zip("abcd", result.ligaments[kind_l]):
+            new.append({"set": "calibrated", "ligament": kind_l, "variant": "primary", "parameter": p,
+                        "value": repr(float(v)), "unit": {"a": "N", "b": "%", "c": "N", "d": "%"}[p],
+                        "kind": kind, "source": src_note,
+                        "note": f"Eq. 7 (a,b,d fitted, c = -a*ln(1+exp(b/d)) so F(0)=0) on stage "
+                                f"{LIGAMENT_STAGE[kind_l]}; no ITL row (ITL absent, as Table 3)"})
+    write_table_atomic(pd.concat([pd.DataFrame(new), sp], ignore_index=True), out / "ligaments_softplus.csv")
+    return out
+
+
+def _fit_not_converged(result: CalibrationResult, structure: str) -> int:
+    """Scenarios of the calibration step fitting ``structure`` that had no equilibrium at the fitted values:
+    a table value fitted on them is marked (column ``fit_not_converged`` > 0) instead of looking clean."""
+    s = result.summary
+    if s is None or "structure" not in getattr(s, "columns", ()):
+        return 0
+    sel = s[s["structure"] == structure]
+    return int(pd.to_numeric(sel["n_not_converged"], errors="coerce").fillna(0).sum())
+
+
+def table1(result: CalibrationResult, paper) -> pd.DataFrame:
+    rows = []
+    for d in MAIN_DIRECTIONS:
+        p, q = result.disc[d], paper.disc.torque[d]
+        rows.append({"direction": d, "p1_nm": p[0], "p2_rad3": p[1], "p3_nm_per_rad": p[2],
+                     "paper_p1_nm": q[0], "paper_p2_rad3": q[1], "paper_p3_nm_per_rad": q[2],
+                     "fit_stage": DISC_STAGE, "fit_not_converged": _fit_not_converged(result, f"disc:{d}"),
+                     "data_kind": result.data_kind})
+    return pd.DataFrame(rows)
+
+
+def table2(result: CalibrationResult, paper) -> pd.DataFrame:
+    rows = []
+    fs = result.facet_surfaces
+    for p in ("p30", "p03", "p20", "p02", "p00"):
+        r = {"parameter": p}
+        for side in ("left", "right"):
+            sel = fs[(fs["parameter"] == p) & (fs["side"] == side)]
+            r[f"{side}"] = float(sel["value"].iloc[0]) if len(sel) else np.nan
+            r["unit"] = sel["unit"].iloc[0] if len(sel) else ""
+            r[f"paper_{side}"] = paper.facet.surface_paper.get(side, {}).get(p, np.nan)
+        r["note"] = ("project geometry, fitted local frame (u ~ superior, w = joint normal), mm; paper's "
+                     "values are in the paper's own frame (comparison only)")
+        r["data_kind"] = "geometry"
+        rows.append(r)
+    rows.append({"parameter": "stiffness", "left": result.facet_stiffness, "right": result.facet_stiffness,
+                 "unit": "N/m", "paper_left": paper.facet.stiffness, "paper_right": paper.facet.stiffness,
+                 "note": f"Eq. 5 c_stiff fitted on stage {FACET_STAGE}", "data_kind": result.data_kind})
+    return pd.DataFrame(rows)
+
+
+def table3(result: CalibrationResult, paper) -> pd.DataFrame:
+    rows = []
+    for k in CALIBRATED_LIGAMENTS:
+        a, b, c, d = result.ligaments[k]
+        q = paper.ligaments.get(k)
+        rows.append({"ligament": k, "a_n": a, "b_pct": b, "c_n": c, "d_pct": d,
+                     "prestrain_pct": result.charset.ligaments[k].prestrain_pct, "fit_stage": LIGAMENT_STAGE[k],
+                     "paper_a_n": getattr(q, "a", np.nan), "paper_b_pct": getattr(q, "b", np.nan),
+                     "paper_c_n": getattr(q, "c", np.nan), "paper_d_pct": getattr(q, "d", np.nan),
+                     "fit_not_converged": _fit_not_converged(result, k), "data_kind": result.data_kind})
+    return pd.DataFrame(rows)
+
+
+# ------------------------------------------------------------------ derived disc-only rows
+def invert_eq3(p, moment_nm):
+    """Smallest phi >= 0 [rad] with Eq. 3 T(phi) = moment (before any torque peak); NaN if none."""
+    from scipy.optimize import brentq
+
+    grid = np.linspace(0.0, math.radians(60.0), 60001)
+    T = eq3(grid, p)
+    above = np.flatnonzero(T >= moment_nm)
+    if above.size == 0:
+        return float("nan")
+    j = above[0]
+    if j == 0:
+        return 0.0
+    return brentq(lambda x: eq3(x, p) - moment_nm, grid[j - 1], grid[j], xtol=1e-14)
+
+
+def derived_disc_only_rows(torque: dict, moments_nm=(1.0, 2.5, 5.0, 7.5, 10.0), source="", note="") -> pd.DataFrame:
+    rows = []
+    for d in MAIN_DIRECTIONS:
+        for M in moments_nm:
+            rows.append({"stage": DISC_STAGE, "direction": d, "moment_nm": float(M),
+                         "rom_mean_deg": round(math.degrees(invert_eq3(torque[d], M)), 4),
+                         "rom_min_deg": np.nan, "rom_max_deg": np.nan, "n_specimens": 8,
+                         "kind": "derived_from_published_fit", "source": source, "note": note})
+    return pd.DataFrame(rows)
+
+
+
+# ------------------------------------------------------------------ figures (matplotlib, Agg)
+def _plt():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def plot_disc_torque_angle(disc_points: pd.DataFrame, table: pd.DataFrame, path, data_label="") -> None:
+    """Fig. 4 analog: disc torque vs angle [deg], data points (ROM_mean, M) and the fitted Eq. 3."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    colours = dict(zip(MAIN_DIRECTIONS, ("C0", "C1", "C2", "C3")))
+    for d in MAIN_DIRECTIONS:
+        pts = disc_points[disc_points["direction"] == d]
+        row = table[table["direction"] == d].iloc[0]
+        p = (row["p1_nm"], row["p2_rad3"], row["p3_nm_per_rad"])
+        phi = np.linspace(0, max(16.0, pts["rom_deg"].max() * 1.15), 300)
+        ax.plot(phi, eq3(np.radians(phi), p), "-", color=colours[d], label=f"{d} (Eq. 3 fit)")
+        ax.plot(pts["rom_deg"], pts["moment_nm"], "o--", color=colours[d], mfc="none", lw=0.8)
+    ax.set_xlabel("rotation angle [deg]")
+    ax.set_ylabel("disc torque [N*m]")
+    ax.set_title("Disc torque-angle (stage w/o ALL)" + (f" - data: {data_label}" if data_label else ""), fontsize=9)
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    save_figure_atomic(fig, path, dpi=120)
+    plt.close(fig)
+
+
+def plot_ligament_characteristics(points: pd.DataFrame, table: pd.DataFrame, path, data_label="") -> None:
+    """Fig. 5 analog: per ligament, modelled (strain, force) at the fit stage's solutions and the fitted Eq. 7."""
+    plt = _plt()
+    fig, axes = plt.subplots(2, 3, figsize=(11, 6.5))
+    for ax, k in zip(axes.ravel(), ("ALL", "PLL", "CL", "FL", "ISL", "SSL")):
+        row = table[table["ligament"] == k].iloc[0]
+        pts = points[points["ligament"] == k] if len(points) else points
+        lo = min(-5.0, pts["strain_pct"].min() - 2) if len(pts) else -5.0
+        hi = max(25.0, pts["strain_pct"].max() + 2) if len(pts) else 25.0
+        eps = np.linspace(lo, hi, 300)
+        from .elements.ligament import softplus_force
+        F, _ = softplus_force(eps, row["a_n"], row["b_pct"], row["c_n"], row["d_pct"])
+        ax.plot(eps, F, "-", color="C0", label="Eq. 7 fit (tension-only)")
+        for g, gp in pts.groupby("group") if len(pts) else []:
+            gp = gp.sort_values("strain_pct")
+            ax.plot(gp["strain_pct"], gp["force_n"], "o--", mfc="none", lw=0.6, label=f"{g} (model)")
+        ax.set_title(f"{k} (fit on {row['fit_stage']})", fontsize=9)
+        ax.set_xlabel("strain [%]")
+        ax.set_ylabel("force [N]")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=6)
+    if data_label:
+        fig.suptitle(f"Ligament characteristics calibrated on {data_label}", fontsize=10)
+    fig.tight_layout()
+    save_figure_atomic(fig, path, dpi=110)
+    plt.close(fig)

@@ -1,0 +1,143 @@
+"""Workflow configuration: load, validate against the JSON schema, fill defaults.
+
+The schema is ``workflow/schemas/config.schema.yaml``, the same file the Snakemake
+workflow validates against (``workflow/rules/common.smk``), so the library and the
+workflow cannot disagree about what a valid configuration is. Usable without Snakemake::
+
+    from lumbar.config import load_config
+    cfg = load_config("config/config.yaml")      # or a dict
+    cfg["fsu"]["moments_nm"]                     # defaults filled
+
+Invalid input raises :class:`ConfigError`, whose message names the key path
+(``fsu.moments_nm[2]``) and the allowed values or form.
+"""
+from __future__ import annotations
+
+import copy
+import functools
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import yaml
+from jsonschema import Draft202012Validator, validators
+
+__all__ = ["ConfigError", "load_config", "default_schema_path", "key_path"]
+
+_SCHEMA_RELPATH = Path("workflow") / "schemas" / "config.schema.yaml"
+
+
+class ConfigError(ValueError):
+    """Invalid configuration; ``errors`` lists (key path, message) pairs."""
+
+    def __init__(self, errors: list[tuple[str, str]]):
+        self.errors = errors
+        lines = [f"{path}: {msg}" for path, msg in errors]
+        super().__init__("invalid configuration:\n  " + "\n  ".join(lines))
+
+
+def default_schema_path() -> Path:
+    """The workflow schema, found relative to the package (src/lumbar -> repository root)."""
+    root = Path(__file__).resolve().parents[2]
+    path = root / _SCHEMA_RELPATH
+    if not path.is_file():
+        raise ConfigError([("<schema>", f"config schema not found at {path}; "
+                            "pass schema=<path to workflow/schemas/config.schema.yaml>")])
+    return path
+
+
+def key_path(parts) -> str:
+    """Render a jsonschema path deque as ``a.b[2].c`` (``<root>`` when empty)."""
+    out = ""
+    for p in parts:
+        if isinstance(p, int):
+            out += f"[{p}]"
+        else:
+            out += ("." if out else "") + str(p)
+    return out or "<root>"
+
+
+def _with_defaults(validator_class):
+    """Validator that fills ``default`` values (deep-copied, so the schema stays pristine)."""
+    validate_properties = validator_class.VALIDATORS["properties"]
+
+    def set_defaults(validator, properties, instance, schema):
+        if isinstance(instance, dict):
+            for name, sub in properties.items():
+                if "default" in sub and name not in instance:
+                    instance[name] = copy.deepcopy(sub["default"])
+        yield from validate_properties(validator, properties, instance, schema)
+
+    return validators.extend(validator_class, {"properties": set_defaults})
+
+
+_DefaultFilling = _with_defaults(Draft202012Validator)
+
+
+def _describe(error) -> tuple[str, str]:
+    """(key path, human message with the allowed values/form) for one jsonschema error."""
+    path = list(error.absolute_path)
+    sch = error.schema if isinstance(error.schema, dict) else {}
+    v = error.validator
+    if v == "additionalProperties":
+        allowed = sorted(sch.get("properties", {}))
+        extra = sorted(set(error.instance) - set(allowed)) if isinstance(error.instance, dict) else []
+        key = key_path(path + [extra[0]]) if extra else key_path(path)
+        return key, f"unknown key {', '.join(map(repr, extra))}; allowed keys: {', '.join(allowed)}"
+    if v == "enum":
+        return key_path(path), f"{error.instance!r} is not allowed; allowed values: {', '.join(map(str, error.validator_value))}"
+    if v == "type":
+        return key_path(path), f"{error.instance!r} has the wrong type; expected {error.validator_value}"
+    if v in ("minimum", "exclusiveMinimum", "maximum", "exclusiveMaximum"):
+        op = {"minimum": ">=", "exclusiveMinimum": ">", "maximum": "<=", "exclusiveMaximum": "<"}[v]
+        desc = sch.get("description", "")
+        return key_path(path), f"{error.instance!r} is out of range; expected a value {op} {error.validator_value}" + (
+            f" ({desc})" if desc else "")
+    if v == "minItems":
+        return key_path(path), f"must list at least {error.validator_value} item(s); got {error.instance!r}"
+    if v == "uniqueItems":
+        return key_path(path), f"items must be unique; got {error.instance!r}"
+    if v == "minLength":
+        return key_path(path), "must be a non-empty string"
+    return key_path(path), error.message
+
+
+def _read(path_or_dict) -> dict:
+    if isinstance(path_or_dict, Mapping):
+        return copy.deepcopy(dict(path_or_dict))
+    path = Path(path_or_dict)
+    try:
+        with open(path) as fh:
+            data = yaml.safe_load(fh)
+    except OSError as exc:
+        raise ConfigError([("<file>", f"cannot read {path}: {exc}")]) from exc
+    except yaml.YAMLError as exc:
+        raise ConfigError([("<file>", f"{path} is not valid YAML: {exc}")]) from exc
+    return {} if data is None else data
+
+
+_SafeLoader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+@functools.lru_cache(maxsize=8)
+def _schema_doc(path: str, mtime_ns: int) -> dict:
+    """The parsed schema, cached by path and modification time (never modified: defaults are deep-copied)."""
+    with open(path) as fh:
+        return yaml.load(fh, Loader=_SafeLoader)
+
+
+def load_config(path_or_dict: str | Path | Mapping[str, Any], schema: str | Path | None = None) -> dict:
+    """Load a YAML file (or copy a dict), validate it against the schema, fill defaults.
+
+    Returns a new dict; the input mapping is not modified. Raises :class:`ConfigError`
+    listing every problem, each with its key path.
+    """
+    data = _read(path_or_dict)
+    if not isinstance(data, dict):
+        raise ConfigError([("<root>", f"expected a mapping of sections, got {type(data).__name__}")])
+    schema_path = Path(schema) if schema is not None else default_schema_path()
+    validator = _DefaultFilling(_schema_doc(str(schema_path.resolve()), schema_path.stat().st_mtime_ns))
+    errors = sorted(validator.iter_errors(data), key=lambda e: (key_path(e.absolute_path), e.validator))
+    if errors:
+        raise ConfigError([_describe(e) for e in errors])
+    return data

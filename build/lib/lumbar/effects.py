@@ -1,0 +1,272 @@
+"""Candidate physical effects for the discrepancy workflow (issue 6).
+
+Each effect is a one-parameter extension of a model that **vanishes at parameter 0** (the model is then
+unchanged, bit for bit) and acts on some of the project's experiments:
+
+* ``stepwise_rom``  L4-L5 range of motion of the stepwise-reduction experiment (re-solved, batched);
+* ``neutral_angle`` L4-L5 sagittal angle at 0 N*m per reduction stage (the vertebral-arch artefact);
+* ``idp_invitro``   L4-L5 IDP of the L2-S1 wire-cable experiment (from the solved internal loads);
+* ``in_vivo``       L4-L5 IDP of the muscle-driven model against in-vivo values (from segment loads).
+
+Two families:
+
+* ``kind = "solver"``: enters the equilibrium (lumbar.model params ``k_tension``, ``disc_phi_offset``,
+  ``fibre_l0_scale``, or extra fibres/cables whose per-scenario fibre-mask weight is the parameter, so
+  the solver's exact Jacobian covers them). :class:`FsuVariants` solves many parameter values of many
+  effects as one batch.
+* ``kind = "idp"``: acts on the IDP computed from the disc loads (no re-solve):
+  ``idp_delta(name, value, idp_pa, f_axial_n, m_sagittal_nm, idp_per_newton)``.
+
+``disc_tension`` is registered for completeness (paper 1, Sect. 4.3 hypothesis) but no scenario of the
+available experiments loads the L4-L5 disc in tension (the effect changes no ROM by more than 1e-8 deg
+and no IDP by more than 0.1 N of disc force), so it is not identifiable there and is not benchmarked.
+"""
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from . import so3
+from .fsu import DIRECTIONS, MAIN_DIRECTIONS, STAGES, moment_loads
+from .solve import solve
+
+EXPERIMENTS = ("stepwise_rom", "neutral_angle", "idp_invitro", "in_vivo")
+# stages after the vertebral arches were sawn off where the neutral-angle offset acts; at w/o ALL the disc
+# alone is shift invariant (the ROM about the stage's own 0 N*m state cannot change), and its flexion law
+# (Eq. 3 with p3 < 0) has an unstable neutral, so the offset is not applied there
+VA_STAGES = ("wo_va", "wo_pll")
+ARCH_STAGES = STAGES[STAGES.index("wo_va"):]         # stages without the vertebral arches (ITL, spinous processes)
+PRELOAD_CABLE_LENGTH_M = 1000.0                      # far fixed point: the preload keeps its direction
+PASSIVE_CABLE_LENGTH_M = 1.0
+# effects with a form inside the L4-L5 equilibrium (FsuVariants); axial_preload also has an IDP form
+SOLVER_EFFECTS = ("ligament_prestrain", "va_neutral_offset", "itl", "passive_muscle", "disc_tension",
+                  "axial_preload")
+
+
+@dataclass(frozen=True)
+class Effect:
+    name: str
+    parameter: str
+    unit: str                     # SI unit of the parameter
+    bounds: tuple                 # (lo, hi) of the fit, SI
+    magnitudes: tuple             # benchmark magnitudes (SI), plausible sizes
+    experiments: tuple            # experiments it acts on (benchmarked there)
+    kind: str                     # "solver" | "idp"
+    description: str
+    basis: str                    # where the papers point at it
+
+
+EFFECTS: dict[str, Effect] = {e.name: e for e in [
+    Effect("ligament_prestrain", "delta_prestrain", "1 (strain)", (-0.06, 0.06), (0.02, 0.04),
+           ("stepwise_rom", "neutral_angle"), "solver",
+           "extra prestrain of every ligament fibre: slack length l0 -> l0 / (1 + delta)",
+           "paper 1 Sect. 2.2.4: prestrains taken from the literature, not measured on the specimens"),
+    Effect("va_neutral_offset", "lordosis_offset", "rad", (-0.07, 0.07), (0.0269, 0.0524),
+           ("stepwise_rom", "neutral_angle"), "solver",
+           "disc neutral angle shifted into lordosis (extension) from the w/o VA stage on "
+           "(disc_phi_offset_y = -offset for wo_va, wo_pll; w/o ALL is shift invariant)",
+           "paper 1 Sect. 4.2: sawing off the vertebral arches increased the lordotic angle at 0 N*m "
+           "from 0.66 to 2.2 deg (Heuer et al. 2007, Table 1)"),
+    Effect("itl", "itl_force_scale", "1", (0.0, 1.0), (0.1, 0.25),
+           ("stepwise_rom", "neutral_angle"), "solver",
+           "intertransverse ligaments (left, right) with the Rupp et al. (2015) ITL law times a force scale; "
+           "removed with the vertebral arches",
+           "paper 1 Sect. 4.2: the ITL influence was not measured; Sect. 4.3: non-validated ITL"),
+    Effect("passive_muscle", "passive_tension", "N", (0.0, 100.0), (10.0, 25.0),
+           ("stepwise_rom", "neutral_angle"), "solver",
+           "passive posterior muscle tissue: a constant-force cable from the L4 spinous process (SSL "
+           "insertion) towards the L5 one, removed with the vertebral arches",
+           "paper 2 Sect. 3.2.2/4: passive muscle stiffness changes spinal loading; paper 1 Sect. 2.1.1: "
+           "specimens were prepared free of muscle"),
+    Effect("axial_preload", "preload", "N", (0.0, 1000.0), (150.0, 300.0),
+           ("idp_invitro", "in_vivo"), "idp",
+           "axial compressive preload carried by the disc (follower-load-like): IDP += idp_per_newton * P",
+           "paper 2 Sect. 4: in-vivo compression from body weight and muscles; in-vitro tests without preload"),
+    Effect("idp_moment_term", "k_moment", "Pa/(N*m)", (0.0, 0.2e6), (0.036e6, 0.072e6),
+           ("idp_invitro", "in_vivo"), "idp",
+           "IDP += k * |M_sagittal| (the disc's bending moment raises the nucleus pressure)",
+           "paper 2 Sect. 2.4: IDP formula with +0.036 MPa/(N*m) flexion, +0.018 extension moment term; "
+           "paper 1 Eq. IDP = 1.68 F/CSA has none"),
+    Effect("disc_load_share", "share_slope", "1/(N*m)", (-0.25, 0.25), (0.06, 0.12),
+           ("idp_invitro", "in_vivo"), "idp",
+           "posture-dependent share of the axial load on the nucleus: IDP *= 1 + s * M_sagittal "
+           "(flexion + loads the nucleus, extension + unloads it to the facets)",
+           "paper 2 Sect. 2.4: disc share 0.85 and nucleus factor 0.66 taken constant for every posture"),
+    Effect("disc_tension", "k_tension", "N/m", (0.0, 2.0e6), (5.0e5, 1.0e6),
+           (), "solver",
+           "disc tensile (traction) stiffness k_tension (the published disc transmits no traction)",
+           "paper 1 Sect. 4.3: outliers with the cranial multifidus attributed partly to the disc's "
+           "inability to transmit traction"),
+]}
+
+
+def effect_names(experiment=None, kind=None):
+    """Effects acting on ``experiment`` (all with None), optionally of one ``kind``."""
+    return [n for n, e in EFFECTS.items() if (experiment is None or experiment in e.experiments)
+            and (kind is None or e.kind == kind)]
+
+
+def check_effect(name, value=None):
+    if name not in EFFECTS:
+        raise ValueError(f"unknown effect {name!r}; known effects: {sorted(EFFECTS)}")
+    if value is not None:
+        lo, hi = EFFECTS[name].bounds
+        v = float(value)
+        if not np.isfinite(v) or v < lo or v > hi:
+            raise ValueError(f"effect {name}: {EFFECTS[name].parameter} = {value!r} {EFFECTS[name].unit} "
+                             f"is outside its bounds [{lo:g}, {hi:g}]")
+    return EFFECTS[name]
+
+
+# ------------------------------------------------------------------ IDP-from-loads effects
+def idp_delta(name, value, idp_pa, m_sagittal_nm, idp_per_newton):
+    """IDP [Pa] with the IDP effect ``name`` at ``value`` (arrays broadcast; value 0 -> idp unchanged)."""
+    idp = np.asarray(idp_pa, float)
+    v = np.asarray(value, float)
+    M = np.asarray(m_sagittal_nm, float)
+    if name == "axial_preload":
+        return idp + v * idp_per_newton
+    if name == "idp_moment_term":
+        return idp + v * np.abs(M)
+    if name == "disc_load_share":
+        return idp * (1.0 + v * M)
+    raise ValueError(f"effect {name!r} is not an IDP effect; IDP effects: {effect_names(kind='idp')}")
+
+
+# ------------------------------------------------------------------ solver effects on the L4-L5 unit
+class FsuVariants:
+    """An L4-L5 unit augmented with the extra elements of the solver effects (at weight 0).
+
+    ``simulate(scen, values)`` solves every row of ``values`` (a model variant: one value per effect)
+    for every scenario of ``scen`` (stage, direction, moment_nm) in one batch: (G*S) 0 N*m states and
+    (G*n) loaded states warm-started from them. Returns ROM (G, n) [deg] relative to each variant's
+    0 N*m state, converged (G, n), and the 0 N*m rotation vectors (G, S, 3) [rad].
+    """
+
+    def __init__(self, fsu, itl_law=None):
+        from .elements.ligament import rupp_shape
+
+        self.fsu = fsu
+        m = copy.deepcopy(fsu.model)
+        m.__dict__.pop("_group_cache", None)
+        self.nf_base = m.nf
+        lev = fsu.level
+        up, lo = 0, -1
+        extra = {}
+        if itl_law is None:
+            from .characteristics import load_characteristic_set
+            itl_law = load_characteristic_set("rupp2015").ligaments["ITL"]
+        itl = [lg for lg in lev.ligaments if lg.kind == "ITL"]
+        shape = rupp_shape(itl_law.l_a_m, itl_law.l_b_m, itl_law.f_a_n, itl_law.f_b_n, itl_law.n_strands)
+        g_itl = [m.add_fibre_group(lg.name + "_effect", "ITL", lev.name, up, lo, lg.upper, lg.lower,
+                                   lg.extra_length, "rupp", shape, prestrain_pct=itl_law.prestrain_pct,
+                                   scale=itl_law.n_strands / lg.n_fibres) for lg in itl]
+        extra["itl"] = g_itl
+        c = np.asarray(lev.disc_centre, float)
+        nrm = np.asarray(lev.disc_normal, float) / np.linalg.norm(lev.disc_normal)
+        extra["axial_preload"] = [m.add_fibre_group("preload_effect", "preload", lev.name, up, lo, c[None],
+                                                    (c - PRELOAD_CABLE_LENGTH_M * nrm)[None], 0.0, "cable",
+                                                    (1.0,))]
+        ssl = [lg for lg in lev.ligaments if lg.kind == "SSL"]
+        src = ssl[0] if ssl else [lg for lg in lev.ligaments if lg.kind == "ISL"][0]
+        a, b = np.asarray(src.upper, float).mean(0), np.asarray(src.lower, float).mean(0)
+        u = (b - a) / np.linalg.norm(b - a)
+        extra["passive_muscle"] = [m.add_fibre_group("passive_muscle_effect", "passive_muscle", lev.name, up, lo,
+                                                     a[None], (a + PASSIVE_CABLE_LENGTH_M * u)[None], 0.0,
+                                                     "cable", (1.0,))]
+        m.finalize()
+        self.model = m
+        self.extra_cols = {k: np.flatnonzero(np.isin(m.f_group, g)) for k, g in extra.items()}
+        self.is_lig = np.zeros(m.nf, bool)
+        self.is_lig[: self.nf_base] = m.f_law[: self.nf_base] != 2
+        self.is_lig[self.extra_cols["itl"]] = True
+
+    def masks_params(self, stages, values: dict):
+        """fmask (G*S, nf), cmask (G*S, nc), params for variants ``values`` {effect: (G,)} x stages."""
+        stages = list(stages)
+        G = len(next(iter(values.values()))) if values else 1
+        for k in values:
+            check_effect(k)
+            if k not in SOLVER_EFFECTS:
+                raise ValueError(f"effect {k!r} does not act on the solver")
+        fb, cb = self.fsu.masks(stages)
+        S, m = len(stages), self.model
+        fm = np.zeros((G, S, m.nf))
+        fm[:, :, : self.nf_base] = fb
+        cm = np.broadcast_to(cb, (G, S, m.nc)).copy()
+        after_va = np.array([s in ARCH_STAGES for s in stages])
+        offset_on = np.array([s in VA_STAGES for s in stages])
+        v = {k: np.asarray(values.get(k, np.zeros(G)), float).reshape(G) for k in
+             ("ligament_prestrain", "va_neutral_offset", "itl", "passive_muscle", "disc_tension", "axial_preload")}
+        for k in ("itl", "passive_muscle"):
+            fm[:, :, self.extra_cols[k]] = (v[k][:, None] * ~after_va)[..., None]
+        fm[:, :, self.extra_cols["axial_preload"]] = v["axial_preload"][:, None, None]
+        params = {}
+        if (v["ligament_prestrain"] != 0).any():
+            sc = np.ones((G, S, m.nf))
+            sc[:, :, self.is_lig] = (1.0 / (1.0 + v["ligament_prestrain"]))[:, None, None]
+            params["fibre_l0_scale"] = sc.reshape(G * S, m.nf)
+        if (v["va_neutral_offset"] != 0).any():
+            off = np.zeros((G, S, 3))
+            off[:, :, 1] = -v["va_neutral_offset"][:, None] * offset_on
+            params["disc_phi_offset"] = off.reshape(G * S, 3)
+        if (v["disc_tension"] != 0).any():
+            params["k_tension"] = np.repeat(v["disc_tension"], S)
+        return fm.reshape(G * S, m.nf), cm.reshape(G * S, m.nc), params, G
+
+    def _start(self, params, B):
+        """Start states: the disc's shifted neutral angle, so Newton finds the root next to it (the
+        disc-only flexion law of Eq. 3 with p3 < 0 has a second zero-torque root far away)."""
+        x0, R0 = self.model.reference_state(B)
+        off = params.get("disc_phi_offset")
+        if off is not None:
+            R0[:, 0] = so3.exp(np.asarray(off, float))
+        return x0, R0
+
+    def simulate(self, scen: pd.DataFrame, values: dict, max_iter=50, tol=1e-8):
+        scen = scen.reset_index(drop=True)
+        stages = list(dict.fromkeys(scen["stage"]))
+        fm, cm, params, G = self.masks_params(stages, values)
+        S, n, m = len(stages), len(scen), self.model
+        kw = dict(max_iter=max_iter, tol_force=tol, tol_moment=tol)
+        r0 = solve(m, np.zeros((G * S, m.nb, 6)), *self._start(params, G * S), fmask=fm, cmask=cm,
+                   params=params, **kw)
+        si = np.array([stages.index(s) for s in scen["stage"]])
+        gi = (np.arange(G)[:, None] * S + si[None, :]).ravel()          # (G*n,) index into the G*S states
+        loads = np.tile(moment_loads(list(scen["direction"]), list(scen["moment_nm"]), m.nb), (G, 1, 1))
+        p1 = {k: np.asarray(val)[gi] for k, val in params.items()}
+        res = solve(m, loads, x0=r0.x[gi], R0=r0.R[gi], fmask=fm[gi], cmask=cm[gi], params=p1, **kw)
+        rot = so3.log(res.R[:, 0] @ np.swapaxes(r0.R[gi, 0], -1, -2))
+        axis = np.array([DIRECTIONS[d][0] for d in scen["direction"]])
+        sign = np.array([DIRECTIONS[d][1] for d in scen["direction"]])
+        rom = np.degrees(rot.reshape(G, n, 3)[:, np.arange(n), axis] * sign)
+        conv = (res.converged & r0.converged[gi]).reshape(G, n)
+        phi0 = so3.log(r0.R[:, 0]).reshape(G, S, 3)
+        return np.where(conv, rom, np.nan), conv, phi0, stages
+
+    def neutral_lordosis(self, stages, values: dict, max_iter=50, tol=1e-8):
+        """Lordotic angle change [deg] at 0 N*m per stage (G, S): -(sagittal rotation) from the reference."""
+        fm, cm, params, G = self.masks_params(stages, values)
+        r0 = solve(self.model, np.zeros((fm.shape[0], self.model.nb, 6)), *self._start(params, fm.shape[0]),
+                   fmask=fm, cmask=cm, params=params, max_iter=max_iter, tol_force=tol, tol_moment=tol)
+        phi = so3.log(r0.R[:, 0]).reshape(G, len(stages), 3)
+        return -np.degrees(phi[..., 1]), r0.converged.reshape(G, len(stages))
+
+
+def simulate_stepwise_reduction(fsu, stages=STAGES, directions=MAIN_DIRECTIONS, moments_nm=(1.0, 2.5, 5.0, 7.5, 10.0),
+                                effects=None, max_iter=50, tol=1e-8) -> pd.DataFrame:
+    """Like ``lumbar.stepwise_reduction.simulate_stepwise_reduction`` with solver effects of this module."""
+    from .stepwise_reduction import scenario_grid
+    scen = scenario_grid(stages, directions, moments_nm)
+    values = {}
+    for k, val in (effects or {}).items():
+        check_effect(k, val)
+        values[k] = np.array([float(val)])
+    rom, conv, _, _ = FsuVariants(fsu).simulate(scen, values, max_iter=max_iter, tol=tol)
+    out = scen.copy()
+    out["rom_deg"] = rom[0]
+    out["converged"] = conv[0]
+    return out

@@ -1,0 +1,239 @@
+"""The L4-L5 functional spinal unit (paper 1, Sect. 2.2) and its range of motion under pure moments.
+
+``build_fsu`` turns a geometry level and a characteristic set into a :class:`SpineModel` with the
+lower vertebra fixed and the upper one free (6 DOF). ``range_of_motion`` solves many scenarios
+(reduction stage x direction x moment) in one batch: each stage is first brought to equilibrium
+at 0 N*m, then the moment is applied by load continuation. ROM = rotation of the upper vertebra
+about the loading axis relative to the stage's 0 N*m equilibrium.
+
+Command line::
+
+    python -m lumbar.fsu --moment 10 --direction all --geometry default
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from . import so3
+from .elements.facet import fit_surface
+from .elements.ligament import rupp_shape
+from .model import DiscSpec, SpineModel
+from .solve import solve
+
+log = logging.getLogger(__name__)
+
+# reduction stages of the stepwise-reduction experiment (Heuer et al. 2007), in removal order
+STAGES = ("intact", "wo_ssl", "wo_isl", "wo_fl", "wo_cl", "wo_va", "wo_pll", "wo_all")
+STAGE_LABELS = {"intact": "intact", "wo_ssl": "w/o SSL", "wo_isl": "w/o ISL", "wo_fl": "w/o FL",
+                "wo_cl": "w/o CL", "wo_va": "w/o VA", "wo_pll": "w/o PLL", "wo_all": "w/o ALL"}
+# what each stage removes in addition to the previous one; removing the vertebral arches (VA)
+# takes the facet joints and the intertransverse ligaments (attached to the arch) with them
+REMOVED_AT = {"wo_ssl": {"SSL"}, "wo_isl": {"ISL"}, "wo_fl": {"FL"}, "wo_cl": {"CL"},
+              "wo_va": {"facets", "ITL"}, "wo_pll": {"PLL"}, "wo_all": {"ALL"}}
+# loading direction -> (project axis index, sign); see docs/design.md for the sign conventions
+DIRECTIONS = {
+    "flexion": (1, 1.0), "extension": (1, -1.0),
+    "lateral_bending": (0, 1.0), "lateral_bending_right": (0, 1.0), "lateral_bending_left": (0, -1.0),
+    "axial_rotation": (2, 1.0), "axial_rotation_left": (2, 1.0), "axial_rotation_right": (2, -1.0),
+}
+MAIN_DIRECTIONS = ("flexion", "extension", "lateral_bending", "axial_rotation")
+
+
+def removed_structures(stage: str) -> set:
+    if stage not in STAGES:
+        raise ValueError(f"unknown reduction stage {stage!r}; expected one of {STAGES}")
+    out = set()
+    for s in STAGES[1: STAGES.index(stage) + 1]:
+        out |= REMOVED_AT[s]
+    return out
+
+
+def disc_frame(normal) -> np.ndarray:
+    """Rows e1 (anterior, orthogonal to the normal), e2 = e3 x e1, e3 = disc normal."""
+    e3 = np.asarray(normal, float) / np.linalg.norm(normal)
+    e1 = np.array([1.0, 0.0, 0.0]) - e3[0] * e3
+    e1 /= np.linalg.norm(e1)
+    return np.vstack([e1, np.cross(e3, e1), e3])
+
+
+@dataclass
+class FSU:
+    model: SpineModel
+    level: object
+    charset: object
+    group_kind: list           # ligament kind per fibre group
+    surface_side: list         # "left"/"right" per facet surface
+
+    def masks(self, stages):
+        """Element masks (S, nf) and (S, nc) for a list of reduction stages."""
+        m = self.model
+        fk = np.array([self.group_kind[g] for g in m.f_group]) if m.nf else np.array([])
+        fmask = np.ones((len(stages), m.nf))
+        cmask = np.ones((len(stages), m.nc))
+        for i, st in enumerate(stages):
+            gone = removed_structures(st)
+            if m.nf:
+                fmask[i] = ~np.isin(fk, list(gone))
+            if "facets" in gone:
+                cmask[i] = 0.0
+        return fmask, cmask
+
+
+def add_level(model: SpineModel, level, charset, facet_stiffness=None, k_shear=None,
+              exclude=()):
+    """Add the disc, facet joints and ligaments of one geometry level to ``model``.
+
+    Returns (group kinds, surface sides) of what was added. Ligament kinds absent from the
+    characteristic set are left out (as the paper does for literature sets that lack them).
+    """
+    up, lo = model.body_index(level.upper), model.body_index(level.lower)
+    disc = charset.disc
+    ks = disc.k_shear if k_shear is None else k_shear
+    if ks is None:
+        raise ValueError("characteristic set has no disc shear stiffness: set fsu.disc_shear_stiffness_n_per_m")
+    if not np.isfinite(ks) or ks <= 0:
+        raise ValueError(f"disc shear stiffness must be a finite value > 0 N/m, got {ks}")
+    model.add_disc(DiscSpec(up, lo, np.asarray(level.disc_centre, float), disc_frame(level.disc_normal),
+                            disc.k_axial_quadratic, disc.k_axial_linear, ks, disc.k_tension,
+                            disc.torque, name=level.name))
+    kinds = []
+    for lig in level.ligaments:
+        law = charset.ligaments.get(lig.kind)
+        if law is None or lig.kind in exclude:
+            continue
+        if hasattr(law, "a"):
+            model.add_fibre_group(lig.name, lig.kind, level.name, up, lo, lig.upper, lig.lower,
+                                  lig.extra_length, "softplus", (law.a, law.b, law.c, law.d),
+                                  prestrain_pct=law.prestrain_pct)
+        else:
+            shape = rupp_shape(law.l_a_m, law.l_b_m, law.f_a_n, law.f_b_n, law.n_strands)
+            model.add_fibre_group(lig.name, lig.kind, level.name, up, lo, lig.upper, lig.lower,
+                                  lig.extra_length, "rupp", shape, prestrain_pct=law.prestrain_pct,
+                                  scale=law.n_strands / lig.n_fibres)
+        kinds.append(lig.kind)
+    sides = []
+    k_fac = charset.facet.stiffness if facet_stiffness is None else facet_stiffness
+    if not np.isfinite(k_fac) or k_fac < 0:
+        raise ValueError(f"facet stiffness must be a finite value >= 0 N/m, got {k_fac}")
+    for side in ("left", "right"):
+        fl = level.facets.get(side)
+        if fl is None:
+            continue
+        medial = np.array([0.0, -1.0 if side == "left" else 1.0, 0.0])
+        surf = fit_surface(fl.superior, fl.inferior, medial_hint=medial)
+        model.add_facet(up, lo, surf, fl.inferior, k_fac)
+        sides.append(side)
+    return kinds, sides
+
+
+def build_fsu(geometry, charset, level="L4-L5", facet_stiffness=None, k_shear=None,
+              contact_eps=5e-5, slack_width_pct=0.5) -> FSU:
+    """The functional unit of ``level``: lower vertebra fixed, upper free."""
+    if level not in geometry.levels:
+        raise ValueError(f"geometry {geometry.name!r} has no level {level!r}; has {sorted(geometry.levels)}")
+    lev = geometry.levels[level]
+    m = SpineModel(contact_eps=contact_eps, slack_width_pct=slack_width_pct)
+    m.add_body(lev.upper, geometry.vertebrae[lev.upper].centroid)
+    m.add_body(lev.lower, geometry.vertebrae[lev.lower].centroid, fixed=True)
+    kinds, sides = add_level(m, lev, charset, facet_stiffness, k_shear)
+    m.finalize()
+    return FSU(m, lev, charset, kinds, sides)
+
+
+def moment_loads(directions, moments_nm, nb=1, body=0):
+    """External load array (B, nb, 6) of pure moments [N*m] about the project axes."""
+    L = np.zeros((len(directions), nb, 6))
+    for i, (d, M) in enumerate(zip(directions, moments_nm)):
+        axis, sign = DIRECTIONS[d]
+        L[i, body, 3 + axis] = sign * M
+    return L
+
+
+def range_of_motion(fsu: FSU, moments_nm=(1, 2.5, 5, 7.5, 10), directions=MAIN_DIRECTIONS,
+                    stages=("intact",), load_steps=1, max_iter=50, tol=1e-8) -> pd.DataFrame:
+    """ROM table (one row per stage x direction x moment), solved as one batch."""
+    for d in directions:
+        if d not in DIRECTIONS:
+            raise ValueError(f"unknown direction {d!r}; expected one of {sorted(DIRECTIONS)}")
+    m = fsu.model
+    stages = list(stages)
+    fm_s, cm_s = fsu.masks(stages)
+    zero = np.zeros((len(stages), m.nb, 6))
+    r0 = solve(m, zero, fmask=fm_s, cmask=cm_s, load_steps=1, max_iter=max_iter,
+               tol_force=tol, tol_moment=tol)
+    grid = [(s, d, M) for s in range(len(stages)) for d in directions for M in moments_nm]
+    si = np.array([g[0] for g in grid], int)
+    loads = moment_loads([g[1] for g in grid], [g[2] for g in grid], m.nb)
+    res = solve(m, loads, x0=r0.x[si], R0=r0.R[si], fmask=fm_s[si], cmask=cm_s[si],
+                load_steps=load_steps, max_iter=max_iter, tol_force=tol, tol_moment=tol)
+    rot = so3.log(res.R[:, 0] @ np.swapaxes(r0.R[si, 0], -1, -2))
+    trans = (res.x[:, 0] - r0.x[si, 0])
+    axis = np.array([DIRECTIONS[g[1]][0] for g in grid])
+    sign = np.array([DIRECTIONS[g[1]][1] for g in grid])
+    rom = np.degrees(rot[np.arange(len(grid)), axis] * sign)
+    conv = res.converged & r0.converged[si]
+    df = pd.DataFrame({
+        "stage": [stages[g[0]] for g in grid],
+        "direction": [g[1] for g in grid],
+        "moment_nm": [float(g[2]) for g in grid],
+        "rom_deg": np.where(conv, rom, np.nan),
+        "rot_x_deg": np.degrees(rot[:, 0]), "rot_y_deg": np.degrees(rot[:, 1]),
+        "rot_z_deg": np.degrees(rot[:, 2]),
+        "trans_x_mm": trans[:, 0] * 1e3, "trans_y_mm": trans[:, 1] * 1e3, "trans_z_mm": trans[:, 2] * 1e3,
+        "converged": conv,
+        "residual_force_n": res.residual_force, "residual_moment_nm": res.residual_moment,
+        "iterations": res.iterations,
+    })
+    if not conv.all():
+        log.warning("ROM: %d of %d scenarios did not converge; their rom_deg is NaN and converged=False",
+                    int((~conv).sum()), len(conv))
+    return df
+
+
+def main(argv=None) -> int:
+    from .characteristics import CHARACTERISTIC_SETS, load_characteristic_set
+    from .geometry import load_geometry
+    p = argparse.ArgumentParser(prog="python -m lumbar.fsu", description=__doc__.split("\n\n")[0])
+    p.add_argument("--moment", type=float, nargs="+", default=[10.0], help="pure moment(s) [N*m]")
+    p.add_argument("--direction", default="all",
+                   help="all | comma list of " + ", ".join(sorted(DIRECTIONS)))
+    p.add_argument("--geometry", default="default", help="default | visible_human | synthetic")
+    p.add_argument("--geometry-dir", default=None, help="folder of the Visible Human set")
+    p.add_argument("--set", default="calibrated", choices=CHARACTERISTIC_SETS, help="characteristic set")
+    p.add_argument("--stage", default="intact", help="all | comma list of " + ", ".join(STAGES))
+    p.add_argument("--level", default="L4-L5")
+    p.add_argument("--shear-stiffness", type=float, default=None, help="disc shear stiffness [N/m]")
+    p.add_argument("--facet-stiffness", type=float, default=None, help="facet contact stiffness [N/m]")
+    a = p.parse_args(argv)
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    directions = MAIN_DIRECTIONS if a.direction == "all" else tuple(a.direction.split(","))
+    stages = STAGES if a.stage == "all" else tuple(a.stage.split(","))
+    for m in a.moment:
+        if not np.isfinite(m) or m < 0:
+            p.error(f"--moment must be finite and >= 0 N*m, got {m}")
+    try:
+        geo = load_geometry(a.geometry, path=a.geometry_dir)
+        cs = load_characteristic_set(a.set)
+        fsu = build_fsu(geo, cs, a.level, facet_stiffness=a.facet_stiffness, k_shear=a.shear_stiffness)
+        df = range_of_motion(fsu, a.moment, directions, stages)
+    except (ValueError, KeyError, FileNotFoundError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    cols = ["stage", "direction", "moment_nm", "rom_deg", "rot_x_deg", "rot_y_deg", "rot_z_deg",
+            "trans_x_mm", "trans_y_mm", "trans_z_mm", "converged"]
+    print(f"# geometry={geo.name} set={cs.name} level={a.level}")
+    print(df[cols].to_string(index=False, float_format=lambda v: f"{v:.3f}"))
+    ok = bool(df["converged"].all())
+    if not ok:
+        print(f"# {int((~df['converged']).sum())} scenario(s) did NOT converge", file=sys.stderr)
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

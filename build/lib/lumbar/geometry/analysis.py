@@ -1,0 +1,142 @@
+"""Geometric helpers shared by the loaders: plane fits, endplates, disc measures, centroids."""
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+
+EZ = np.array([0.0, 0.0, 1.0])
+
+
+def plane_fit(points: np.ndarray, up=EZ):
+    """Least-squares plane: (centroid, unit normal = smallest-variance axis, oriented along ``up``)."""
+    c = points.mean(axis=0)
+    _, _, vt = np.linalg.svd(points - c, full_matrices=False)
+    n = vt[-1]
+    if n @ up < 0:
+        n = -n
+    return c, n / np.linalg.norm(n)
+
+
+def sagittal_split(mesh: trimesh.Trimesh, y_mid: float = 0.0):
+    """x of the posterior wall of the vertebral body and of the anterior edge of the lamina at the midline.
+
+    Mid-sagittal section (plane y = y_mid): the anterior-most closed polygon is the vertebral body, the
+    next one posteriorly the lamina/spinous process; the canal lies between them.
+    """
+    sec = mesh.section(plane_normal=[0, 1, 0], plane_origin=[0, y_mid, 0])
+    if sec is None:
+        return None, None
+    p2, T = sec.to_2D()
+    boxes = []
+    for poly in p2.polygons_full:
+        b = np.array(poly.exterior.coords)
+        b3 = trimesh.transform_points(np.c_[b, np.zeros(len(b))], T)
+        boxes.append((b3[:, 0].min(), b3[:, 0].max()))
+    boxes.sort(key=lambda t: -t[1])
+    if len(boxes) < 2:
+        return None, None
+    return boxes[0][0], boxes[1][1]
+
+
+def hull_centroid(points: np.ndarray) -> np.ndarray:
+    return np.asarray(trimesh.convex.convex_hull(points).center_mass, dtype=float)
+
+
+def volume_centroid(mesh: trimesh.Trimesh) -> np.ndarray:
+    """Volume centroid if watertight, else that of the convex hull (documented approximation)."""
+    if mesh.is_watertight and mesh.volume > 0:
+        return np.asarray(mesh.center_mass, dtype=float)
+    return hull_centroid(mesh.vertices)
+
+
+def inferior_endplate(mesh: trimesh.Trimesh, face_mask: np.ndarray, band: float = 0.005):
+    """Inferior endplate of a vertebral body from its downward-facing faces.
+
+    Faces in ``face_mask`` (the body part) whose outward normal points inferiorly (n.z < -0.5) and whose
+    centres lie within ``band`` of the body's lowest point.  Returns (area-weighted centroid, unit normal
+    pointing superior = minus the area-weighted mean outward normal, face indices).
+    """
+    fc, fn, fa = mesh.triangles_center, mesh.face_normals, mesh.area_faces
+    zmin = fc[face_mask, 2].min()
+    sel = face_mask & (fn[:, 2] < -0.5) & (fc[:, 2] < zmin + band)
+    if sel.sum() < 1:
+        sel = face_mask & (fc[:, 2] < zmin + band)
+    w = fa[sel]
+    c = (fc[sel] * w[:, None]).sum(0) / w.sum()
+    n = -(fn[sel] * w[:, None]).sum(0)
+    n /= np.linalg.norm(n)
+    return c, n, np.where(sel)[0]
+
+
+def facing_endplate(mesh: trimesh.Trimesh, c_up: np.ndarray, n_up: np.ndarray, radius: float,
+                    band: float = 0.005):
+    """Superior endplate of the lower vertebra, found from the upper one's inferior endplate (c_up, n_up):
+    faces of ``mesh`` whose outward normal faces the upper endplate (n.n_up > 0.5), whose centres lie
+    below c_up inside the cylinder of the given radius about the axis (c_up, n_up), and within ``band``
+    of the highest such face along n_up.  Returns (area-weighted centroid, unit normal, face indices)."""
+    fc, fn, fa = mesh.triangles_center, mesh.face_normals, mesh.area_faces
+    d = fc - c_up
+    h = d @ n_up
+    r = np.linalg.norm(d - np.outer(h, n_up), axis=1)
+    cand = (r < radius) & (h < 0) & (fn @ n_up > 0.5)
+    if not cand.any():
+        raise ValueError("no superior endplate faces found below the upper vertebra")
+    sel = cand & (h > h[cand].max() - band)
+    w = fa[sel]
+    c = (fc[sel] * w[:, None]).sum(0) / w.sum()
+    n = (fn[sel] * w[:, None]).sum(0)
+    n /= np.linalg.norm(n)
+    return c, n, np.where(sel)[0]
+
+
+def section_area(mesh: trimesh.Trimesh, origin, normal, inside_point=None) -> float:
+    """Area of the section polygon of ``mesh`` by the plane (origin, normal) that contains (or lies
+    nearest to) ``inside_point``; sum over polygon.area of that polygon only."""
+    sec = mesh.section(plane_normal=normal, plane_origin=origin)
+    if sec is None:
+        return float("nan")
+    p2, T = sec.to_2D()
+    polys = list(p2.polygons_full)
+    if not polys:
+        return float("nan")
+    if inside_point is None:
+        return float(sum(p.area for p in polys))
+    import shapely.geometry as sg  # noqa: PLC0415
+    q = trimesh.transform_points(np.atleast_2d(inside_point), np.linalg.inv(T))[0, :2]
+    pt = sg.Point(q)
+    best = min(polys, key=lambda p: p.distance(pt))
+    return float(best.area)
+
+
+def projected_area(points: np.ndarray, normal: np.ndarray) -> float:
+    """Convex-hull area of ``points`` projected on the plane with the given normal."""
+    from scipy.spatial import ConvexHull  # noqa: PLC0415
+    n = np.asarray(normal, float) / np.linalg.norm(normal)
+    a = np.cross(n, [1.0, 0, 0] if abs(n[0]) < 0.9 else [0, 1.0, 0])
+    a /= np.linalg.norm(a)
+    b = np.cross(n, a)
+    q = np.c_[points @ a, points @ b]
+    return float(ConvexHull(q).volume)
+
+
+def summary_table(geo) -> "pd.DataFrame":
+    """One row per level: disc centre/normal/CSA/height, facet landmarks, ligament fibres (mm)."""
+    import pandas as pd
+
+    rows = []
+    for name in sorted(geo.levels):
+        lev = geo.levels[name]
+        row = {"geometry": geo.name, "level": name, "upper": lev.upper, "lower": lev.lower}
+        for ax, c in zip("xyz", lev.disc_centre):
+            row[f"disc_centre_{ax}_mm"] = 1e3 * float(c)
+        for ax, n in zip("xyz", lev.disc_normal):
+            row[f"disc_normal_{ax}"] = float(n)
+        row["disc_csa_mm2"] = 1e6 * float(lev.disc_csa)
+        row["disc_height_mm"] = 1e3 * float(lev.disc_height)
+        row["facet_landmarks_n"] = int(sum(len(f.superior) + len(f.inferior) for f in lev.facets.values()))
+        for lig in lev.ligaments:
+            length = np.linalg.norm(np.asarray(lig.upper) - np.asarray(lig.lower), axis=1) + np.asarray(lig.extra_length)
+            row[f"{lig.name}_n_fibres"] = int(len(length))
+            row[f"{lig.name}_mean_length_mm"] = 1e3 * float(length.mean()) if len(length) else np.nan
+        rows.append(row)
+    return pd.DataFrame(rows)

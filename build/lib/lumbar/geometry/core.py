@@ -1,0 +1,79 @@
+"""Data classes and error type of :mod:`lumbar.geometry` (see docs/design.md)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import trimesh
+
+LEVEL_NAMES = ("L1-L2", "L2-L3", "L3-L4", "L4-L5", "L5-S1")
+VERTEBRA_NAMES = ("L1", "L2", "L3", "L4", "L5", "S1")
+LIGAMENT_KINDS = ("ALL", "PLL", "FL", "CL", "ISL", "SSL", "ITL")
+LIGAMENT_NAMES = ("ALL", "PLL", "FL", "CL_L", "CL_R", "ISL", "SSL", "ITL_L", "ITL_R")
+
+
+class GeometryError(ValueError):
+    """Invalid geometry input (missing/unreadable file, wrong units, malformed table)."""
+
+
+@dataclass
+class Vertebra:
+    name: str
+    mesh: trimesh.Trimesh          # project frame, metres
+    centroid: np.ndarray           # (3,) volume centroid of the vertebral body (reference point c_b)
+
+
+@dataclass
+class FacetLandmarks:
+    superior: np.ndarray           # (9,3) lower vertebra's superior articular process (medial face)
+    inferior: np.ndarray           # (9,3) upper vertebra's inferior articular process (lateral face)
+
+
+@dataclass
+class Ligament:
+    name: str                      # ALL, PLL, FL, CL_L, CL_R, ISL, SSL, ITL_L, ITL_R
+    kind: str                      # ALL, PLL, FL, CL, ISL, SSL, ITL
+    upper: np.ndarray              # (n,3) fibre ends fixed to the upper vertebra
+    lower: np.ndarray              # (n,3) fibre ends fixed to the lower vertebra
+    extra_length: np.ndarray       # (n,) constant via-point path length within one body (m)
+
+    @property
+    def n_fibres(self) -> int:
+        return int(self.upper.shape[0])
+
+    @property
+    def lengths(self) -> np.ndarray:
+        """Reference fibre lengths (straight part + extra_length), metres."""
+        return np.linalg.norm(self.upper - self.lower, axis=1) + self.extra_length
+
+
+@dataclass
+class Level:
+    name: str                      # "L4-L5"
+    upper: str                     # "L4"
+    lower: str                     # "L5"
+    disc_centre: np.ndarray        # (3,)
+    disc_normal: np.ndarray        # (3,) unit, pointing superior
+    disc_csa: float                # m^2
+    disc_height: float             # m
+    facets: dict = field(default_factory=dict)     # "left"/"right" -> FacetLandmarks
+    ligaments: list = field(default_factory=list)  # list[Ligament]
+
+    def ligament(self, name: str) -> Ligament:
+        for lig in self.ligaments:
+            if lig.name == name:
+                return lig
+        raise KeyError(f"level {self.name} has no ligament {name!r}")
+
+
+@dataclass
+class SpineGeometry:
+    name: str
+    source: str
+    vertebrae: dict                # name -> Vertebra
+    levels: dict                   # "L4-L5" -> Level
+
+
+def level_vertebrae(level: str) -> tuple[str, str]:
+    up, lo = level.split("-")
+    return up, lo

@@ -1,0 +1,110 @@
+"""``load_geometry``: dispatch to the geometry sources."""
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+
+from . import analysis as A
+from .core import LEVEL_NAMES, VERTEBRA_NAMES, GeometryError, Level, SpineGeometry, Vertebra, level_vertebrae
+
+CSA_OFFSET_M = 0.002   # section plane this far inside the upper vertebral body, above its inferior endplate
+
+
+def _levels_and_vertebrae(levels):
+    if levels is None:
+        levels = list(LEVEL_NAMES)
+    if isinstance(levels, str):
+        levels = [levels]
+    bad = [lv for lv in levels if lv not in LEVEL_NAMES]
+    if bad:
+        raise GeometryError(f"unknown level(s) {bad}; expected some of {list(LEVEL_NAMES)}")
+    levels = [lv for lv in LEVEL_NAMES if lv in levels]
+    verts = sorted({v for lv in levels for v in level_vertebrae(lv)}, key=VERTEBRA_NAMES.index)
+    return levels, verts
+
+
+def load_geometry(kind: str = "default", path=None, levels=None) -> SpineGeometry:
+    """Load a spine geometry in the project frame (x anterior, y left, z superior; metres).
+
+    kind: "default" / "myo_sim" (embedded myo-sim meshes + data/landmarks/myo_sim_landmarks.csv; ``path``
+    optionally overrides the landmark CSV) or "visible_human" (``path`` = the visible_human_lss folder).
+    levels: None (all of "L1-L2".."L5-S1") or an iterable of level names; only their vertebrae are loaded.
+    """
+    k = str(kind).lower()
+    if k in ("default", "myo_sim", "myo-sim"):
+        return _checked(load_myo_sim(landmarks_csv=path, levels=levels))
+    if k in ("visible_human", "visible-human", "vh"):
+        if path is None:
+            raise GeometryError("kind='visible_human' needs path= the visible_human_lss folder")
+        from .visible_human import load_visible_human  # noqa: PLC0415
+        return _checked(load_visible_human(path, levels=levels))
+    if k == "synthetic":
+        from .synthetic import symmetric_fsu  # noqa: PLC0415
+        return symmetric_fsu()
+    raise GeometryError(f"unknown geometry kind {kind!r}; expected 'default'/'myo_sim', 'visible_human' or 'synthetic'")
+
+
+def _checked(geo: SpineGeometry) -> SpineGeometry:
+    """Units, closedness and frame of every vertebra mesh (lumbar.geometry.checks)."""
+    from .checks import check_spine  # noqa: PLC0415
+    check_spine(geo)
+    return geo
+
+
+def _body_centroid(mesh: trimesh.Trimesh, x_post: float) -> np.ndarray:
+    """Volume centroid of the convex hull of the vertebra's vertices anterior to the posterior wall of the
+    body (the vertebral body; a capped slice would need a polygon triangulation engine)."""
+    v = mesh.vertices
+    return A.hull_centroid(v[v[:, 0] > x_post])
+
+
+def load_myo_sim(landmarks_csv=None, levels=None) -> SpineGeometry:
+    from . import myo_sim  # noqa: PLC0415
+    from .landmarks import ENDPLATE_RADIUS, _Feat, default_csv_path, landmarks_to_level_parts, read_landmarks  # noqa: PLC0415
+    levels, verts = _levels_and_vertebrae(levels)
+    need = list(verts)
+    if "S1" in need and "L5" not in need:
+        need.append("L5")
+    meshes = myo_sim.load_raw_meshes(tuple(need))
+    csv = default_csv_path() if landmarks_csv is None else landmarks_csv
+    df = read_landmarks(csv, meshes)
+    feats = {v: _Feat(v, meshes[v]) for v in need if v != "S1"}
+    if "S1" in need:
+        feats["S1"] = _Feat("S1", meshes["S1"], x_post=feats["L5"].x_post, x_lam=feats["L5"].x_lam)
+    geo_levels, s1_endplate = {}, None
+    for lv in levels:
+        U, L = level_vertebrae(lv)
+        fu, fl = feats[U], feats[L]
+        c_inf, n_inf, _ = A.inferior_endplate(fu.mesh, fu.mesh.triangles_center[:, 0] > fu.x_post)
+        c_sup, n_sup, _ = A.facing_endplate(fl.mesh, c_inf, n_inf, radius=ENDPLATE_RADIUS)
+        n = n_inf + n_sup
+        n /= np.linalg.norm(n)
+        centre = 0.5 * (c_inf + c_sup)
+        height = float((c_inf - c_sup) @ n)
+        origin = c_inf + CSA_OFFSET_M * n_inf
+        csa = A.section_area(fu.mesh, origin, n_inf, inside_point=origin)
+        proj = A.projected_area(fu.body, n_inf)
+        if not (0 < csa < proj):
+            raise GeometryError(f"myo-sim {lv}: disc CSA {csa} m^2 not in (0, projected body area {proj})")
+        if L == "S1":
+            s1_endplate = (c_sup, n_sup)
+        ligs, facets = landmarks_to_level_parts(df, lv, U, L)
+        geo_levels[lv] = Level(name=lv, upper=U, lower=L, disc_centre=centre, disc_normal=n,
+                               disc_csa=float(csa), disc_height=height, facets=facets, ligaments=ligs)
+    vertebrae = {}
+    for v in verts:
+        if v == "S1":
+            # sacrum: hull centroid of its vertices within 25 mm below the S1 endplate and 20 mm of its axis
+            if s1_endplate is None:  # pragma: no cover - S1 only loaded with L5-S1
+                raise GeometryError("S1 needs level L5-S1")
+            c, n = s1_endplate
+            d = meshes["S1"].vertices - c
+            h = d @ n
+            r = np.linalg.norm(d - np.outer(h, n), axis=1)
+            cen = A.hull_centroid(meshes["S1"].vertices[(h < 0.5e-3) & (h > -0.025) & (r < 0.02)])
+        else:
+            cen = _body_centroid(meshes[v], feats[v].x_post)
+        vertebrae[v] = Vertebra(name=v, mesh=meshes[v], centroid=cen)
+    ver = myo_sim.package_version()
+    return SpineGeometry(name="myo_sim", source=f"myo-sim {ver} (Apache-2.0) torso chain, qpos0; landmarks {csv}",
+                         vertebrae=vertebrae, levels=geo_levels)

@@ -1,0 +1,49 @@
+"""Validated, cached mesh reading."""
+from __future__ import annotations
+
+import functools
+import os
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from .core import GeometryError
+
+MAX_EXTENT_M = 0.3
+
+
+@functools.lru_cache(maxsize=64)
+def _read_mesh_cached(path: str, mtime_ns: int) -> trimesh.Trimesh:
+    try:
+        mesh = trimesh.load(path, force="mesh", process=True)
+    except Exception as exc:  # trimesh raises many types
+        raise GeometryError(f"{path}: mesh not readable ({type(exc).__name__}: {exc}); "
+                            "expected an STL/OBJ triangle mesh in metres") from exc
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0 or len(mesh.vertices) < 4:
+        raise GeometryError(f"{path}: mesh not readable or empty (no triangles); "
+                            "expected an STL/OBJ triangle mesh in metres")
+    if not np.all(np.isfinite(mesh.vertices)):
+        raise GeometryError(f"{path}: mesh has non-finite vertex coordinates")
+    ext = mesh.extents
+    if np.any(ext > MAX_EXTENT_M):
+        raise GeometryError(
+            f"{path}: mesh extent {np.round(ext, 4).tolist()} exceeds {MAX_EXTENT_M} m in some axis; "
+            "looks like millimetres, expected metres")
+    return mesh
+
+
+def read_mesh(path, *, max_extent: float = MAX_EXTENT_M) -> trimesh.Trimesh:
+    """Read a mesh (cached by path + modification time); returns a private copy."""
+    p = Path(path)
+    if not p.is_file():
+        raise GeometryError(f"{p}: mesh file missing (expected a triangle mesh file in metres)")
+    mesh = _read_mesh_cached(str(p.resolve()), os.stat(p).st_mtime_ns)
+    return mesh.copy()
+
+
+def require_dir(path, what: str) -> Path:
+    p = Path(path)
+    if not p.is_dir():
+        raise GeometryError(f"{p}: {what} directory missing")
+    return p

@@ -1,0 +1,512 @@
+"""The L2-S1 lumbar spine with wire-cable muscles (paper 1, Sects. 2.1.2, 2.3, 3.2, Appendix 3).
+
+Model: sacrum (S1) fixed, L2..L5 free (24 DOF); every level L2-L3..L5-S1 gets disc, facet joints and
+ligaments through :func:`lumbar.fsu.add_level` with the same characteristic set (the L4-L5 calibration
+transferred unchanged, as the paper does). Five symmetric pairs of constant, length-independent cable
+forces (Wilke et al. 1996: 80 N per pair, 40 N per side) pull L2 along lines of action derived from the
+Christophy muscle set shipped with myo-sim (``data/cables/wilke1996_cables.csv`` says which fascicles and
+how; the MJCF is read from site-packages at run time). Each cable is a ``law="cable"`` fibre from its
+attachment on the vertebra to a fixed point ``cable_length_m`` away along its line of action (the pulley).
+
+Scenarios: 7 muscle set-ups (none, each pair alone, all) x 7 load cases (neutral, +-3.75 N*m pure moment
+on L2 in flexion/extension, lateral bending left/right, axial rotation left/right) = 49, solved as one
+batch (cables switched by the per-scenario fibre mask, moments as loads).
+"""
+from __future__ import annotations
+
+import functools
+import logging
+import re
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .fsu import DIRECTIONS, add_level
+from .io import Column, TableError, TableSchema, read_table
+from .model import GROUND, SpineModel
+from .solve import solve
+
+log = logging.getLogger(__name__)
+
+LEVELS = ("L2-L3", "L3-L4", "L4-L5", "L5-S1")
+FREE = ("L2", "L3", "L4", "L5")
+IDP_LEVEL = "L4-L5"
+MUSCLES = ("multifidus_caudal", "iliocostalis_longissimus", "psoas_vertebral_bodies",
+           "psoas_transverse_processes", "multifidus_cranial")
+MUSCLE_SETUPS = ("none",) + MUSCLES + ("all",)
+LOAD_CASES = ("neutral", "flexion", "extension", "axial_rotation_left", "axial_rotation_right",
+              "lateral_bending_left", "lateral_bending_right")
+MOMENT_NM = 3.75
+CABLE_LENGTH_M = 1.0
+# Newton step limits for the L2-S1 chain: its vertebrae move up to ~2 cm under the cables, so the FSU
+# defaults (1 mm, 0.05 rad per iteration) cost many iterations; these were the fastest robust choice
+# over the six characteristic sets (benchmarks/bench_l2s1.py).
+STEP_LIMITS = dict(max_step_trans=1e-2, max_step_rot=0.1)
+SIDES = {"left": "l", "right": "r"}
+
+
+def default_cable_table() -> Path:
+    return Path(__file__).resolve().parents[2] / "data" / "cables" / "wilke1996_cables.csv"
+
+
+CABLE_SCHEMA = TableSchema("wilke1996_cables", {
+    "muscle_setup": Column("str", allowed=frozenset(MUSCLES)),
+    "label": Column("str"),
+    "vertebra": Column("str", allowed=frozenset(FREE)),
+    "attachment_fascicles": Column("str"),
+    "direction_fascicles": Column("str"),
+    "attachment_rule": Column("str", allowed=frozenset({"mean_site_on_vertebra"})),
+    "direction_rule": Column("str", allowed=frozenset({"mean_unit_from_vertebra_site_to_next_site",
+                                                       "mean_unit_from_caudal_site_to_cranial_site"})),
+    "tension_per_side": Column("float", min=0.0),
+    "unit": Column("str", allowed=frozenset({"N"})),
+    "kind": Column("str", allowed=frozenset({"derived_from_geometry"})),
+    "source": Column("str"),
+    "note": Column("str", required=False, nullable=True),
+})
+
+
+# ------------------------------------------------------------------ Christophy fascicles in myo-sim
+@functools.lru_cache(maxsize=2)
+def christophy_sites(chain_xml: str | None = None):
+    """({site: (myo-sim body, position (3,) in the project frame [m])}, {tendon: [site, ...]}).
+
+    Read from the myo-sim torso MJCF at qpos0 with the same frame conversion as the meshes
+    (:mod:`lumbar.geometry.myo_sim`). Wrapping side-sites (inside ``<geom>``) are not path points.
+    """
+    from .geometry import myo_sim as M
+
+    p = Path(chain_xml) if chain_xml else M.chain_path()
+    root = ET.parse(p).getroot()
+    sites = {}
+
+    def walk(body, R_parent, t_parent):
+        R = R_parent @ M._rot(body)
+        t = t_parent + R_parent @ M._vec(body, "pos", [0, 0, 0])
+        for s in body.findall("site"):
+            sites[s.get("name")] = (body.get("name"), M.R_PROJECT_FROM_WORLD @ (t + R @ M._vec(s, "pos", [0, 0, 0])))
+        for c in body.findall("body"):
+            walk(c, R, t)
+
+    sac = next((b for b in root.iter("body") if b.get("name") == "sacrum"), None)
+    if sac is None:
+        raise ValueError(f"{p}: no <body name='sacrum'>")
+    walk(sac, np.eye(3), np.zeros(3))
+    tendons = {}
+    tfile = p.parent / "myotorso_tendon.xml"
+    for sp in ET.parse(tfile).getroot().iter("spatial"):
+        tendons[sp.get("name")] = [s.get("site") for s in sp.findall("site")]
+    return sites, tendons
+
+
+def _fascicle_path(name, side, sites, tendons):
+    key = f"{name}_{SIDES[side]}_tendon"
+    if key not in tendons:
+        raise ValueError(f"{default_cable_table()}: fascicle {name!r} ({key}) not in the myo-sim torso MJCF")
+    return [sites[s] for s in tendons[key]]
+
+
+def derive_cables(table=None, tension_scale=1.0) -> pd.DataFrame:
+    """Cable attachments and lines of action derived from the myo-sim Christophy fascicles.
+
+    One row per cable (muscle set-up x side): attachment in the *myo-sim* frame [m], the myo-sim
+    centroid of the vertebra it is attached to, unit direction, tension [N].
+    Rules: attachment = mean of the listed fascicles' sites on the vertebra; direction = mean of the
+    unit vectors from that site to the next path point (``..._to_next_site``), or from each fascicle's
+    caudal path point to its cranial one (``..._caudal_site_to_cranial_site``), normalised.
+    """
+    from .geometry import myo_sim as M
+    from .geometry.myo_sim import BODY_OF
+
+    path = Path(table) if table is not None else default_cable_table()
+    df = read_table(path, CABLE_SCHEMA)
+    missing = sorted(set(MUSCLES) - set(df["muscle_setup"]))
+    if missing or df["muscle_setup"].duplicated().any():
+        raise TableError(path, f"need each muscle set-up once; missing {missing}", column="muscle_setup",
+                         expected=", ".join(MUSCLES))
+    sites, tendons = christophy_sites()
+    myo = _myo_centroids()
+    rows = []
+    for i, r in df.iterrows():
+        body = BODY_OF[r["vertebra"]]
+        for side in ("left", "right"):
+            att, dirs = [], []
+            for fas in r["attachment_fascicles"].split(";"):
+                pts = _fascicle_path(fas.strip(), side, sites, tendons)
+                on = [k for k, (b, _) in enumerate(pts) if b == body]
+                if not on:
+                    raise TableError(path, f"fascicle {fas!r} has no site on {body}", row=i + 1,
+                                     column="attachment_fascicles", expected=f"fascicles attached to {r['vertebra']}")
+                att.append(pts[on[0]][1])
+            for fas in r["direction_fascicles"].split(";"):
+                pts = _fascicle_path(fas.strip(), side, sites, tendons)
+                if r["direction_rule"] == "mean_unit_from_vertebra_site_to_next_site":
+                    k = next(k for k, (b, _) in enumerate(pts) if b == body)
+                    other = pts[k + 1] if k + 1 < len(pts) else pts[k - 1]
+                    d = other[1] - pts[k][1]
+                else:
+                    lo, hi = sorted((pts[0][1], pts[-1][1]), key=lambda p: p[2])
+                    d = hi - lo
+                dirs.append(d / np.linalg.norm(d))
+            u = np.mean(dirs, axis=0)
+            u /= np.linalg.norm(u)
+            a = np.mean(att, axis=0)
+            rows.append(dict(muscle_setup=r["muscle_setup"], side=side, vertebra=r["vertebra"],
+                             attach_x_m=a[0], attach_y_m=a[1], attach_z_m=a[2],
+                             dir_x=u[0], dir_y=u[1], dir_z=u[2],
+                             centroid_x_m=myo[r["vertebra"]][0], centroid_y_m=myo[r["vertebra"]][1],
+                             centroid_z_m=myo[r["vertebra"]][2],
+                             tension_n=float(r["tension_per_side"]) * tension_scale,
+                             fascicles=r["attachment_fascicles"], direction_fascicles=r["direction_fascicles"],
+                             rule=f"{r['attachment_rule']}; {r['direction_rule']}",
+                             source=f"myo-sim {M.package_version()} (Apache-2.0), Christophy et al. 2012 fascicles; "
+                                    "Wilke et al. 1996 cable concept",
+                             kind="derived_from_geometry"))
+    return pd.DataFrame(rows)
+
+
+@functools.lru_cache(maxsize=1)
+def _myo_centroids():
+    from .geometry import load_geometry
+    g = load_geometry("default", levels=list(LEVELS))
+    return {v: np.asarray(g.vertebrae[v].centroid, float) for v in FREE}
+
+
+def mirror_cables(cables: pd.DataFrame, about_y=0.0) -> pd.DataFrame:
+    """Cables with every left cable replaced by the mirror image (y -> 2*about_y - y) of its right one."""
+    out = cables.copy()
+    for ms in out["muscle_setup"].unique():
+        r = out.index[(out["muscle_setup"] == ms) & (out["side"] == "right")][0]
+        left = out.index[(out["muscle_setup"] == ms) & (out["side"] == "left")][0]
+        for c in out.columns:
+            out.at[left, c] = out.at[r, c] if c != "side" else "left"
+        out.at[left, "attach_y_m"] = 2 * about_y - out.at[r, "attach_y_m"]
+        out.at[left, "centroid_y_m"] = 2 * about_y - out.at[r, "centroid_y_m"]
+        out.at[left, "dir_y"] = -out.at[r, "dir_y"]
+    return out
+
+
+# ------------------------------------------------------------------ model
+@dataclass
+class L2S1:
+    model: SpineModel
+    geometry: object
+    charset: object
+    cables: pd.DataFrame          # derived cables with the attachment used in this geometry
+    cable_group: dict             # (muscle_setup, side) -> fibre group id
+    group_kind: list              # kind per fibre group ("cable" for cables)
+    surface_side: list            # (level, side) per facet surface
+
+    def fmask(self, setups) -> np.ndarray:
+        m = self.model
+        out = np.ones((len(setups), m.nf))
+        is_cable = np.array([self.group_kind[g] == "cable" for g in m.f_group])
+        for i, s in enumerate(setups):
+            if s not in MUSCLE_SETUPS:
+                raise ValueError(f"unknown muscle_setup {s!r}; expected one of {MUSCLE_SETUPS}")
+            on = set(MUSCLES) if s == "all" else ({s} if s != "none" else set())
+            gids = [g for (ms, _), g in self.cable_group.items() if ms in on]
+            out[i, is_cable] = np.isin(m.f_group[is_cable], gids).astype(float)
+        return out
+
+
+def build_l2s1(geometry, charset, cables: pd.DataFrame | None = None, facet_stiffness=None, k_shear=None,
+               cable_length_m=CABLE_LENGTH_M, contact_eps=5e-5, slack_width_pct=0.5) -> L2S1:
+    """L2-S1 model of ``geometry`` with ``charset`` at every level and the derived cables.
+
+    Cable attachments are taken relative to the vertebra's centroid: ``a = c_geo + (a_myo - c_myo)``,
+    so the same Christophy-derived points follow a perturbed or a Visible Human geometry.
+    """
+    miss = [lv for lv in LEVELS if lv not in geometry.levels]
+    if miss:
+        raise ValueError(f"geometry {geometry.name!r} lacks level(s) {miss}; L2-S1 needs {list(LEVELS)}")
+    if cables is None:
+        cables = derive_cables()
+    m = SpineModel(contact_eps=contact_eps, slack_width_pct=slack_width_pct)
+    for v in FREE:
+        m.add_body(v, geometry.vertebrae[v].centroid)
+    m.add_body("S1", geometry.vertebrae["S1"].centroid, fixed=True)
+    kinds, sides = [], []
+    for lv in LEVELS:
+        k, s = add_level(m, geometry.levels[lv], charset, facet_stiffness, k_shear)
+        kinds += k
+        sides += [(lv, x) for x in s]
+    cab = cables.copy()
+    groups = {}
+    for i, r in cab.iterrows():
+        c_geo = np.asarray(geometry.vertebrae[r["vertebra"]].centroid, float)
+        a = c_geo + np.array([r.attach_x_m - r.centroid_x_m, r.attach_y_m - r.centroid_y_m,
+                              r.attach_z_m - r.centroid_z_m])
+        u = np.array([r.dir_x, r.dir_y, r.dir_z])
+        cab.loc[i, ["model_x_m", "model_y_m", "model_z_m"]] = a
+        gid = m.add_fibre_group(f"{r.muscle_setup}_{r.side}", "cable", "cable", m.body_index(r["vertebra"]),
+                                GROUND, a[None], (a + cable_length_m * u)[None], 0.0, "cable",
+                                (float(r.tension_n),))
+        groups[(r.muscle_setup, r.side)] = gid
+        kinds.append("cable")
+    m.finalize()
+    return L2S1(m, geometry, charset, cab, groups, kinds, sides)
+
+
+def scenario_grid(setups=MUSCLE_SETUPS, load_cases=LOAD_CASES):
+    return [(s, c) for s in setups for c in load_cases]
+
+
+def scenario_loads(load_cases, nb, moment_nm=MOMENT_NM, body=0):
+    L = np.zeros((len(load_cases), nb, 6))
+    for i, c in enumerate(load_cases):
+        if c == "neutral":
+            continue
+        if c not in DIRECTIONS:
+            raise ValueError(f"unknown load_case {c!r}; expected one of {LOAD_CASES}")
+        axis, sign = DIRECTIONS[c]
+        L[i, body, 3 + axis] = sign * moment_nm
+    return L
+
+
+@dataclass
+class Solution:
+    spine: L2S1
+    grid: list
+    fmask: np.ndarray
+    x: np.ndarray
+    R: np.ndarray
+    converged: np.ndarray
+    residual_force: np.ndarray
+    residual_moment: np.ndarray
+    loads: np.ndarray
+
+
+def solve_scenarios(spine: L2S1, setups=MUSCLE_SETUPS, load_cases=LOAD_CASES, moment_nm=MOMENT_NM,
+                    load_steps=1, max_iter=50, tol_force=1e-8, tol_moment=1e-8) -> Solution:
+    """All set-up x load-case scenarios of one model as one batch."""
+    grid = scenario_grid(setups, load_cases)
+    m = spine.model
+    fm = spine.fmask([g[0] for g in grid])
+    loads = scenario_loads([g[1] for g in grid], m.nb, moment_nm)
+    res = solve(m, loads, fmask=fm, load_steps=load_steps, max_iter=max_iter, tol_force=tol_force,
+                tol_moment=tol_moment, **STEP_LIMITS)
+    return Solution(spine, grid, fm, res.x, res.R, res.converged, res.residual_force, res.residual_moment, loads)
+
+
+def equilibrium_residual(sol: Solution):
+    """Re-evaluated max |force| [N] and |moment| [N*m] residual of every free vertebra (B,)."""
+    Q, _ = sol.spine.model.evaluate(sol.x, sol.R, sol.loads, sol.fmask, 1.0, jacobian=False)
+    return np.abs(Q[..., :3]).max(axis=(1, 2)), np.abs(Q[..., 3:]).max(axis=(1, 2))
+
+
+def internal_loads(sol: Solution, level=IDP_LEVEL) -> pd.DataFrame:
+    """Per scenario: disc loads, facet forces and ligament group forces at ``level``; cable forces."""
+    sp, m = sol.spine, sol.spine.model
+    di = [d.name for d in m.discs].index(level)
+    dl = m.disc_loads(sol.x, sol.R)
+    F, T = dl["force"][:, di], dl["torque"][:, di]
+    cf = m.contact_forces(sol.x, sol.R)
+    gf = m.group_forces(sol.x, sol.R, sol.fmask)
+    df = pd.DataFrame({
+        "muscle_setup": [g[0] for g in sol.grid], "load_case": [g[1] for g in sol.grid],
+        "converged": sol.converged,
+        "disc_axial_force_n": F[:, 2], "disc_shear_ap_n": F[:, 0], "disc_shear_lat_n": F[:, 1],
+        # moment carried by the disc (restoring torque on the upper body, sign flipped: + = the disc is
+        # loaded in flexion / right lateral bending / left axial rotation)
+        "disc_moment_lateral_nm": -T[:, 0], "disc_moment_sagittal_nm": -T[:, 1], "disc_moment_axial_nm": -T[:, 2],
+        "disc_flexion_deg": np.degrees(dl["phi"][:, di, 1]),
+    })
+    for sid, (lv, side) in enumerate(sp.surface_side):
+        if lv == level:
+            df[f"facet_{side}_n"] = cf[:, sid]
+    kinds = {}
+    for g, (name, kind, lv) in enumerate(m.fibre_groups):
+        if lv == level:
+            kinds.setdefault(kind, []).append(g)
+    for kind in ("ALL", "PLL", "FL", "CL", "ISL", "SSL", "ITL"):
+        if kind in kinds:
+            df[f"lig_{kind}_n"] = gf[:, kinds[kind]].sum(1)
+    cab = [g for g, (_, kind, _) in enumerate(m.fibre_groups) if kind == "cable"]
+    df["cable_total_n"] = gf[:, cab].sum(1) if cab else 0.0
+    return df
+
+
+def run_set(geometry, charset, cables=None, idp_formula="paper1", idp_kwargs=None, facet_stiffness=None,
+            k_shear=None, load_steps=1, max_iter=50, tol=1e-8, moment_nm=MOMENT_NM):
+    """Build, solve the 49 scenarios, and return (internal-loads table with idp_mpa, Solution)."""
+    from .idp import FORMULAS, idp_from_disc
+    if idp_formula not in FORMULAS:
+        raise ValueError(f"unknown IDP formula {idp_formula!r} (config key l2s1.idp_formula); expected one of {FORMULAS}")
+    sp = build_l2s1(geometry, charset, cables, facet_stiffness=facet_stiffness, k_shear=k_shear)
+    sol = solve_scenarios(sp, moment_nm=moment_nm, load_steps=load_steps, max_iter=max_iter, tol_force=tol,
+                          tol_moment=tol)
+    df = internal_loads(sol)
+    csa = geometry.levels[IDP_LEVEL].disc_csa
+    idp = idp_from_disc(df["disc_axial_force_n"].to_numpy(), df["disc_moment_sagittal_nm"].to_numpy(),
+                        formula=idp_formula, csa_m2=csa, **(idp_kwargs or {}))
+    df.insert(3, "idp_mpa", np.where(sol.converged, idp / 1e6, np.nan))
+    if not sol.converged.all():
+        bad = [f"{a}/{b}" for (a, b), c in zip(sol.grid, sol.converged) if not c]
+        log.warning("L2-S1 %s: %d of %d scenarios did not converge (%s); idp_mpa NaN, flagged",
+                    getattr(charset, "name", "?"), len(bad), len(bad) + int(sol.converged.sum()), ", ".join(bad))
+    return df, sol
+
+
+# ------------------------------------------------------------------ reference (measured/surrogate) IDP table
+IDP_TABLE_SCHEMA = TableSchema("idp_table", {
+    "muscle_setup": Column("str", allowed=frozenset(MUSCLE_SETUPS)),
+    "load_case": Column("str", allowed=frozenset(LOAD_CASES)),
+    "idp_mean_mpa": Column("float"),
+    "idp_sd_mpa": Column("float", min=0.0, description="MPa, standard deviation over specimens"),
+    "n_specimens": Column("int", min=0),
+    "kind": Column("str"),
+    "source": Column("str"),
+})
+
+
+def read_idp_table(path) -> pd.DataFrame:
+    """Validated measured/surrogate IDP table (schema in data/experiments/README.md)."""
+    df = read_table(path, IDP_TABLE_SCHEMA)
+    key = list(zip(df["muscle_setup"], df["load_case"]))
+    dup = [i + 1 for i, k in enumerate(key) if key.index(k) != i]
+    if dup:
+        raise TableError(path, f"duplicate (muscle_setup, load_case) {key[dup[0] - 1]}", row=dup[0],
+                         column="load_case", expected="each scenario once")
+    missing = sorted(set(scenario_grid()) - set(key))
+    if missing:
+        raise TableError(path, f"{len(missing)} scenario(s) missing, e.g. {missing[0]}", column="muscle_setup",
+                         expected="all 7 x 7 muscle_setup x load_case rows")
+    return df
+
+
+def synopsis(sim: pd.DataFrame, ref: pd.DataFrame) -> pd.DataFrame:
+    """Table 5 rows: sim (set, muscle_setup, load_case, idp_mpa, converged) against the reference table."""
+    r = ref.rename(columns={"kind": "data_kind"})[["muscle_setup", "load_case", "idp_mean_mpa", "idp_sd_mpa",
+                                                   "data_kind"]]
+    df = sim[["set", "muscle_setup", "load_case", "idp_mpa", "converged"]].rename(columns={"idp_mpa": "idp_sim_mpa"})
+    df = df.merge(r, on=["muscle_setup", "load_case"], how="left", validate="many_to_one")
+    inside = (df["idp_sim_mpa"] >= df["idp_mean_mpa"] - df["idp_sd_mpa"]) & \
+             (df["idp_sim_mpa"] <= df["idp_mean_mpa"] + df["idp_sd_mpa"])
+    df["outlier"] = ~(inside & df["converged"].astype(bool))
+    return df[["set", "muscle_setup", "load_case", "idp_sim_mpa", "idp_mean_mpa", "idp_sd_mpa", "outlier",
+               "converged", "data_kind"]]
+
+
+def outlier_counts(syn: pd.DataFrame, published: pd.DataFrame | None = None) -> pd.DataFrame:
+    g = syn.groupby("set", sort=False)
+    out = pd.DataFrame({"set": list(g.groups),
+                        "outliers": g["outlier"].apply(lambda s: int(s.astype(bool).sum())).to_numpy(),
+                        "not_converged": g["converged"].apply(lambda s: int((~s.astype(bool)).sum())).to_numpy(),
+                        "scenarios": g.size().to_numpy().astype(int)})
+    out["data_kind"] = g["data_kind"].agg(lambda s: ";".join(sorted(set(s.astype(str))))).to_numpy()
+    return out
+
+
+PUBLISHED_KEY = {"calibrated": "outliers_idp_this_paper_model", "chazal1985": "outliers_idp_chazal1985",
+                 "shirazi_adl1986": "outliers_idp_shirazi_adl1986", "white_panjabi1990": "outliers_idp_white_panjabi1990",
+                 "nolte1990": "outliers_idp_nolte1990", "rupp2015": "outliers_idp_rupp2015"}
+
+
+def versus_paper(counts: pd.DataFrame, published_csv=None) -> pd.DataFrame:
+    """Outlier counts beside the paper's (Table 5 / Sect. 3.2); empty paper columns if the file is absent."""
+    out = counts[["set", "outliers", "scenarios", "data_kind"]].copy()
+    out["paper_outliers"] = np.nan
+    out["paper_source"] = ""
+    if published_csv is not None and Path(published_csv).is_file():
+        pub = pd.read_csv(published_csv).set_index("quantity")
+        for i, s in out["set"].items():
+            k = PUBLISHED_KEY.get(s)
+            if k in pub.index:
+                out.at[i, "paper_outliers"] = float(pub.at[k, "value"])
+                out.at[i, "paper_source"] = str(pub.at[k, "source"])
+    else:
+        log.warning("published model results %s not found: paper_outliers left empty", published_csv)
+    out["difference"] = out["outliers"] - out["paper_outliers"]
+    return out
+
+
+# ------------------------------------------------------------------ figures (Table 5 grid, Fig. 7)
+SETUP_LABELS = {"none": "without muscles", "multifidus_caudal": "multifidus to caudal",
+                "iliocostalis_longissimus": "iliocostalis longissimus", "psoas_vertebral_bodies": "psoas vertebrae",
+                "psoas_transverse_processes": "psoas transversus", "multifidus_cranial": "multifidus to cranial",
+                "all": "all muscles"}
+
+
+def _kind_note(syn):
+    kinds = sorted(set(syn["data_kind"].astype(str)))
+    return ("reference = SURROGATE (virtual specimens, not measured)" if kinds == ["surrogate"]
+            else f"reference kind: {', '.join(kinds)}")
+
+
+def plot_table5_grid(syn: pd.DataFrame, path):
+    """Check/cross grid: rows = set-up x load case, columns = characteristic sets."""
+    import matplotlib
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    from .io import atomic_writer
+    sets = list(dict.fromkeys(syn["set"]))
+    rows = scenario_grid()
+    idx = syn.set_index(["set", "muscle_setup", "load_case"])
+    fig, ax = plt.subplots(figsize=(2.0 + 1.3 * len(sets), 14), dpi=100)
+    for j, s in enumerate(sets):
+        for i, (ms, lc) in enumerate(rows):
+            r = idx.loc[(s, ms, lc)]
+            if not bool(r["converged"]):
+                ax.text(j, i, "n.c.", color="#d62728", ha="center", va="center", fontsize=8, fontweight="bold")
+            elif bool(r["outlier"]):
+                ax.text(j, i, "\u2717", color="#d62728", ha="center", va="center", fontsize=12)
+            else:
+                ax.text(j, i, "\u2713", color="#2ca02c", ha="center", va="center", fontsize=12)
+    ax.set_xlim(-0.5, len(sets) - 0.5)
+    ax.set_ylim(len(rows) - 0.5, -0.5)
+    ax.set_xticks(range(len(sets)))
+    ax.set_xticklabels([f"{s}\n{int(syn[syn['set'] == s]['outlier'].sum())}/49" for s in sets], fontsize=8)
+    ax.set_yticks(range(len(rows)))
+    ax.set_yticklabels([f"{SETUP_LABELS[ms]} | {lc.replace('_', ' ')}" for ms, lc in rows], fontsize=7)
+    for k in range(1, len(MUSCLE_SETUPS)):
+        ax.axhline(k * len(LOAD_CASES) - 0.5, color="grey", lw=0.5)
+    ax.set_title(f"Table 5: L4-L5 IDP within mean +- SD (\u2713) or outlier (\u2717, n.c. = no equilibrium)\n"
+                 f"{_kind_note(syn)}", fontsize=9)
+    fig.tight_layout()
+    try:
+        with atomic_writer(path, "wb") as fh:
+            fig.savefig(fh, format="png", metadata={"Software": None})
+    finally:
+        plt.close(fig)
+
+
+def plot_fig7(syn: pd.DataFrame, path, set_name="calibrated"):
+    """Fig. 7: bars = reference mean with SD, circles = simulated IDP, red crosses = outliers."""
+    import matplotlib
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    from .io import atomic_writer
+    if set_name not in set(syn["set"]):
+        set_name = syn["set"].iloc[0]
+    d = syn[syn["set"] == set_name].set_index(["muscle_setup", "load_case"])
+    colours = plt.get_cmap("tab10").colors
+    fig, ax = plt.subplots(figsize=(16, 6), dpi=100)
+    w = 0.8 / len(MUSCLE_SETUPS)
+    for k, ms in enumerate(MUSCLE_SETUPS):
+        xs = np.arange(len(LOAD_CASES)) - 0.4 + (k + 0.5) * w
+        r = d.loc[[(ms, lc) for lc in LOAD_CASES]]
+        ax.bar(xs, r["idp_mean_mpa"], w * 0.9, color=colours[k], alpha=0.55, label=SETUP_LABELS[ms],
+               yerr=r["idp_sd_mpa"], error_kw=dict(ecolor="black", capsize=2, lw=0.8))
+        ax.scatter(xs, r["idp_sim_mpa"], s=28, facecolor="none", edgecolor=colours[k], linewidth=1.5, zorder=3)
+        out = r["outlier"].to_numpy(bool)
+        sim = np.where(np.isfinite(r["idp_sim_mpa"]), r["idp_sim_mpa"], 0.0)
+        ax.scatter(xs[out], sim[out], marker="x", color="red", s=40, zorder=4)
+    ax.set_xticks(range(len(LOAD_CASES)))
+    ax.set_xticklabels([lc.replace("_", " ") for lc in LOAD_CASES])
+    ax.set_ylabel("L4-L5 IDP [MPa]")
+    n_out = int(d["outlier"].sum())
+    ax.set_title(f"Fig. 7: L4-L5 IDP, set '{set_name}': bars mean +- SD ({_kind_note(syn)}); circles model; "
+                 f"red crosses {n_out} outliers", fontsize=10)
+    ax.legend(fontsize=8, ncol=4)
+    fig.tight_layout()
+    try:
+        with atomic_writer(path, "wb") as fh:
+            fig.savefig(fh, format="png", metadata={"Software": None})
+    finally:
+        plt.close(fig)

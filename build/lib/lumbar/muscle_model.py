@@ -1,0 +1,563 @@
+"""Muscle-driven lumbar spine (paper 2, Sect. 2.1-2.4): L1-L5 free, thorax fused to L1, sacrum/pelvis fixed.
+
+Passive intervertebral behaviour: the project's disc, facet and ligament elements at every level
+(:func:`lumbar.fsu.add_level`, characteristic set selectable). With ``symmetric_passive`` (default, config
+``muscle_model.symmetric_passive``) the geometry is first mirror-averaged about y = 0
+(:func:`lumbar.geometry.symmetry.mirror_average`: left/right partner points averaged, midline points
+projected to y = 0, disc centres/normals and body centroids on the plane) and the segment COMs are put on
+y = 0, so that with the mirrored fascicles the model is exactly bilateral (the myo-sim landmarks are not:
+midline ligament insertions snapped to mesh vertices off y = 0, lateral force up to 7 N on a level at rest). Muscles: the 210 MyoTorso fascicles
+(:mod:`lumbar.muscles`), Hill-type without tendon compliance. Upper-body weights: de Leva (1996) fractions
+for a ``body_mass_kg`` body plus the MyoTorso lumbar slice masses (``data/anthropometry``). Activities
+(paper Sect. 2.4): thorax sagittal rotation targets and the 190 N crate held 25 / 55 cm anterior to the
+L5-S1 disc, applied to the L1+thorax body. The redundancy solver is :mod:`lumbar.muscles.redundancy`.
+
+One passive model per level (same bodies) gives each level's intervertebral load and its exact
+derivative; their sum is the spine. Muscle forces are constant-tension cables per path segment (exact
+geometric stiffness from :class:`lumbar.model.SpineModel`, tension per scenario through ``fmask``) plus
+the rank-one tension-stiffness term ``-dT/dL g g^T`` added here.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from . import so3
+from .fsu import add_level, disc_frame
+from .geometry.core import LEVEL_NAMES
+from .model import SpineModel
+from .muscles.muscle_set import ABDOMINALS, EXTENSORS, GROUPS, SCENARIOS, MuscleSet, load_muscle_set
+from .muscles.paths import N_PER_CM2, MusclePaths, baseline_properties
+
+G = 9.81
+FREE = ("L1", "L2", "L3", "L4", "L5")
+DATA = Path(__file__).resolve().parents[2] / "data"
+LENGTH_SCALE = 0.05   # m, moments -> forces in the FSU-load cost
+PROP_FIELDS = ("spt_pa", "k_pa", "ssl_um", "in_situ_sl_um", "pennation_rad")
+
+
+@dataclass(frozen=True)
+class Activity:
+    name: str
+    thorax_flexion_deg: float
+    crate_n: float = 0.0
+    crate_anterior_m: float = 0.0
+    in_vivo_row: str = ""
+    note: str = ""
+
+
+ACTIVITIES = {
+    "extension_19deg": Activity("extension_19deg", -19.0, in_vivo_row="extension_20deg",
+                                note="in vivo: about 20 deg extension"),
+    "upright_standing": Activity("upright_standing", 0.0, in_vivo_row="relaxed_standing"),
+    "crate_close": Activity("crate_close", 0.0, 190.0, 0.25, "crate_close_chest",
+                            note="in vivo: 20 kg crate close to the chest (distance not stated)"),
+    "crate_far": Activity("crate_far", 0.0, 190.0, 0.55, "crate_far_60cm",
+                          note="in vivo: crate about 60 cm in front of the body; model 55 cm as in the paper"),
+    "flexion_36deg": Activity("flexion_36deg", 36.0, in_vivo_row="flexion_36deg",
+                              note="in vivo trunk flexion includes hip flexion; here all of it is lumbar (pelvis fixed)"),
+}
+
+
+def get_activity(name) -> Activity:
+    if isinstance(name, Activity):
+        return name
+    if name not in ACTIVITIES:
+        raise ValueError(f"unknown activity {name!r} (field 'activity'); expected one of {sorted(ACTIVITIES)}")
+    return ACTIVITIES[name]
+
+
+def read_anthropometry(path=None) -> pd.DataFrame:
+    path = Path(path) if path is not None else DATA / "anthropometry" / "upper_body_segments.csv"
+    from lumbar.tables import read_kind  # noqa: PLC0415
+    read_kind(path, "anthropometry")   # schema: file, row, column and expected form of a bad cell
+    df = pd.read_csv(path)
+    for i, r in df.iterrows():
+        if r["body"] not in FREE:
+            raise ValueError(f"{path} row {i + 2}: body {r['body']!r} must be one of {FREE}")
+        has_f, has_m = pd.notna(r["mass_fraction"]), pd.notna(r["mass_kg_fixed"])
+        if has_f == has_m:
+            raise ValueError(f"{path} row {i + 2}: give exactly one of mass_fraction, mass_kg_fixed")
+        v = r["mass_fraction"] if has_f else r["mass_kg_fixed"]
+        if not v > 0:
+            raise ValueError(f"{path} row {i + 2}: segment mass must be > 0, got {v}")
+    return df
+
+
+class PointForces:
+    """Opaque container (numpy treats it as a scalar, so it passes through ``lumbar.solve`` params)."""
+
+    def __init__(self, items):
+        self.items = list(items)
+
+    def __iter__(self):
+        return iter(self.items)
+
+
+class LumbarMuscleModel:
+    """Bodies, passive levels, muscles and weights; ``evaluate`` is the equilibrium residual + Jacobian."""
+
+    def __init__(self, geometry=None, charset=None, muscle_set: MuscleSet | None = None, body_mass_kg=71.0,
+                 anthropometry_csv=None, iap_force_n=0.0, characteristics="calibrated", data_dir=None,
+                 symmetric_passive=True):
+        from .characteristics import load_characteristic_set
+        from .geometry import load_geometry
+        from .geometry.symmetry import mirror_average
+        if not body_mass_kg > 0:
+            raise ValueError(f"body_mass_kg must be > 0, got {body_mass_kg}")
+        if not iap_force_n >= 0:
+            raise ValueError(f"iap_force_n must be >= 0, got {iap_force_n}")
+        self.geo = geometry if geometry is not None else load_geometry("default")
+        self.symmetric_passive = bool(symmetric_passive)
+        if self.symmetric_passive:
+            # passive elements (and body reference points) mirror-averaged about y = 0: the muscles are
+            # already bilateral (load_muscle_set), so the whole model is mirror-symmetric
+            self.geo = mirror_average(self.geo)
+        self.charset = charset if charset is not None else load_characteristic_set(
+            characteristics, **({"data_dir": data_dir} if data_dir else {}))
+        self.ms = muscle_set if muscle_set is not None else load_muscle_set()
+        self.nb = len(FREE)
+        cents = np.array([self.geo.vertebrae[v].centroid for v in FREE])
+        self.c = cents
+        self.body_index = {v: i for i, v in enumerate(FREE)} | {"S1": -1}
+
+        def bodies(m):
+            for v in FREE:
+                m.add_body(v, self.geo.vertebrae[v].centroid)
+            m.add_body("S1", self.geo.vertebrae["S1"].centroid, fixed=True)
+
+        self.levels = list(LEVEL_NAMES)
+        self.level_models = []
+        for lv in self.levels:
+            m = SpineModel()
+            bodies(m)
+            add_level(m, self.geo.levels[lv], self.charset)
+            self.level_models.append(m.finalize())
+        self.paths = MusclePaths(self.ms, self.body_index, cents)
+        cab = SpineModel()
+        bodies(cab)
+        for k in range(self.paths.ns):
+            cab.add_fibre_group(f"{self.ms.names[self.paths.seg_m[k]]}_{k}", "muscle", "", int(self.paths.seg_a[k]),
+                                int(self.paths.seg_b[k]), self.paths.sa[k], self.paths.sb[k], 0.0, "cable", (1.0,))
+        self.cables = cab.finalize()
+        self.l_ref = self.paths.reference_lengths(self.nb)
+        self.props = baseline_properties(self.ms, self.l_ref)
+        # weights: (body, force (3,), reference point (3,))
+        self.body_mass_kg = body_mass_kg
+        self.segments = self._segments(read_anthropometry(anthropometry_csv))
+        self.iap_force_n = iap_force_n
+        self.thorax = 0
+        self.l5s1_centre = np.asarray(self.geo.levels["L5-S1"].disc_centre, float)
+
+    def _segments(self, df):
+        out = []
+        for _, r in df.iterrows():
+            mass = r["mass_fraction"] * self.body_mass_kg if pd.notna(r["mass_fraction"]) else r["mass_kg_fixed"]
+            rule, arg = str(r["com_rule"]).split(":")
+            if rule == "mjcf_com":
+                com = self.ms.mjcf_bodies[arg][1]
+            elif rule == "shoulder_drop":
+                com = self.ms.mjcf_bodies["Arm_attachment"][1] - np.array([0, 0, float(arg)])
+            else:
+                raise ValueError(f"unknown com_rule {r['com_rule']!r} in the anthropometry table")
+            com = np.array(com, float)
+            if self.symmetric_passive:
+                com[1] = 0.0        # MyoTorso COMs are within 0.15 mm of y = 0; exactly on it when symmetric
+            out.append((r["segment"], self.body_index[r["body"]], float(mass), com))
+        return out
+
+    # ------------------------------------------------------------------ loads
+    def point_forces(self, activity):
+        """Weights, crate and IAP: a :class:`PointForces` of (body, force (3,), reference point (3,), follower)."""
+        f = [(b, np.array([0, 0, -m * G]), com, False) for _, b, m, com in self.segments]
+        act = get_activity(activity)
+        if act.crate_n:
+            z = self.segments[1][3][2]
+            p = np.array([self.l5s1_centre[0] + act.crate_anterior_m, 0.0, z])
+            f.append((self.thorax, np.array([0, 0, -act.crate_n]), p, False))
+        if self.iap_force_n:
+            p = self.c[0] + np.array([0.06, 0, 0.05])   # below the diaphragm centre, anterior to L1
+            f.append((self.thorax, np.array([0, 0, self.iap_force_n]), p, True))
+        return PointForces(f)
+
+    def upper_body_weight_n(self):
+        return sum(m for _, _, m, _ in self.segments) * G
+
+    # ------------------------------------------------------------------ evaluation
+    # ------------------------------------------------------------------ per-scenario inputs
+    def load_arrays(self, activities):
+        """Point loads of each activity as arrays: forces (B, nf, 3) [N] and points (B, nf, 3) [m] on the
+        bodies ``self.load_bodies`` (weights, crate slot with 0 N when there is no crate, IAP follower)."""
+        segs = self.segments
+        nf = len(segs) + 1
+        F = np.zeros((len(activities), nf, 3))
+        P = np.zeros((len(activities), nf, 3))
+        for i, act in enumerate(activities):
+            act = get_activity(act)
+            for k, (_, b, mass, com) in enumerate(segs):
+                F[i, k, 2] = -mass * G
+                P[i, k] = com
+            P[i, -1] = [self.l5s1_centre[0] + act.crate_anterior_m, 0.0, segs[1][3][2]]
+            F[i, -1, 2] = -act.crate_n
+        return F, P
+
+    @property
+    def load_bodies(self):
+        return [b for _, b, _, _ in self.segments] + [self.thorax]
+
+    def props_stack(self, props_list):
+        """(B, 5, nm) per-scenario muscle properties (spt_pa, k_pa, ssl_um, in_situ_sl_um, pennation_rad)."""
+        return np.stack([np.stack([np.broadcast_to(getattr(p, f), (self.ms.n,)) for f in PROP_FIELDS])
+                         for p in props_list])
+
+    def _props(self, params):
+        st = params.get("prop_stack")
+        if st is None:
+            return params.get("props", self.props)
+        return self.props.with_(**{f: st[:, k] for k, f in enumerate(PROP_FIELDS)})
+
+    # ------------------------------------------------------------------ evaluation
+    def evaluate(self, x, R, loads=None, fmask=1.0, cmask=1.0, jacobian=True, params=None, levels=False):
+        """Residual (B, nb, 6) and Jacobian (B, nb, 6, nb, 6).
+
+        ``params``: ``activation`` (B, nm); muscle properties as ``props`` (one MuscleProperties) or
+        ``prop_stack`` (B, 5, nm, see :meth:`props_stack`); point loads as ``force_vec``/``force_pt``
+        (B, nf, 3, see :meth:`load_arrays`) or ``forces`` (a :class:`PointForces`). With ``levels=True``
+        also returns each level's passive load on its upper vertebra (B, nlev, 6) and its derivative
+        (B, nlev, 6, nb, 6) (or None without ``jacobian``)."""
+        params = params or {}
+        B = x.shape[0]
+        a = np.broadcast_to(params.get("activation", 0.0), (B, self.ms.n))
+        props = self._props(params)
+        Q = np.zeros((B, self.nb, 6)) if loads is None else np.array(loads, float, copy=True)
+        J = np.zeros((B, self.nb, 6, self.nb, 6)) if jacobian else None
+        if levels:
+            FL = np.zeros((B, len(self.levels), 6))
+            DL = np.zeros((B, len(self.levels), 6, self.nb, 6)) if jacobian else None
+        for k, (lv, m) in enumerate(zip(self.levels, self.level_models)):
+            q, j = m.evaluate(x, R, jacobian=jacobian)
+            Q += q
+            if jacobian:
+                J += j
+            if levels:
+                up = self.body_index[self.geo.levels[lv].upper]
+                FL[:, k] = q[:, up]
+                if jacobian:
+                    DL[:, k] = j[:, up]
+        L, Gd = self.paths.lengths(x, R, gradient=True)
+        T, dT, _, _ = props.tension(L, a)
+        q, j = self.cables.evaluate(x, R, fmask=T[:, self.paths.seg_m], jacobian=jacobian)
+        Q += q
+        if jacobian:
+            J += j
+            g = Gd.reshape(B, self.ms.n, -1)
+            J -= np.einsum("bm,bmi,bmj->bij", dT, g, g).reshape(J.shape)
+        items = []
+        if "force_vec" in params:
+            fv, fp = np.broadcast_to(params["force_vec"], (B,) + np.shape(params["force_vec"])[-2:]), \
+                np.broadcast_to(params["force_pt"], (B,) + np.shape(params["force_pt"])[-2:])
+            items = [(b, fv[:, k], fp[:, k], False) for k, b in enumerate(self.load_bodies)]
+        for b, f, s, follower in list(items) + list(params.get("forces", ())):
+            s = np.broadcast_to(s, (B, 3))
+            r = np.einsum("bij,bj->bi", R[:, b], s - self.c[b])
+            fw = np.broadcast_to(f, (B, 3)) if not follower else np.einsum("bij,j->bi", R[:, b], f)
+            Q[:, b, :3] += fw
+            Q[:, b, 3:] += np.cross(r, fw)
+            if jacobian:
+                if follower:
+                    J[:, b, :3, b, 3:] -= so3.hat(fw)
+                    J[:, b, 3:, b, 3:] -= so3.hat(np.cross(r, fw))
+                else:
+                    J[:, b, 3:, b, 3:] += so3.hat(fw) @ so3.hat(r)
+        if levels:
+            return Q, J, FL, DL
+        return Q, J
+
+    def reference_state(self, batch=1):
+        x = np.broadcast_to(self.c, (batch, self.nb, 3)).copy()
+        R = np.broadcast_to(np.eye(3), (batch, self.nb, 3, 3)).copy()
+        return x, R
+
+    def level_loads(self, x, R, jacobian=False):
+        """Passive load of each level on its upper vertebra: (B, nlev, 6) (force, moment about the upper
+        body's reference point) and optionally its derivative (B, nlev, 6, nb, 6)."""
+        B = x.shape[0]
+        F = np.zeros((B, len(self.levels), 6))
+        D = np.zeros((B, len(self.levels), 6, self.nb, 6)) if jacobian else None
+        for k, (lv, m) in enumerate(zip(self.levels, self.level_models)):
+            up = self.body_index[self.geo.levels[lv].upper]
+            q, j = m.evaluate(x, R, jacobian=jacobian)
+            F[:, k] = q[:, up]
+            if jacobian:
+                D[:, k] = j[:, up]
+        return F, D
+
+    def segment_loads(self, x, R) -> pd.DataFrame:
+        """Compressive / anterior-shear force and sagittal moment (flexion +) applied to each level's upper
+        vertebra, in the disc frame carried by the lower vertebra, about the disc centre (paper Table 1)."""
+        F, _ = self.level_loads(x, R)
+        rows = []
+        for b in range(x.shape[0]):
+            for k, lv in enumerate(self.levels):
+                lev = self.geo.levels[lv]
+                up, lo = self.body_index[lev.upper], self.body_index[lev.lower]
+                Rl = R[b, lo] if lo >= 0 else np.eye(3)
+                xl = x[b, lo] if lo >= 0 else np.asarray(self.geo.vertebrae[lev.lower].centroid)
+                cl = self.c[lo] if lo >= 0 else xl
+                pd_ = xl + Rl @ (np.asarray(lev.disc_centre) - cl)
+                E = Rl @ disc_frame(lev.disc_normal).T        # columns e1 (anterior), e2 (left), e3 (normal)
+                f, mom = F[b, k, :3], F[b, k, 3:]
+                md = mom + np.cross(x[b, up] - pd_, f)
+                rows.append({"scenario": b, "level": lv, "compressive_n": float(f @ E[:, 2]),
+                             "shear_n": float(-f @ E[:, 0]), "moment_nm": float(-md @ E[:, 1]),
+                             "lateral_moment_nm": float(-md @ E[:, 0]), "axial_moment_nm": float(-md @ E[:, 2])})
+        return pd.DataFrame(rows)
+
+    def thorax_rotation(self, R):
+        return so3.log(R[:, self.thorax])
+
+    def muscle_forces(self, x, R, a, props=None):
+        props = props or self.props
+        L, _ = self.paths.lengths(x, R, gradient=False)
+        T, _, act1, pas = props.tension(L, np.atleast_2d(a))
+        return L, T, np.atleast_2d(a) * act1, pas, props.sarcomere_length(L)
+
+
+def group_mask(ms: MuscleSet, scenario) -> np.ndarray:
+    """Fascicles a sensitivity scenario (MUL, EXT, EXT+PS, ALL) or a group list applies to."""
+    groups = SCENARIOS.get(scenario) if isinstance(scenario, str) else tuple(scenario)
+    if groups is None:
+        raise ValueError(f"unknown muscle scenario {scenario!r} (field 'scenario'); expected one of {sorted(SCENARIOS)}")
+    bad = [g for g in groups if g not in GROUPS]
+    if bad:
+        raise ValueError(f"unknown muscle group(s) {bad} (field 'groups'); expected some of {GROUPS}")
+    return np.isin(ms.groups, groups)
+
+
+def apply_parameter(props, ms, parameter, value, scenario, ssl_um=None):
+    """Props with ``parameter`` (ssl_um, k_n_per_cm2, in_situ_sl_um, spt_n_per_cm2, pennation_deg) set to
+    ``value`` for the scenario's fascicles; ``ssl_um`` additionally sets their slack sarcomere length."""
+    mask = group_mask(ms, scenario)
+    kw = {}
+    if parameter == "ssl_um":
+        if not value > 0:
+            raise ValueError(f"ssl_um must be > 0 um, got {value}")
+        kw["ssl_um"] = np.where(mask, value, props.ssl_um)
+    elif parameter == "k_n_per_cm2":
+        kw["k_pa"] = np.where(mask, value * N_PER_CM2, props.k_pa)
+    elif parameter == "in_situ_sl_um":
+        kw["in_situ_sl_um"] = np.where(mask, value, props.in_situ_sl_um)
+    elif parameter == "spt_n_per_cm2":
+        kw["spt_pa"] = np.where(mask, value * N_PER_CM2, props.spt_pa)
+    elif parameter == "pennation_deg":
+        kw["pennation_rad"] = np.where(mask, np.radians(value), props.pennation_rad)
+    else:
+        raise ValueError(f"unknown muscle parameter {parameter!r} (field 'parameter'); expected one of "
+                         "ssl_um, k_n_per_cm2, in_situ_sl_um, spt_n_per_cm2, pennation_deg")
+    if ssl_um is not None and parameter != "ssl_um":
+        if not ssl_um > 0:
+            raise ValueError(f"ssl_um must be > 0 um, got {ssl_um}")
+        kw["ssl_um"] = np.where(mask, ssl_um, props.ssl_um)
+    return props.with_(**kw)
+
+
+__all__ = ["ACTIVITIES", "Activity", "LumbarMuscleModel", "get_activity", "apply_parameter", "group_mask",
+           "EXTENSORS", "ABDOMINALS"]
+
+
+# ====================================================================== study (validation, sensitivity, Sobol)
+PARAMETERS = ("ssl_um", "k_n_per_cm2", "in_situ_sl_um", "spt_n_per_cm2", "pennation_deg")
+POSTURES = {"standing": "upright_standing", "flexion": "flexion_36deg"}
+# what the paper states (Sect. 3.2, original_text); keyed by (parameter, value, ssl_um or None, scope, posture)
+PAPER_CHANGES = {
+    ("ssl_um", 2.0, None, "MUL", "standing"): "IDP doubled (Sect. 3.2.1)",
+    ("ssl_um", 2.0, None, "EXT", "standing"): "IDP x7 (Sect. 3.2.1)",
+    ("ssl_um", 2.0, None, "EXT+PS", "standing"): "IDP x10 (Sect. 3.2.1)",
+    ("ssl_um", 2.0, None, "MUL", "flexion"): "36 deg flexion not reached (Sect. 3.2.1)",
+    ("ssl_um", 2.0, None, "EXT", "flexion"): "36 deg flexion not reached (Sect. 3.2.1)",
+    ("ssl_um", 2.0, None, "EXT+PS", "flexion"): "36 deg flexion not reached (Sect. 3.2.1)",
+    ("ssl_um", 2.0, None, "ALL", "flexion"): "36 deg flexion not reached (Sect. 3.2.1)",
+    ("ssl_um", 3.2, None, "ALL", "standing"): "total IDP unchanged for SSL > 2.8 (Sect. 3.2.1)",
+    ("ssl_um", 3.6, None, "ALL", "standing"): "total IDP unchanged for SSL > 2.8 (Sect. 3.2.1)",
+    ("k_n_per_cm2", 10.0, None, "ALL", "standing"): "change <= 20% (Sect. 3.2.2)",
+    ("k_n_per_cm2", 50.0, None, "ALL", "standing"): "change <= 20% (Sect. 3.2.2)",
+    ("k_n_per_cm2", 10.0, None, "ALL", "flexion"): "change <= 20% (Sect. 3.2.2)",
+    ("k_n_per_cm2", 50.0, None, "ALL", "flexion"): "change <= 20% (Sect. 3.2.2)",
+    ("k_n_per_cm2", 500.0, 2.4, "MUL", "flexion"): "IDP ~1 -> ~2 MPa (Sect. 3.2.2)",
+    ("k_n_per_cm2", 1000.0, 2.4, "MUL", "flexion"): "IDP ~1 -> ~3 MPa (Sect. 3.2.2)",
+    ("in_situ_sl_um", 3.6, None, "EXT", "standing"): "+79% (0.38 -> 0.68 MPa) (Sect. 3.2.3)",
+    ("in_situ_sl_um", 3.6, None, "EXT", "flexion"): "+380% (0.88 -> 3.34 MPa) (Sect. 3.2.3)",
+    ("spt_n_per_cm2", 10.0, None, "ALL", "flexion"): "+39% (Sect. 3.2.4)",
+    ("spt_n_per_cm2", 10.0, None, "EXT", "standing"): "upright not reached (Sect. 3.2.4)",
+    ("spt_n_per_cm2", 5.0, None, "EXT", "standing"): "upright not reached (Sect. 3.2.4)",
+    ("spt_n_per_cm2", 5.0, None, "EXT+PS", "standing"): "upright not reached (Sect. 3.2.4)",
+    ("spt_n_per_cm2", 5.0, None, "ALL", "standing"): "upright not reached (Sect. 3.2.4)",
+    **{("pennation_deg", v, None, s, p): "negligible (Sect. 3.2.5)" for v in (0.0, 7.5, 15.0, 22.5, 30.0)
+       for s in ("MUL", "EXT", "EXT+PS", "ALL") for p in ("standing", "flexion")},
+}
+
+
+def idp_parts(compressive_n, moment_nm, area_m2=18e-4):
+    """L4-L5 IDP [MPa] and its force and moment parts (paper 2, Sect. 2.4; lumbar.idp.idp_paper2)."""
+    from .idp import MPA, idp_paper2
+    F = np.asarray(compressive_n, float)
+    M = np.asarray(moment_nm, float)
+    total = idp_paper2(F, M, area_m2=area_m2) / MPA
+    force = idp_paper2(F, np.zeros_like(M), area_m2=area_m2) / MPA
+    return total, force, total - force
+
+
+def make_solver(model, cfg=None):
+    """RedundancySolver from the config section ``muscle_model.solver`` (weights, iterations, tracking)."""
+    from .muscles.redundancy import RedundancySolver, Weights
+    cfg = cfg or {}
+    w = Weights(**{k: cfg[k] for k in ("activation", "fsu_load_per_n2", "tracking_per_deg2") if k in cfg}) \
+        if any(k in cfg for k in ("activation", "fsu_load_per_n2", "tracking_per_deg2")) else Weights()
+    return RedundancySolver(model, w, max_iter=cfg.get("max_iter", 150),
+                            max_tracking_deg=cfg.get("max_tracking_deg", 1.0))
+
+
+def solve_postures(model, solver, activities, props_list=None, start=None):
+    """Solve the activities (names) as one batch; ``props_list``: per-scenario MuscleProperties;
+    ``start``: per-scenario PostureSolution to warm-start from (e.g. the baseline of the same posture)."""
+    acts = [get_activity(a) for a in activities]
+    F, P = model.load_arrays(acts)
+    params = {"force_vec": F, "force_pt": P}
+    if props_list is not None:
+        params["prop_stack"] = model.props_stack(props_list)
+    kw = {}
+    if start is not None:
+        kw = dict(x0=np.stack([s.x for s in start]), R0=np.stack([s.R for s in start]),
+                  a0=np.stack([s.a for s in start]))
+    return solver.solve_batch([a.thorax_flexion_deg for a in acts], params, **kw)
+
+
+def read_in_vivo(path) -> pd.DataFrame:
+    df = pd.read_csv(path)
+    need = {"activity", "idp_mpa", "source", "kind"}
+    if need - set(df.columns):
+        raise ValueError(f"{path}: missing columns {sorted(need - set(df.columns))}")
+    for i, r in df.iterrows():
+        if not (np.isfinite(r["idp_mpa"]) and r["idp_mpa"] > 0):
+            raise ValueError(f"{path} row {i + 2}: idp_mpa must be > 0 MPa, got {r['idp_mpa']}")
+    return df
+
+
+def flexion_relaxation(model, sols, names):
+    """Sum of active and passive extensor (and abdominal active) forces [N] per solved posture, with the
+    extensors' sarcomere lengths (PCSA-weighted mean and max [um]) and the PCSA fraction beyond their slack
+    sarcomere length (where passive force starts)."""
+    rows = []
+    ext = np.isin(model.ms.groups, EXTENSORS)
+    abd = np.isin(model.ms.groups, ABDOMINALS)
+    w = model.props.pcsa_m2[ext]
+    for name, s in zip(names, sols):
+        _, _, act, pas, sl = model.muscle_forces(s.x[None], s.R[None], s.a)
+        se = sl[0, ext]
+        rows.append({"activity": name, "extensor_active_n": float(act[0, ext].sum()),
+                     "extensor_passive_n": float(pas[0, ext].sum()),
+                     "abdominal_active_n": float(act[0, abd].sum()), "converged": s.converged,
+                     "extensor_sl_mean_um": float(np.sum(w * se) / np.sum(w)), "extensor_sl_max_um": float(se.max()),
+                     "extensor_pcsa_fraction_beyond_ssl": float(np.sum(w[se > model.props.ssl_um[ext]]) / np.sum(w))})
+    return pd.DataFrame(rows)
+
+
+def validation(model, sols, names, in_vivo: pd.DataFrame, area_m2=18e-4):
+    """Table 1 analog, Fig. 3 table, metrics and flexion-relaxation from solved activities."""
+    seg = []
+    for name, s in zip(names, sols):
+        d = model.segment_loads(s.x[None], s.R[None]).drop(columns="scenario")
+        d.insert(1, "activity", name)
+        d["converged"] = s.converged
+        seg.append(d)
+    seg = pd.concat(seg, ignore_index=True)
+    l45 = seg[seg["level"] == "L4-L5"].set_index("activity")
+    iv = in_vivo.set_index("activity")
+    rows = []
+    for name, s in zip(names, sols):
+        act = get_activity(name)
+        tot, fp, mp = idp_parts(l45.loc[name, "compressive_n"], l45.loc[name, "moment_nm"], area_m2)
+        r = iv.loc[act.in_vivo_row]
+        rows.append({"activity": name, "idp_sim_mpa": float(tot), "idp_force_mpa": float(fp),
+                     "idp_moment_mpa": float(mp), "idp_in_vivo_mpa": float(r["idp_mpa"]),
+                     "in_vivo_row": act.in_vivo_row, "source": r["source"], "kind": r["kind"],
+                     "converged": s.converged, "tracking_error_deg": s.tracking_error_deg, "note": act.note})
+    val = pd.DataFrame(rows)
+    ok = val[val["converged"]]
+    metrics = {"n": int(len(ok)), "n_total": int(len(val)), "r2": None, "rmse_mpa": None,
+               "r2_definition": "squared Pearson correlation (linear fit of simulated vs in-vivo IDP, as the paper)",
+               "paper_r2": 0.98}
+    if len(ok) >= 3:
+        r = np.corrcoef(ok["idp_sim_mpa"], ok["idp_in_vivo_mpa"])[0, 1]
+        metrics["r2"] = float(r ** 2)
+        metrics["rmse_mpa"] = float(np.sqrt(np.mean((ok["idp_sim_mpa"] - ok["idp_in_vivo_mpa"]) ** 2)))
+    return seg, val, metrics
+
+
+def sensitivity_rows(parameter, ssl_um, values, scopes, postures) -> pd.DataFrame:
+    """The scenarios of one sensitivity chunk (one Paramspace row: parameter and fixed SSL or none)."""
+    if parameter not in PARAMETERS:
+        raise ValueError(f"unknown muscle parameter {parameter!r}; expected one of {PARAMETERS}")
+    rows = [{"parameter": parameter, "value": float(v), "ssl_um": ssl_um, "group_scope": sc, "posture": p}
+            for v in values for sc in scopes for p in postures]
+    return pd.DataFrame(rows)
+
+
+def run_sensitivity(model, solver, rows: pd.DataFrame, baseline: dict, area_m2=18e-4) -> pd.DataFrame:
+    """Solve every row (one batch), warm-started from the baseline solution of its posture."""
+    props, start, names = [], [], []
+    for _, r in rows.iterrows():
+        ssl = None if pd.isna(r["ssl_um"]) else float(r["ssl_um"])
+        props.append(apply_parameter(model.props, model.ms, r["parameter"], r["value"], r["group_scope"], ssl))
+        names.append(POSTURES[r["posture"]])
+        start.append(baseline[r["posture"]])
+    sols = solve_postures(model, solver, names, props, start)
+    out = rows.copy()
+    seg = [model.segment_loads(s.x[None], s.R[None]).query("level == 'L4-L5'").iloc[0] for s in sols]
+    tot, fp, mp = idp_parts([s["compressive_n"] for s in seg], [s["moment_nm"] for s in seg], area_m2)
+    out["idp_mpa"], out["idp_force_mpa"], out["idp_moment_mpa"] = tot, fp, mp
+    out["converged"] = [s.converged for s in sols]
+    out["tracking_error_deg"] = [s.tracking_error_deg for s in sols]
+    out["paper_change"] = [PAPER_CHANGES.get((r["parameter"], float(r["value"]),
+                                              None if pd.isna(r["ssl_um"]) else float(r["ssl_um"]),
+                                              r["group_scope"], r["posture"]), "")
+                           for _, r in out.iterrows()]
+    return out
+
+
+SOBOL_BOUNDS = {"ssl_um": (2.0, 3.6), "k_n_per_cm2": (10.0, 1000.0), "in_situ_sl_um": (2.0, 3.6),
+                "spt_n_per_cm2": (5.0, 150.0), "pennation_deg": (0.0, 30.0)}
+
+
+def sobol_study(model, solver, baseline: dict, n_base: int, seed: int, scope="ALL", postures=("standing", "flexion"),
+                area_m2=18e-4):
+    """Variance-based (Sobol) indices of L4-L5 IDP to the five parameters (uniform on the paper's ranges,
+    applied to ``scope``), Saltelli sampling (SALib), per posture. Non-converged samples are replaced by
+    the posture's mean IDP and counted (``n_failed``)."""
+    from SALib.analyze import sobol as sobol_analyze
+    from SALib.sample import sobol as sobol_sample
+    problem = {"num_vars": len(PARAMETERS), "names": list(PARAMETERS),
+               "bounds": [list(SOBOL_BOUNDS[p]) for p in PARAMETERS]}
+    X = sobol_sample.sample(problem, n_base, calc_second_order=False, seed=seed)
+    rows = []
+    for posture in postures:
+        props = []
+        for x in X:
+            pr = model.props
+            for name, v in zip(PARAMETERS, x):
+                pr = apply_parameter(pr, model.ms, name, float(v), scope)
+            props.append(pr)
+        sols = solve_postures(model, solver, [POSTURES[posture]] * len(X), props, [baseline[posture]] * len(X))
+        seg = [model.segment_loads(s.x[None], s.R[None]).query("level == 'L4-L5'").iloc[0] for s in sols]
+        y = idp_parts([s["compressive_n"] for s in seg], [s["moment_nm"] for s in seg], area_m2)[0]
+        ok = np.array([s.converged for s in sols])
+        y = np.where(ok, y, np.mean(y[ok]) if ok.any() else 0.0)
+        si = sobol_analyze.analyze(problem, y, calc_second_order=False, seed=seed)
+        for k, name in enumerate(PARAMETERS):
+            rows.append({"posture": posture, "parameter": name, "S1": si["S1"][k], "S1_conf": si["S1_conf"][k],
+                         "ST": si["ST"][k], "ST_conf": si["ST_conf"][k], "n_samples": len(X),
+                         "n_failed": int((~ok).sum()), "scope": scope})
+    return pd.DataFrame(rows)

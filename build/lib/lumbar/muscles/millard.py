@@ -1,0 +1,187 @@
+"""Millard et al. (2013) normalised muscle curves, built as in OpenSim's SmoothSegmentedFunctionFactory.
+
+Each curve is a chain of quintic Bezier "corner" segments (SegmentedQuinticBezierToolkit::
+calcQuinticBezierCornerControlPoints: control points x0, x0+c(xC-x0) (twice), x1+c(xC-x1) (twice), x1,
+with xC the intersection of the two end tangents and c = 0.1 + 0.8*curviness), extrapolated linearly
+outside its domain with the end slopes. Values and first derivatives are analytic: x(u), y(u) are
+quintic polynomials, u is found from x by safeguarded Newton, and dy/dx = y'(u)/x'(u).
+
+Curves and their parameters (OpenSim defaults, cited in tests/test_muscles.py):
+* active force-length (ActiveForceLengthCurve): lce0 = 0.47-0.0259 = 0.4441, lce1 = 0.6259, lce2 = 1,
+  lce3 = 1.8123, shallow ascending slope 0.8616, minimum value 0.1, curviness 1;
+* passive (fibre) force-length (FiberForceLengthCurve / createFiberForceLengthCurve, OpenSim 4 defaults):
+  zero below strain e0 = 0, a toe segment to strain min(0.1/kiso, 0.1 e1) = 0.035 with stiffness at low
+  force klow = 0.2, then 1 at strain e1 = 0.7 with stiffness kiso = 2/0.7, curviness 0.75. Tangent moduli
+  with K = 1 MPa: 0.23, 1.07, 2.30, 2.86 MPa at 10, 30, 50, 70 % strain, beside the paper's baseline
+  0.26, 1.01, 2.45, 2.86 (Sect. 2.5; checked in the tests). (Until 2026-11-23 the toe segment was missing:
+  a single corner from (1, 0, slope 0) gave 0.08 MPa at 10 % strain and 3-30x less force below 10 %.)
+* force-velocity (createFiberForceVelocityCurve, for completeness; the static model does not use it):
+  fmaxE 1.4, slopes 0 at -vmax, 5 at isometric, 0 at +vmax, curviness 0.6 (concentric) / 0.9 (eccentric).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+_B = np.array([[-1, 5, -10, 10, -5, 1],      # quintic Bernstein basis, rows = powers u^5 .. u^0
+               [5, -20, 30, -20, 5, 0],
+               [-10, 30, -30, 10, 0, 0],
+               [10, -20, 10, 0, 0, 0],
+               [-5, 5, 0, 0, 0, 0],
+               [1, 0, 0, 0, 0, 0]], float)
+
+
+def corner_control_points(x0, y0, dydx0, x1, y1, dydx1, curviness):
+    """Six x and six y control points of one C-shaped quintic Bezier corner (OpenSim's rule)."""
+    if not 0.0 <= curviness <= 1.0:
+        raise ValueError(f"curviness must be in [0, 1], got {curviness}")
+    c = 0.1 + 0.8 * curviness
+    if abs(dydx0 - dydx1) > np.sqrt(np.finfo(float).eps):
+        xc = (y1 - y0 - x1 * dydx1 + x0 * dydx0) / (dydx0 - dydx1)
+    else:
+        xc = 0.5 * (x0 + x1)
+    yc = (xc - x1) * dydx1 + y1
+    a = (xc - x0) ** 2 + (yc - y0) ** 2
+    b = (xc - x1) ** 2 + (yc - y1) ** 2
+    d = (x1 - x0) ** 2 + (y1 - y0) ** 2
+    if not (d > a and d > b):
+        raise ValueError("corner end points and slopes do not form a C-shaped corner")
+    x0m, y0m = x0 + c * (xc - x0), y0 + c * (yc - y0)
+    x1m, y1m = x1 + c * (xc - x1), y1 + c * (yc - y1)
+    return np.array([x0, x0m, x0m, x1m, x1m, x1]), np.array([y0, y0m, y0m, y1m, y1m, y1])
+
+
+@dataclass
+class SmoothSegmentedCurve:
+    """Piecewise quintic Bezier curve y(x) with linear extrapolation; ``value_and_slope`` is vectorised."""
+
+    name: str
+    px: np.ndarray      # (nseg, 6)
+    py: np.ndarray      # (nseg, 6)
+
+    def __post_init__(self):
+        self.px = np.atleast_2d(np.asarray(self.px, float))
+        self.py = np.atleast_2d(np.asarray(self.py, float))
+        self.cx = self.px @ _B.T          # polynomial coefficients, powers u^5..u^0
+        self.cy = self.py @ _B.T
+        self.x_lo, self.x_hi = self.px[0, 0], self.px[-1, -1]
+        self.y_lo, self.y_hi = self.py[0, 0], self.py[-1, -1]
+        self.s_lo = self._slope_end(0, 0.0)
+        self.s_hi = self._slope_end(-1, 1.0)
+
+    def _slope_end(self, seg, u):
+        dx = np.polyval(np.polyder(self.cx[seg]), u)
+        dy = np.polyval(np.polyder(self.cy[seg]), u)
+        return dy / dx
+
+    def value_and_slope(self, x):
+        """y(x) and dy/dx(x) for an array of x."""
+        x = np.asarray(x, float)
+        flat = x.reshape(-1)
+        y = np.empty_like(flat)
+        dydx = np.empty_like(flat)
+        lo, hi = flat <= self.x_lo, flat >= self.x_hi
+        y[lo] = self.y_lo + self.s_lo * (flat[lo] - self.x_lo)
+        dydx[lo] = self.s_lo
+        y[hi] = self.y_hi + self.s_hi * (flat[hi] - self.x_hi)
+        dydx[hi] = self.s_hi
+        mid = ~(lo | hi)
+        if mid.any():
+            xm = flat[mid]
+            starts = self.px[:, 0]
+            seg = np.clip(np.searchsorted(starts, xm, side="right") - 1, 0, len(starts) - 1)
+            cx, cy = self.cx[seg], self.cy[seg]
+            a, b = np.zeros_like(xm), np.ones_like(xm)
+            u = 0.5 * (a + b)
+            for _ in range(60):                      # safeguarded Newton on x(u) = x (x(u) monotone)
+                f = _poly(cx, u) - xm
+                a = np.where(f < 0, u, a)
+                b = np.where(f >= 0, u, b)
+                d = _dpoly(cx, u)
+                un = u - f / np.where(np.abs(d) > 1e-300, d, 1e-300)
+                bad = (un <= a) | (un >= b) | ~np.isfinite(un)
+                un = np.where(bad, 0.5 * (a + b), un)
+                if np.all(np.abs(un - u) < 1e-15):
+                    u = un
+                    break
+                u = un
+            y[mid] = _poly(cy, u)
+            dydx[mid] = _dpoly(cy, u) / _dpoly(cx, u)
+        return y.reshape(x.shape), dydx.reshape(x.shape)
+
+    def __call__(self, x):
+        return self.value_and_slope(x)[0]
+
+
+def _poly(c, u):
+    out = c[:, 0].copy()
+    for k in range(1, 6):
+        out = out * u + c[:, k]
+    return out
+
+
+def _dpoly(c, u):
+    out = 5 * c[:, 0]
+    for k in range(1, 5):
+        out = out * u + (5 - k) * c[:, k]
+    return out
+
+
+def active_force_length_curve(x0=0.4441, x1=0.6259, x2=1.0, x3=1.8123, ylow=0.1, dydx=0.8616,
+                              curviness=1.0) -> SmoothSegmentedCurve:
+    """Normalised active force-length curve (createFiberActiveForceLengthCurve)."""
+    if not (0 <= x0 < x1 < x2 < x3):
+        raise ValueError("need 0 <= lce0 < lce1 < lce2 < lce3")
+    if not 0 <= dydx < 1.0 / (x2 - x1):
+        raise ValueError("shallow ascending slope out of range")
+    xd = 0.0259 * x2
+    xs = x2 - xd
+    y0, dydx0 = 0.0, 0.0
+    y1 = 1 - dydx * (xs - x1)
+    dydx01 = (y1 - y0) / (x1 - (x0 + xd))
+    x01 = x0 + xd + 0.5 * (x1 - (x0 + xd))
+    y01 = y0 + 0.5 * (y1 - y0)
+    x1s = x1 + 0.5 * (xs - x1)
+    y1s = y1 + 0.5 * (1 - y1)
+    y2, dydx2, y3, dydx3 = 1.0, 0.0, 0.0, 0.0
+    x23 = (x2 + xd) + 0.5 * ((x3 - xd) - (x2 + xd))
+    y23 = y2 + 0.5 * (y3 - y2)
+    dydx23 = (y3 - y2) / ((x3 - xd) - (x2 + xd))
+    segs = [(x0, ylow, dydx0, x01, y01, dydx01), (x01, y01, dydx01, x1s, y1s, dydx),
+            (x1s, y1s, dydx, x2, y2, dydx2), (x2, y2, dydx2, x23, y23, dydx23),
+            (x23, y23, dydx23, x3, ylow, dydx3)]
+    pts = [corner_control_points(*s, curviness) for s in segs]
+    return SmoothSegmentedCurve("active_force_length", [p[0] for p in pts], [p[1] for p in pts])
+
+
+def passive_force_length_curve(e0=0.0, e1=0.7, klow=0.2, kiso=2.0 / 0.7, curviness=0.75) -> SmoothSegmentedCurve:
+    """Normalised passive fibre force-length curve (createFiberForceLengthCurve); x = 1 + strain.
+
+    Two corner segments as in OpenSim 4: (1+e0, 0, slope 0) -> (xlow, ylow, slope klow) -> (1+e1, 1, kiso)
+    with ``xlow = 1+e0 + dx``, ``dx = min(0.1/kiso, 0.1 (e1-e0))``, ``ylow = klow dx / 2`` (the toe)."""
+    if not e1 > e0:
+        raise ValueError("strain at one normalised force must exceed the strain at zero force")
+    if not kiso > 1.0 / (e1 - e0):
+        raise ValueError(f"stiffness at one normalised force must exceed 1/(e1-e0) = {1 / (e1 - e0):.4g}")
+    if not 0.0 < klow < 1.0 / (e1 - e0):
+        raise ValueError(f"stiffness at low force (klow) must be in (0, 1/(e1-e0) = {1 / (e1 - e0):.4g})")
+    x0, xiso = 1.0 + e0, 1.0 + e1
+    dx = min(0.1 / kiso, 0.1 * (xiso - x0))
+    xlow, ylow = x0 + dx, klow * 0.5 * dx
+    p0 = corner_control_points(x0, 0.0, 0.0, xlow, ylow, klow, curviness)
+    p1 = corner_control_points(xlow, ylow, klow, xiso, 1.0, kiso, curviness)
+    return SmoothSegmentedCurve("passive_force_length", [p0[0], p1[0]], [p0[1], p1[1]])
+
+
+def force_velocity_curve(fmax_e=1.4, dydx_c=0.0, dydx_iso=5.0, dydx_e=0.0, curv_c=0.6,
+                         curv_e=0.9) -> SmoothSegmentedCurve:
+    """Normalised force-velocity curve (createFiberForceVelocityCurve), x = v / vmax in [-1, 1]."""
+    pc = corner_control_points(-1.0, 0.0, dydx_c, 0.0, 1.0, dydx_iso, curv_c)
+    pe = corner_control_points(0.0, 1.0, dydx_iso, 1.0, fmax_e, dydx_e, curv_e)
+    return SmoothSegmentedCurve("force_velocity", [pc[0], pe[0]], [pc[1], pe[1]])
+
+
+ACTIVE_FL = active_force_length_curve()
+PASSIVE_FL = passive_force_length_curve()
+FORCE_VELOCITY = force_velocity_curve()

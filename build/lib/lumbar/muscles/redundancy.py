@@ -1,0 +1,459 @@
+"""Muscle redundancy: activations and vertebral poses in static equilibrium (paper 2, Sect. 2.2, static).
+
+Problem, per posture (L1..L5 free, the thorax = the L1 body, its rotation tracked):
+
+    minimise   w_a * sum a^2 + w_f * sum_levels |F_level(q)|^2 + w_t * |thorax rotation(q) - target|_deg^2
+    subject to Q(q, a) = 0  (static equilibrium of every free body),  0 <= a <= 1
+
+(the paper's cost without its time terms; ``F_level`` = force [N] and moment / 0.05 m of each level's
+passive structures on its upper vertebra). Weights are fixed once (``Weights``), not fitted.
+
+Method: sequential quadratic programming with exact first derivatives, in two phases.
+
+* Phase 0 (start): the thorax rotation is held at its target; the other DOFs are put in equilibrium by
+  :func:`lumbar.solve.solve`, then SQP steps balance the thorax moment (a heavily weighted least-squares
+  row), so that phase 1 starts close to equilibrium.
+* Phase 1: all DOFs free. Each QP has the poses and activations as variables, the Gauss-Newton model of
+  the cost, the linearised equilibrium ``J dq + B da = -Q`` as an equality (``J = dQ/dq`` exact from the
+  model, ``B = dQ/da = -(dL/dq)^T F_iso``) and the activation box (within the trust bound D). The equality
+  is eliminated exactly (J is invertible), ``dq = -J^-1 (Q + B da)``; the remaining bound-constrained linear
+  least squares in ``da`` is solved exactly by :func:`box_lsq`. Steps are capped (1 mm, 0.02 rad) and
+  accepted by an Armijo test on the L1 merit ``cost + mu |Q|_1`` over six step lengths evaluated as one
+  batch; if none decreases it while out of equilibrium, ``mu`` (below the equilibrium multipliers, so the
+  step was no descent direction) is raised tenfold up to ``mu_max`` and the step retried. Stop when the QP's predicted cost decrease is below ``rel_cost_tol`` (relative) with a residual
+  below ``polish_from``; a plain Newton polish on the poses (activations fixed) then brings the residual
+  of every free body below ``tol`` (1e-8 N and N*m).
+
+All scenarios of a batch advance together (one vectorised model evaluation per iteration). A posture is
+``converged`` only if the equilibrium holds (< 1e-6), the SQP is stationary and the thorax is within
+``max_tracking_deg`` (1 deg, the paper's rejection rule, red stars) of its target; otherwise it is flagged
+with a message and a log line, never returned as a silent number.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import lsq_linear
+
+from .. import so3
+from ..solve import solve
+
+log = logging.getLogger(__name__)
+
+
+def box_lsq(alpha, C, d, a, lb, ub, max_iter=50, tol=1e-12):
+    """Exact minimiser of ``alpha |a + z|^2 + |C z - d|^2`` over ``lb <= z <= ub`` (C: k x n, k << n).
+
+    Solved through its dual in the k residual multipliers y (concave, piecewise quadratic):
+    ``z(y) = clip(-a - C^T y / (2 alpha), lb, ub)`` and ``grad = C z(y) - d - y / 2``, maximised by a
+    semismooth Newton method with backtracking (generalised Hessian ``-(C_F C_F^T / (2 alpha) + I / 2)``
+    on the free set F). Strong duality holds (strictly convex primal), so z(y*) is the primal minimiser.
+    Falls back to BVLS (scipy.optimize.lsq_linear) if the dual iteration does not converge."""
+    k = C.shape[0]
+    y = np.zeros(k)
+
+    def zf(y):
+        return np.clip(-a - C.T @ y / (2 * alpha), lb, ub)
+
+    def dual(y, z):
+        return alpha * np.sum((a + z) ** 2) + y @ (C @ z - d) - y @ y / 4
+
+    scale = 1.0 + np.abs(d).max() + np.abs(C).max()
+    z = zf(y)
+    gval = dual(y, z)
+    for _ in range(max_iter):
+        grad = C @ z - d - y / 2
+        if np.abs(grad).max() < tol * scale:
+            return z
+        u = -a - C.T @ y / (2 * alpha)
+        F = (u > lb) & (u < ub)
+        CF = C[:, F]
+        H = CF @ CF.T / (2 * alpha) + 0.5 * np.eye(k)
+        step = np.linalg.solve(H, grad)
+        t = 1.0
+        for _ls in range(40):
+            yn = y + t * step
+            zn = zf(yn)
+            gn = dual(yn, zn)
+            if gn >= gval + 1e-4 * t * (grad @ step) or _ls == 39:
+                break
+            t *= 0.5
+        y, z, gval = yn, zn, gn
+    A = np.vstack([np.sqrt(alpha) * np.eye(len(a)), C])
+    b = np.r_[-np.sqrt(alpha) * a, d]
+    return np.clip(lsq_linear(A, b, bounds=(lb, ub), method="bvls", tol=1e-13).x, lb, ub)
+
+
+@dataclass
+class Weights:
+    """Cost weights, chosen once (documented in docs/design.md), not fitted to the validation data."""
+
+    activation: float = 1.0              # per activation^2
+    fsu_load_per_n2: float = 1.0e-6      # per N^2 of level force (moments / length_scale_m)
+    tracking_per_deg2: float = 1.0e3     # per deg^2 of thorax rotation error
+    length_scale_m: float = 0.05
+
+    def __post_init__(self):
+        for k, v in vars(self).items():
+            if not (np.isfinite(v) and v >= 0):
+                raise ValueError(f"cost weight {k} must be finite and >= 0, got {v}")
+        if not self.length_scale_m > 0:
+            raise ValueError(f"cost weight length_scale_m must be > 0 m, got {self.length_scale_m}")
+
+
+@dataclass
+class PostureSolution:
+    x: np.ndarray                  # (nb, 3)
+    R: np.ndarray                  # (nb, 3, 3)
+    a: np.ndarray                  # (nm,)
+    converged: bool                # equilibrium, SQP terminated, tracking error <= max_tracking_deg
+    equilibrium: bool
+    tracking_error_deg: float
+    residual_force_n: float
+    residual_moment_nm: float
+    cost: float
+    iterations: int
+    message: str = ""
+
+
+def rot_target(theta_deg):
+    """Thorax rotation vector [rad] of a sagittal target (flexion +, about +y)."""
+    return np.array([0.0, np.radians(theta_deg), 0.0])
+
+
+class _ThoraxHeld:
+    """The model with the thorax rotation held (its three rotational equations replaced by dtheta = 0)."""
+
+    def __init__(self, model):
+        self.m, self.nb = model, model.nb
+
+    def reference_state(self, batch=1):
+        return self.m.reference_state(batch)
+
+    def evaluate(self, x, R, loads=None, fmask=1.0, cmask=1.0, jacobian=True, params=None):
+        Q, J = self.m.evaluate(x, R, loads, jacobian=jacobian, params=params)
+        t = self.m.thorax
+        Q[:, t, 3:] = 0.0
+        if J is not None:
+            J[:, t, 3:] = 0.0
+            J[:, :, :, t, 3:] = 0.0
+            J[:, t, 3:, t, 3:] = -np.eye(3)
+        return Q, J
+
+
+class RedundancySolver:
+    """Batched feasible SQP for the static muscle redundancy problem (module docstring)."""
+
+    def __init__(self, model, weights: Weights | None = None, tol=1e-8, max_iter=40, trust0=0.25,
+                 step_tol=2e-4, max_tracking_deg=1.0):
+        if not max_tracking_deg > 0:
+            raise ValueError(f"max_tracking_deg must be > 0 deg, got {max_tracking_deg}")
+        if not (0 < tol <= 1e-6):
+            raise ValueError(f"equilibrium tolerance must be in (0, 1e-6] N and N*m, got {tol}")
+        self.m = model
+        self.w = weights or Weights()
+        self.tol, self.max_iter, self.trust0 = tol, int(max_iter), trust0
+        self.step_tol, self.max_tracking_deg = step_tol, max_tracking_deg
+        t = model.thorax
+        self.rot = np.arange(6 * t + 3, 6 * t + 6)
+        nb = model.nb
+        ls = self.w.length_scale_m
+        self.fscale = np.r_[np.ones(3), np.full(3, 1.0 / ls)]
+        self.qscale = np.tile(self.fscale, nb)                       # residual rows: N, N*m / 0.05 m
+        self.qvar = np.tile(np.r_[np.full(3, 1e-3), np.full(3, 1e-2)], nb)   # QP pose variables: mm, 10 mrad
+        self.dq_max = np.full(6 * nb, 2.0)                           # |dq| <= 2 mm, 20 mrad at D = trust0
+        self.mu0 = 1.0                                              # L1 merit weight per N of residual
+        self.mu_max = 1.0e6          # the merit weight is raised x10 (up to this) when a step fails the search
+        self.accept_suboptimal = False
+        self.line_search = (1.0, 0.5, 0.25, 0.1, 0.03, 0.01)
+        self.free = np.setdiff1d(np.arange(6 * nb), self.rot)
+        self.w_moment = 1.0e2          # phase 0: per (N*m / 0.05 m)^2 of thorax moment
+        self.phase0_iter = 40
+        self.rel_cost_tol = 1e-6     # stationarity: predicted cost decrease of the QP step, relative
+        self.polish_from = 1e-3      # N, N*m: residual below which the final Newton polish takes over
+        self.max_step_m, self.max_step_rad = 1e-3, 0.02   # per-iteration step limits of the poses
+
+    # ------------------------------------------------------------------ pieces
+    def _params(self, params, a, idx):
+        p = {k: (v[idx] if isinstance(v, np.ndarray) and v.ndim and v.shape[0] == self._B else v)
+             for k, v in params.items()}
+        p["activation"] = a
+        return p
+
+    def tracking(self, R, targets_deg):
+        """Thorax tracking error [deg] (B, 3) and its derivative by the thorax's spatial rotation (B, 3, 3)."""
+        phi = so3.log(R[:, self.m.thorax])
+        e = np.degrees(phi - np.stack([rot_target(t) for t in np.atleast_1d(targets_deg)]))
+        return e, np.degrees(so3.left_jacobian_inverse(phi))
+
+    def cost(self, FL, e, a):
+        Fs = FL * self.fscale
+        w = self.w
+        return (w.activation * (a ** 2).sum(-1) + w.fsu_load_per_n2 * (Fs ** 2).sum((-1, -2))
+                + w.tracking_per_deg2 * (e ** 2).sum(-1))
+
+    def _state(self, x, R, a, params, idx, targets):
+        """Everything one SQP iteration needs at (x, R, a), for the scenarios ``idx`` (one evaluation)."""
+        m = self.m
+        p = self._params(params, a, idx)
+        Q, J, FL, DL = m.evaluate(x, R, params=p, levels=True)
+        e, Te = self.tracking(R, targets)
+        L, Gd = m.paths.lengths(x, R)
+        act1 = m._props(p).tension(L, 1.0)[2]
+        n = 6 * m.nb
+        Bm = -np.swapaxes(Gd.reshape(len(idx), m.ms.n, n) * act1[..., None], 1, 2)   # dQ/da (B, n, nm)
+        return dict(Q=Q.reshape(-1, n), J=J.reshape(-1, n, n), FL=FL, DL=DL, e=e, Te=Te, Bm=Bm,
+                    c=self.cost(FL, e, a), a=np.array(a, float))
+
+    def _qres(self, st, i, held):
+        q = st["Q"][i] * self.qscale
+        if held:
+            q = q.copy()
+            q[..., self.rot] = 0.0
+        return q
+
+    def _merit(self, st, mu, held=False):
+        if held:     # phase 0: tracking error is 0 by construction; thorax moment penalised
+            Fs = st["FL"] * self.fscale
+            M = (st["Q"] * self.qscale)[..., self.rot]
+            c = (self.w.activation * (st["a"] ** 2).sum(-1) + self.w.fsu_load_per_n2 * (Fs ** 2).sum((-1, -2))
+                 + self.w_moment * (M ** 2).sum(-1))
+        else:
+            c = st["c"]
+        return c + mu * np.abs(self._qres(st, slice(None), held)).sum(-1)
+
+    def _qp(self, st, i, a, D, warm, mu, held=False):
+        """The trust-region QP of scenario i in (dq, da): Gauss-Newton model of the cost subject to the
+        linearised equilibrium ``J dq + B da = -Q`` (equality) and the activation box
+        ``max(-a, -D) <= da <= min(1 - a, D)``. The equality is eliminated exactly (J, the stiffness of the
+        loaded spine, is invertible): ``dq = dq0 + S da`` with ``J [dq0 S] = -[Q B]``; what remains is a
+        bound-constrained linear least-squares problem in ``da``, solved exactly by BVLS (an active-set
+        method; scipy.optimize.lsq_linear)."""
+        m, w = self.m, self.w
+        n, nm = 6 * m.nb, m.ms.n
+        J, Q, Bm = st["J"][i], st["Q"][i], st["Bm"][i]
+        r = self.rot
+        if held:        # phase 0: thorax rotation held, its moment balance a heavily weighted LSQ row
+            f = self.free
+            sol = np.linalg.solve(J[np.ix_(f, f)], np.c_[Q[f], Bm[f]])
+            dq0, S = np.zeros(n), np.zeros((n, nm))
+            dq0[f], S[f] = -sol[:, 0], -sol[:, 1:]
+            M0 = (Q[r] + J[r] @ dq0) * self.qscale[r]
+            SM = (Bm[r] + J[r] @ S) * self.qscale[r][:, None]
+        else:
+            sol = np.linalg.solve(J, np.c_[Q, Bm])
+            dq0, S = -sol[:, 0], -sol[:, 1:]
+        DLs = (st["DL"][i] * self.fscale[None, :, None, None]).reshape(-1, n)
+        Fs = (st["FL"][i] * self.fscale).reshape(-1)
+        Te = st["Te"][i]
+        e = st["e"][i]
+        sa, sf, stt = np.sqrt(w.activation), np.sqrt(w.fsu_load_per_n2), np.sqrt(w.tracking_per_deg2)
+        if held:
+            sm = np.sqrt(self.w_moment)
+            A = np.vstack([sa * np.eye(nm), sf * DLs @ S, sm * SM])
+            b = -np.r_[sa * a, sf * (Fs + DLs @ dq0), sm * M0]
+        else:
+            A = np.vstack([sa * np.eye(nm), sf * DLs @ S, stt * Te @ S[r]])
+            b = -np.r_[sa * a, sf * (Fs + DLs @ dq0), stt * (e + Te @ dq0[r])]
+        lb, ub = np.maximum(-a, -D), np.minimum(1.0 - a, D)
+        da = box_lsq(w.activation, A[nm:], b[nm:], a, lb, ub)
+        r1 = A @ da - b
+        self._pred_cost = float(b @ b - r1 @ r1)
+        pred = self._pred_cost + mu * np.abs(self._qres(st, i, held)).sum()
+        dq = dq0 + S @ da
+        return dq, da, pred, None
+
+    # ------------------------------------------------------------------ driver
+    def solve(self, target_flexion_deg, params, x0=None, R0=None, a0=None) -> PostureSolution:
+        """One posture (``params`` for a batch of one; see :meth:`solve_batch`)."""
+        p = {k: (v[None] if k in ("force_vec", "force_pt", "prop_stack") and np.ndim(v) == 2 else v)
+             for k, v in params.items()}
+        return self.solve_batch([target_flexion_deg], p, None if x0 is None else np.asarray(x0)[None],
+                                None if R0 is None else np.asarray(R0)[None],
+                                None if a0 is None else np.asarray(a0)[None])[0]
+
+    def solve_batch(self, targets_deg, params, x0=None, R0=None, a0=None) -> list:
+        """Solve B postures together. ``params``: per-scenario arrays (leading B) ``force_vec``,
+        ``force_pt`` (from ``model.load_arrays``) and optionally ``prop_stack`` (``model.props_stack``), or
+        shared ``props`` / ``forces``. Start: ``x0, R0, a0`` (e.g. the baseline solution) or the reference
+        pose with the target spread over the levels and zero activations."""
+        m = self.m
+        targets = np.asarray(targets_deg, float).reshape(-1)
+        B = self._B = len(targets)
+        nm, n = m.ms.n, 6 * m.nb
+        if x0 is None:
+            xs = [self._initial_pose(t) for t in targets]
+            x0 = np.stack([s[0] for s in xs])
+            R0 = np.stack([s[1] for s in xs])
+        x, R = np.array(x0, float), np.array(R0, float)
+        a = np.zeros((B, nm)) if a0 is None else np.clip(np.array(a0, float), 0.0, 1.0)
+        allidx = np.arange(B)
+        if x0 is None or a0 is None:   # start: equilibrium of the free vertebrae with the thorax held
+            res = solve(_ThoraxHeld(m), np.zeros((B, m.nb, 6)), x0=x, R0=R, params=self._params(params, a, allidx),
+                        max_iter=40, tol_force=1e-6, tol_moment=1e-6, retry_load_steps=())
+            x, R = res.x, res.R
+        st = self._state(x, R, a, params, allidx, targets)
+        D = np.full(B, self.trust0)
+        mu = np.full(B, self.mu0)
+        done = np.zeros(B, bool)
+        optimal = np.zeros(B, bool)
+        iters = np.zeros(B, int)
+        warm = [None] * B
+        msg = [""] * B
+        hist = [[] for _ in range(B)]
+        def iterate(held, act):
+            dq = np.zeros((act.size, m.nb, 6))
+            da = np.zeros((act.size, nm))
+            pred = np.zeros(act.size)
+            predc = np.zeros(act.size)
+            skip = np.zeros(act.size, bool)
+            for k, i in enumerate(act):
+                out = self._qp(st, i, a[i], D[i], warm[i], mu[i], held)
+                if out is None:          # QP failed: shrink and retry next iteration
+                    D[i] *= 0.25
+                    continue
+                dqk, da[k], pred[k], warm[i] = out
+                predc[k] = self._pred_cost
+                dq[k] = dqk.reshape(m.nb, 6)
+                if not held and abs(predc[k]) < self.rel_cost_tol * (1.0 + st["c"][i]) \
+                        and np.abs(st["Q"][i]).max() < self.polish_from:
+                    done[i] = optimal[i] = True      # stationary: the polish below restores equilibrium
+                    skip[k] = True
+            cap = np.maximum(np.abs(dq[..., :3]).max((-1, -2)) / self.max_step_m,
+                             np.abs(dq[..., 3:]).max((-1, -2)) / self.max_step_rad)
+            fac = 1.0 / np.maximum(1.0, cap)
+            dq *= fac[:, None, None]
+            da *= fac[:, None]
+            pred *= fac
+            ts = self.line_search
+            nt = len(ts)
+            tt = np.repeat(np.asarray(ts)[None], act.size, 0).reshape(-1)
+            rep = np.repeat(np.arange(act.size), nt)
+            an = a[act][rep] + tt[:, None] * da[rep]
+            dqt = tt[:, None, None] * dq[rep]
+            xn = x[act][rep] + dqt[..., :3]
+            Rn = so3.exp(dqt[..., 3:]) @ R[act][rep]
+            sn = self._state(xn, Rn, an, params, act[rep], targets[act][rep])
+            iters[act] += 1
+            m_old = self._merit({k: v[act] for k, v in st.items()}, mu[act], held)
+            m_new = self._merit(sn, mu[act][rep], held).reshape(act.size, nt)
+            for k, i in enumerate(act):
+                if skip[k]:
+                    continue
+                ok = m_new[k] <= m_old[k] - 1e-4 * np.asarray(ts) * max(pred[k], 0.0)
+                if ok.any():
+                    j = int(np.argmax(ok))
+                elif m_new[k].min() < m_old[k]:
+                    j = int(np.argmin(m_new[k]))
+                else:
+                    j = -1
+                resid = np.abs(st["Q"][i]).max()
+                if j >= 0:
+                    r = k * nt + j
+                    x[i], R[i], a[i] = xn[r], Rn[r], an[r]
+                    for key in st:
+                        st[key][i] = sn[key][r]
+                    stepa = ts[j] * np.abs(da[k]).max()
+                    stepq = ts[j] * np.abs(dq[k]).max()
+                    resid = np.abs(st["Q"][i]).max()
+                    hist[i].append(float(st["c"][i]))
+                    h = hist[i]
+                    stalled = False
+                    if stalled:
+                        done[i] = optimal[i] = True     # cost stationary to rel_cost_tol over 5 accepted steps
+                    if held:
+                        mom = np.abs(st["Q"][i][self.rot]).max()
+                        if stepa < 10 * self.step_tol and mom < 1e-2:
+                            stop[i] = True
+                    elif resid < self.tol and ((stepa < self.step_tol and stepq < 1e-6)
+                                               or pred[k] < 1e-9 * (1.0 + st["c"][i])):
+                        done[i] = optimal[i] = True
+                elif np.abs(self._qres(st, i, held)).max() >= self.tol and mu[i] < self.mu_max:
+                    # away from equilibrium the SQP step (which satisfies the linearised equilibrium) is a
+                    # descent direction of the L1 merit only if mu exceeds the equilibrium multipliers;
+                    # raise it and retry from the same point (a tenfold step per failed search)
+                    mu[i] *= 10.0
+                elif held:
+                    stop[i] = True
+                else:
+                    done[i] = True
+                    # at equilibrium: stationary if the QP's predicted cost decrease is below the same
+                    # relative tolerance as the regular stop (pred also holds mu |Q|_1, inflated by a raised mu)
+                    if resid < self.tol and (pred[k] < 1e-8 * (1.0 + st["c"][i])
+                                             or abs(predc[k]) < self.rel_cost_tol * (1.0 + st["c"][i])):
+                        optimal[i] = True
+                    else:
+                        msg[i] = "line search failed (no decrease of the merit function)"
+
+        stop = np.zeros(B, bool)
+        for it in range(self.phase0_iter if a0 is None else 0):
+            act = np.flatnonzero(~stop)
+            if act.size == 0:
+                break
+            iterate(True, act)
+        for h in hist:
+            h.clear()
+        for it in range(self.max_iter):
+            act = np.flatnonzero(~done)
+            if act.size == 0:
+                break
+            iterate(False, act)
+        # polish: plain Newton on the poses with the activations fixed (equilibrium to tol)
+        for _ in range(40):
+            bad = np.flatnonzero(np.abs(st["Q"]).max(-1) >= self.tol)
+            if bad.size == 0:
+                break
+            d = -np.linalg.solve(st["J"][bad], st["Q"][bad][..., None])[..., 0].reshape(-1, m.nb, 6)
+            small = np.abs(d).max((-1, -2)) < 1e-3
+            bad, d = bad[small], d[small]
+            if bad.size == 0:
+                break
+            x[bad] += d[..., :3]
+            R[bad] = so3.exp(d[..., 3:]) @ R[bad]
+            sb = self._state(x[bad], R[bad], a[bad], params, bad, targets[bad])
+            for key in st:
+                st[key][bad] = sb[key]
+        out = []
+        Q = st["Q"].reshape(B, m.nb, 6)
+        rf = np.abs(Q[..., :3]).max((-1, -2))
+        rm = np.abs(Q[..., 3:]).max((-1, -2))
+        terr = np.linalg.norm(st["e"], axis=-1)
+        for i in range(B):
+            eq = bool(rf[i] < 1e-6 and rm[i] < 1e-6)
+            if not optimal[i] and not msg[i]:
+                msg[i] = f"SQP stopped after {self.max_iter} iterations without meeting its tolerances"
+            if not eq:
+                msg[i] = msg[i] or "no equilibrium"
+            elif terr[i] > self.max_tracking_deg:
+                msg[i] = (f"thorax misses its target by {terr[i]:.2f} deg (> {self.max_tracking_deg} deg): "
+                          "the muscles cannot hold this posture")
+            conv = bool(eq and terr[i] <= self.max_tracking_deg and (optimal[i] or self.accept_suboptimal))
+            if not conv:
+                log.warning("posture %d (target %.1f deg) not converged: %s (residual %.1e N, %.1e N*m, "
+                            "tracking error %.2f deg)", i, targets[i], msg[i], rf[i], rm[i], terr[i])
+            out.append(PostureSolution(x[i].copy(), R[i].copy(), a[i].copy(), conv, eq, float(terr[i]),
+                                       float(rf[i]), float(rm[i]), float(st["c"][i]), int(iters[i]), msg[i]))
+        return out
+
+    def _initial_pose(self, theta_deg):
+        """Reference pose with the thorax rotation spread evenly over the five levels (about each level's
+        disc centre)."""
+        m = self.m
+        x, R = m.reference_state()
+        x, R = x[0], R[0]
+        levels = ["L5-S1", "L4-L5", "L3-L4", "L2-L3", "L1-L2"]
+        order = ["L5", "L4", "L3", "L2", "L1"]
+        step = so3.exp(np.array([0, np.radians(theta_deg) / 5, 0]))
+        for k, lv in enumerate(levels):
+            piv = np.asarray(m.geo.levels[lv].disc_centre, float)
+            lower = m.geo.levels[lv].lower
+            if lower != "S1":
+                bi = m.body_index[lower]
+                piv = x[bi] + R[bi] @ (piv - m.c[bi])
+            for v in order[k:]:
+                b = m.body_index[v]
+                x[b] = piv + step @ (x[b] - piv)
+                R[b] = step @ R[b]
+        return x, R

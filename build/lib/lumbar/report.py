@@ -1,0 +1,1005 @@
+"""Paper-style report of the workflow's results: one self-contained HTML file and a PDF.
+
+Every number in the report is read from a result or data file; nothing is typed in. Methods are generated
+from the configuration. A section, figure or table whose file is not among the given inputs (for example the
+muscle study or the discrepancy workflow in a small configuration) is replaced by a one-line
+"not built in this configuration" note instead of failing. Results computed against surrogate reference data
+say "surrogate" in their caption and table title.
+
+Usage (the workflow's rule ``paper_report`` calls it with the rule's inputs)::
+
+    from lumbar.report import build_report
+    build_report(inputs, config, "results/report/paper.html", "results/report/paper.pdf",
+                 captions_dir="workflow/report")
+
+The HTML embeds every figure as base64 (``<img data-source="../figures/x.png" src="data:image/png;base64,...">``;
+``data-source`` is the figure file relative to the HTML file) and every table carries ``data-source`` with the
+CSV it was drawn from. The PDF is drawn with reportlab (pure Python) with ``invariant=1``: no time stamp, a fixed
+document id, so the same inputs give the same bytes.
+"""
+from __future__ import annotations
+
+import base64
+import hashlib
+import html
+import io
+import json
+import logging
+import math
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+import pandas as pd
+
+from lumbar import __version__
+from lumbar.io import atomic_writer, write_text_atomic
+
+log = logging.getLogger(__name__)
+
+NOT_BUILT = "not built in this configuration"
+TITLE = "Lumbar spine multibody model: stepwise-reduction ligament characteristics, L2-S1 intradiscal pressure, " \
+        "paraspinal muscles and model-experiment discrepancies"
+PAPERS = (
+    "Lumbar spinal ligament characteristics extracted from stepwise reduction experiments allow for preciser "
+    "modeling than literature data (paper 1)",
+    "Biomechanical properties of paraspinal muscles influence spinal loading - a musculoskeletal simulation study "
+    "(paper 2)",
+)
+SET_LABELS = {"calibrated": "calibrated (this model)", "chazal1985": "Chazal et al. (1985)",
+              "shirazi_adl1986": "Shirazi-Adl et al. (1986)", "white_panjabi1990": "White and Panjabi (1990)",
+              "nolte1990": "Nolte et al. (1990)", "rupp2015": "Rupp et al. (2015)"}
+DIRECTION_ABBR = {"flexion": "F", "extension": "E", "lateral_bending": "L", "axial_rotation": "A"}
+CHECK, CROSS, NC = "\u2713", "\u2717", "n.c."
+MAX_ROWS = 60          # generic CSV tables: at most this many rows are drawn, the rest is referenced
+
+T = "results/tables/"
+F = "results/figures/"
+MM = "results/muscle_model/"
+D = "results/discrepancy/"
+DISCOVERY_CASES = (("default", "stepwise reduction (default case)"), ("in_vivo", "in-vivo intradiscal pressure"),
+                   ("va_artefact", "vertebral-arch removal artefact"))
+
+
+# ----------------------------------------------------------------------------------------------- document model
+@dataclass
+class Heading:
+    text: str
+    level: int = 1
+
+
+@dataclass
+class Para:
+    text: str
+    style: str = "p"          # p | note | abstract | small
+
+
+@dataclass
+class Bullets:
+    items: list
+
+
+@dataclass
+class Figure:
+    path: str
+    caption: str
+    label: str
+
+
+@dataclass
+class Table:
+    title: str
+    header: list
+    rows: list
+    source: str | None = None
+    note: str = ""
+    group_header: list | None = None     # [(text, colspan), ...] drawn above the header
+    marks: bool = False                   # cells are check / cross marks
+
+
+@dataclass
+class Doc:
+    blocks: list = field(default_factory=list)
+
+    def add(self, *blocks):
+        self.blocks.extend(blocks)
+
+
+# ----------------------------------------------------------------------------------------------- small helpers
+def _norm(p) -> str:
+    return Path(os.path.normpath(str(p))).as_posix()
+
+
+def fmt(v, digits: int = 4) -> str:
+    """A value as a short string: floats to ``digits`` significant digits, NaN/None as empty."""
+    if v is None:
+        return ""
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if isinstance(v, (int,)) and not isinstance(v, bool):
+        return str(v)
+    if isinstance(v, float):
+        if math.isnan(v):
+            return ""
+        if v == int(v) and abs(v) < 1e6:
+            return str(int(v))
+        return f"{v:.{digits}g}"
+    try:
+        import numpy as np
+        if isinstance(v, np.bool_):
+            return "yes" if bool(v) else "no"
+        if isinstance(v, np.integer):
+            return str(int(v))
+        if isinstance(v, np.floating):
+            return fmt(float(v), digits)
+    except ImportError:  # pragma: no cover
+        pass
+    if isinstance(v, Mapping):
+        return ", ".join(f"{k}={fmt(x, digits)}" for k, x in v.items())
+    if isinstance(v, (list, tuple)):
+        items = [fmt(x, digits) for x in v[:8]]
+        return "[" + ", ".join(items) + (f", ... ({len(v)} items)" if len(v) > 8 else "") + "]"
+    return str(v)
+
+
+def _flatten(d, prefix="") -> list[tuple[str, Any]]:
+    out = []
+    for k in d:
+        v = d[k]
+        key = f"{prefix}.{k}" if prefix else str(k)
+        if isinstance(v, Mapping) and v:
+            out += _flatten(v, key)
+        else:
+            out.append((key, v))
+    return out
+
+
+def _read_csv(path) -> pd.DataFrame:
+    return pd.read_csv(path)
+
+
+def _col(df, *patterns, exclude=()):
+    """First column whose name contains every pattern and none of ``exclude``."""
+    for c in df.columns:
+        if all(p in c for p in patterns) and not any(e in c for e in exclude):
+            return c
+    return None
+
+
+def _mentions_surrogate(path) -> bool:
+    try:
+        return "surrogate" in Path(path).read_text(errors="ignore").lower()
+    except OSError:
+        return False
+
+
+def _render_caption(text: str, config: Mapping) -> str:
+    """An .rst caption of workflow/report as plain text: config placeholders filled, RST markup removed."""
+    def sub(m):
+        v = config
+        for k in re.findall(r'\["([^"]+)"\]', m.group(1)):
+            v = v.get(k, "") if isinstance(v, Mapping) else ""
+        return fmt(v)
+    text = re.sub(r"\{\{\s*snakemake\.config((?:\[\"[^\"]+\"\])+)\s*\}\}", sub, text)
+    text = text.replace("``", "").replace("**", "")
+    return " ".join(text.split())
+
+
+# ----------------------------------------------------------------------------------------------- the builder
+class _Builder:
+    def __init__(self, inputs, config, html_path, captions_dir=None, published=None):
+        self.config = config
+        self.html_dir = Path(html_path).resolve().parent
+        self.inputs = {}
+        for p in inputs:
+            self.inputs[_norm(p)] = Path(p)
+        self.captions_dir = Path(captions_dir) if captions_dir else None
+        self.published = self._published(published)
+        self.shown: set[str] = set()
+        self.n_fig = 0
+        self.n_tab = 0
+        self.doc = Doc()
+        sr = config.get("stepwise_reduction", {}) or {}
+        l2 = config.get("l2s1", {}) or {}
+        self.sr_surrogate = not sr.get("measured_table") or self._file_surrogate(T + "table4_outlier_counts.csv")
+        self.idp_surrogate = not l2.get("measured_table") or self._file_surrogate(T + "table5_outlier_counts.csv")
+
+    # -- inputs
+    def has(self, rel) -> bool:
+        p = self.inputs.get(_norm(rel))
+        return p is not None and p.exists()
+
+    def path(self, rel) -> Path:
+        return self.inputs[_norm(rel)]
+
+    def _file_surrogate(self, rel) -> bool:
+        return self.has(rel) and _mentions_surrogate(self.path(rel))
+
+    def _published(self, published):
+        if not published or not Path(published).is_file():
+            return {}
+        try:
+            df = pd.read_csv(published)
+            return {r["quantity"]: r for _, r in df.iterrows()}
+        except Exception as e:  # noqa: BLE001 - an unreadable optional file only loses the paper's column
+            log.warning("published results %s unreadable: %s", published, e)
+            return {}
+
+    def rel_to_html(self, rel) -> str:
+        return Path(os.path.relpath(self.path(rel).resolve(), self.html_dir)).as_posix()
+
+    def caption(self, rel, default: str, surrogate: bool = False) -> str:
+        text = default
+        if self.captions_dir is not None:
+            rst = self.captions_dir / (Path(rel).stem + ".rst")
+            if rst.is_file():
+                text = _render_caption(rst.read_text(), self.config)
+        if surrogate:
+            text = "SURROGATE reference data (virtual specimens, not measured). " + text
+        return text
+
+    # -- blocks
+    def missing(self, what: str):
+        self.doc.add(Para(f"{what}: {NOT_BUILT}.", "note"))
+
+    def figure(self, rel, default_caption, surrogate=False, label=None):
+        """A figure; ``label`` "Fig. N" for the analog of the paper's Fig. N, else numbered "Fig. S<n>"."""
+        if not self.has(rel) or self.path(rel).stat().st_size == 0:
+            self.missing(f"{label or 'Figure'} ({Path(rel).name})")
+            return False
+        if label is None:
+            self.n_fig += 1
+            label = f"Fig. S{self.n_fig}"
+        self.shown.add(_norm(rel))
+        self.doc.add(Figure(rel, self.caption(rel, default_caption, surrogate), label))
+        return True
+
+    def table_block(self, title, header, rows, source=None, note="", surrogate=False, label=None, **kw):
+        """A table; ``label`` "Table N" for the analog of the paper's Table N, else numbered "Table S<n>"."""
+        if label is None:
+            self.n_tab += 1
+            label = f"Table S{self.n_tab}"
+        if surrogate and "surrogate" not in title.lower():
+            title += " [SURROGATE reference data]"
+        if source:
+            self.shown.add(_norm(source))
+        self.doc.add(Table(f"{label}. {title}", [str(h) for h in header], rows, source, note, **kw))
+
+    def csv_table(self, rel, title, surrogate=None, columns=None, max_rows=MAX_ROWS, label=None):
+        if not self.has(rel):
+            self.missing(f"{label or 'Table'}, {title} ({Path(rel).name})")
+            return None
+        try:
+            df = _read_csv(self.path(rel))
+        except (ValueError, pd.errors.ParserError) as e:   # shown as a note; the rest of the report is built
+            self.doc.add(Para(f"{label or 'Table'}, {title} ({rel}): not readable as CSV ({e}).", "note"))
+            return None
+        if surrogate is None:
+            surrogate = _mentions_surrogate(self.path(rel))
+        shown = df[columns] if columns else df
+        note = self.caption(rel, "", surrogate=False)
+        if shown.shape[1] > 12 and len(shown) <= 8:      # wide and short: one row per column
+            header = ["column"] + [f"row {i + 1}" for i in range(len(shown))]
+            rows = [[c] + [fmt(v) for v in shown[c]] for c in shown.columns]
+            self.table_block(title, header, rows, source=rel, note=note, surrogate=surrogate, label=label)
+            return df
+        if len(shown) > max_rows:
+            note = (note + " " if note else "") + f"First {max_rows} of {len(shown)} rows; full table: {rel}."
+            shown = shown.head(max_rows)
+        rows = [[fmt(v) for v in r] for r in shown.itertuples(index=False)]
+        self.table_block(title, list(shown.columns), rows, source=rel, note=note, surrogate=surrogate, label=label)
+        return df
+
+    # ------------------------------------------------------------------------------------------- sections
+    def build(self) -> Doc:
+        self.doc.add(Heading(TITLE, 0))
+        self.doc.add(Para("Workflow report of the lumbar project, reproducing: " + "; ".join(PAPERS) + ". "
+                          f"Generated by lumbar {__version__} from the result files of this configuration "
+                          f"(geometry '{fmt(self._cfg('geometry', 'kind'))}', seed {fmt(self._cfg('seed'))}). "
+                          "Every number below is read from a result file; figures are the workflow's outputs.",
+                          "small"))
+        self.summary()
+        self.methods()
+        self.model_section()
+        self.calibration_section()
+        self.forward_section()
+        self.idp_section()
+        self.muscle_section()
+        self.discrepancy_section()
+        self.other_figures()
+        self.provenance_section()
+        self.config_appendix()
+        return self.doc
+
+    def _cfg(self, *keys, default=None):
+        v = self.config
+        for k in keys:
+            if not isinstance(v, Mapping) or k not in v:
+                return default
+            v = v[k]
+        return v
+
+    # -- summary
+    def _counts_sentence(self, rel_vs, rel_counts, what, surrogate):
+        rel = rel_vs if self.has(rel_vs) else rel_counts if self.has(rel_counts) else None
+        if rel is None:
+            return f"{what}: {NOT_BUILT}."
+        df = _read_csv(self.path(rel))
+        ours = _col(df, "outlier", exclude=("paper", "not_conv", "difference"))
+        scen = _col(df, "scenario", exclude=("paper",))
+        paper = _col(df, "paper", "outlier")
+        paper_scen = _col(df, "paper", "scenario")
+        parts = []
+        for _, r in df.iterrows():
+            s = f"{SET_LABELS.get(r['set'], r['set'])} {fmt(r[ours])} of {fmt(r[scen])}" if scen else \
+                f"{SET_LABELS.get(r['set'], r['set'])} {fmt(r[ours])}"
+            if paper and fmt(r[paper]) != "":
+                ps = f" of {fmt(r[paper_scen])}" if paper_scen and fmt(r[paper_scen]) else ""
+                s += f" (paper: {fmt(r[paper])}{ps})"
+            parts.append(s)
+        ref = "SURROGATE reference (virtual specimens)" if surrogate else "the measured reference table"
+        paper_note = " The paper's counts are against the measured experiment, ours against the " + \
+            ("surrogate, so they are not a reproduction of the paper's numbers." if surrogate else "given table.") \
+            if paper and df[paper].notna().any() else \
+            " The paper's counts are not available in this run (paths.published_model_results not found)."
+        return f"{what}, outliers against {ref}: " + "; ".join(parts) + "." + paper_note
+
+    def summary(self):
+        self.doc.add(Heading("Summary", 1))
+        paras = [
+            self._counts_sentence(T + "table4_vs_paper.csv", T + "table4_outlier_counts.csv",
+                                  "Stepwise reduction, forward simulation (Table 4 analog)", self.sr_surrogate),
+            self._counts_sentence(T + "table5_vs_paper.csv", T + "table5_outlier_counts.csv",
+                                  "L2-S1 intradiscal pressure (Table 5 analog)", self.idp_surrogate),
+            self._calibration_sentence(),
+            self._muscle_sentence(),
+            self._discrepancy_sentence(),
+        ]
+        for p in paras:
+            self.doc.add(Para(p, "abstract"))
+
+    def _calibration_sentence(self):
+        rel = "results/calibration/calibration_summary.csv"
+        if not self.has(rel):
+            return f"Calibration residuals: {NOT_BUILT}."
+        df = _read_csv(self.path(rel))
+        res = _col(df, "residual", exclude=("unit",))
+        unit = _col(df, "residual_unit") or _col(df, "unit")
+        parts = []
+        for u, g in df.groupby(unit, sort=False) if unit else [("", df)]:
+            names = ", ".join(str(x) for x in g.get("structure", g.index))
+            parts.append(f"{fmt(g[res].min())} to {fmt(g[res].max())} {u} ({names})")
+        nc = int(df["n_not_converged"].sum()) if "n_not_converged" in df else 0
+        kind = " on SURROGATE data" if _mentions_surrogate(self.path(rel)) else ""
+        return (f"Calibration{kind} in {df['step'].nunique() if 'step' in df else len(df)} steps, RMS residuals: "
+                + "; ".join(parts) + f"; {nc} non-converged scenario(s) during the fits.")
+
+    def _muscle_sentence(self):
+        rel = MM + "in_vivo_metrics.json"
+        if not self.has(rel):
+            return f"Muscle model, in-vivo validation: {NOT_BUILT}."
+        m = json.loads(self.path(rel).read_text())
+        n_tot = m.get("n_total", m.get("n"))
+        s = (f"Muscle model (paper 2): predicted vs in-vivo L4-L5 intradiscal pressure over {fmt(m.get('n'))} "
+             f"converged of {fmt(n_tot)} activities, ")
+        if m.get("r2") is None or m.get("rmse_mpa") is None:
+            s += "R2 and RMSE not computed (too few converged activities)"
+        else:
+            s += f"R2 = {fmt(m.get('r2'), 3)}, RMSE = {fmt(m.get('rmse_mpa'), 3)} MPa"
+        pub = self.published.get("idp_validation_r2")
+        if pub is not None:
+            s += f" (paper: R2 = {fmt(pub['value'])}, {pub['source']})"
+        if _mentions_surrogate(self.path(rel)):
+            s += " [SURROGATE data involved]"
+        return s + "."
+
+    def _discrepancy_sentence(self):
+        out = []
+        rel = D + "default/discovery.json"
+        if self.has(rel):
+            d = json.loads(self.path(rel).read_text())
+            sur = " (against SURROGATE reference data)" if self.sr_surrogate else ""
+            if d.get("named_effect"):
+                out.append(f"Discrepancy workflow{sur}: the missing effect that best explains the model-experiment "
+                           f"gap is '{fmt(d.get('named_effect'))}' (estimate {fmt(d.get('parameter_estimate'))}, "
+                           f"confidence {fmt(d.get('confidence'))}); gap {fmt(d.get('gap_before'))} before, "
+                           f"{fmt(d.get('gap_after'))} after adding it.")
+            else:
+                out.append(f"Discrepancy workflow{sur}: no missing effect is named (gap {fmt(d.get('gap_before'))}; "
+                           f"{fmt(d.get('decision')) or 'no candidate passed the naming rule'}).")
+        rel = D + "benchmark_summary.json"
+        if self.has(rel):
+            d = json.loads(self.path(rel).read_text())
+            scal = [(k, v) for k, v in _flatten(d) if isinstance(v, (int, float, bool))][:8]
+            out.append("Discrepancy benchmark on SURROGATE data with planted effects: "
+                       + ", ".join(f"{k} = {fmt(v)}" for k, v in scal) + ".")
+        return " ".join(out) if out else f"Discrepancy workflow: {NOT_BUILT}."
+
+    # -- methods
+    def methods(self):
+        c = self._cfg
+        self.doc.add(Heading("1 Methods (generated from the configuration)", 1))
+        g = c("geometry", default={}) or {}
+        geo = f"Geometry: '{fmt(g.get('kind'))}'" + (f" read from {g.get('path')}" if g.get("kind") ==
+                                                      "visible_human" else " (myo-sim meshes with project landmarks)")
+        self.doc.add(Para(
+            f"{geo}; motion segment {fmt(c('fsu', 'level'))}. Characteristic sets: "
+            f"{', '.join(SET_LABELS.get(s, s) for s in c('characteristics', 'sets', default=[]))} "
+            f"(tables in {fmt(c('characteristics', 'data_dir'))}). Pure moments "
+            f"{fmt(c('fsu', 'moments_nm'))} N*m in {fmt(c('fsu', 'directions'))}; facet contact stiffness "
+            f"{fmt(c('fsu', 'facet_stiffness_n_per_m'))} N/m; disc shear stiffness "
+            + (f"{fmt(c('fsu', 'disc_shear_stiffness_n_per_m'))} N/m." if c('fsu', 'disc_shear_stiffness_n_per_m')
+               else "the characteristic set's default.")))
+        self.doc.add(Para(
+            f"Solver: batched Newton with exact tangent stiffness, tolerances {fmt(c('solver', 'tol_force_n'))} N "
+            f"and {fmt(c('solver', 'tol_moment_nm'))} N*m, at most {fmt(c('solver', 'max_iter'))} iterations, "
+            f"{fmt(c('solver', 'load_steps'))} load step(s); scenarios without equilibrium are flagged and counted "
+            f"as outliers. Random seed {fmt(c('seed'))}."))
+        sr = c("stepwise_reduction", default={}) or {}
+        if sr:
+            ref = (f"the measured table {sr.get('measured_table')}" if sr.get("measured_table") else
+                   f"a SURROGATE of {fmt(sr.get('n_specimens'))} virtual specimens of the "
+                   f"'{fmt(sr.get('generator_set'))}'"
+                   f" set (noise SD {fmt(sr.get('noise_sd_deg'))} deg, seed {fmt(c('seed'))})")
+            self.doc.add(Para(
+                f"Stepwise reduction (paper 1, Sect. 2.1-2.2): calibration in reverse removal order and forward "
+                f"simulation at {fmt(sr.get('moments_nm'))} N*m, against {ref}; disc-only rows "
+                + (f"derived from the published Eq. 3 fit ({sr.get('disc_only_derived')}); "
+                   if sr.get("disc_only_derived") else "from the reference table; ") +
+                f"rows without a range use mean +- {fmt(sr.get('outlier_tolerance_deg'))} deg."))
+        l2 = c("l2s1", default={}) or {}
+        if l2:
+            ref = (f"the measured table {l2.get('measured_table')}" if l2.get("measured_table") else
+                   f"a SURROGATE of {fmt(l2.get('n_specimens'))} virtual specimens of the "
+                   f"'{fmt(l2.get('generator_set'))}'"
+                   f" set (noise SD {fmt(l2.get('noise_sd_mpa'))} MPa)")
+            self.doc.add(Para(
+                f"L2-S1 intradiscal pressure (paper 1, Sect. 2.3): sets {fmt(l2.get('sets'))}, moments "
+                f"+-{fmt(l2.get('moment_nm'))} N*m on L2, wire cables from {fmt(l2.get('cables'))}, IDP formula "
+                f"'{fmt(l2.get('idp_formula'))}', compared with {ref}."))
+        known = {"geometry", "characteristics", "fsu", "solver", "render", "stepwise_reduction", "l2s1", "paths",
+                 "seed"}
+        for key in self.config:
+            if key in known or not isinstance(self.config[key], Mapping):
+                continue
+            items = _flatten(self.config[key])
+            self.doc.add(Para(f"{key}: " + "; ".join(f"{k} = {fmt(v)}" for k, v in items) + "."))
+
+    # -- paper 1
+    def model_section(self):
+        self.doc.add(Heading("2 Models", 1))
+        self.figure(F + "fig1_l4l5_model.png", "L4-L5 functional spinal unit (Fig. 1 analog).", label="Fig. 1")
+        self.figure(F + "fig3_l2s1_cables.png", "L2-S1 lumbar spine with wire cables (Fig. 3 analog).",
+                    label="Fig. 3")
+        self.csv_table(T + "fsu_geometry.csv", "Geometry of the motion segments (disc, facets, ligament fibres)")
+
+    def calibration_section(self):
+        s = self.sr_surrogate
+        self.doc.add(Heading("3 Calibration on the stepwise reduction (backwards)", 1))
+        self.csv_table(T + "table1_disc_calibrated.csv", "Disc torque-angle parameters, Eq. 3 (Table 1 analog)", s,
+                       label="Table 1")
+        self.figure(F + "fig4_disc_torque_angle.png", "Disc torque-angle characteristics (Fig. 4 analog).", s,
+                    label="Fig. 4")
+        self.csv_table(T + "table2_facet_surfaces.csv", "Facet joint regression surfaces, Eq. 4 (Table 2 analog)",
+                       label="Table 2")
+        self.csv_table(T + "table3_ligaments_calibrated.csv",
+                       "Ligament force-strain parameters, Eq. 7 (Table 3 analog)",
+                       s, label="Table 3")
+        self.figure(F + "fig5_ligament_characteristics.png", "Ligament force-strain characteristics (Fig. 5 analog).",
+                    s, label="Fig. 5")
+        self.csv_table("results/calibration/calibration_summary.csv", "Calibration steps and RMS residuals", s)
+
+    def forward_section(self):
+        s = self.sr_surrogate
+        self.doc.add(Heading("4 Forward simulation of the stepwise reduction", 1))
+        self.figure(F + "fig6_rom_stepwise_reduction.png", "Range of motion per reduction stage (Fig. 6 analog).", s,
+                    label="Fig. 6")
+        self.csv_table(T + "table4_vs_paper.csv", "ROM outlier counts per characteristic set beside the paper's", s)
+        self.grid_table4(s)
+        self.figure(F + "table4_grid.png", "Table 4 as a figure.", s)
+
+    def idp_section(self):
+        s = self.idp_surrogate
+        self.doc.add(Heading("5 Intradiscal pressure in the L2-S1 spine with wire cables", 1))
+        self.figure(F + "fig7_idp.png", "L4-L5 intradiscal pressure per muscle set-up and load case (Fig. 7 analog).",
+                    s, label="Fig. 7")
+        self.csv_table(T + "table5_vs_paper.csv", "IDP outlier counts per characteristic set beside the paper's", s)
+        self.grid_table5(s)
+        self.figure(F + "table5_grid.png", "Table 5 as a figure.", s)
+        if self.has(T + "l2s1_internal_loads.csv"):
+            df = _read_csv(self.path(T + "l2s1_internal_loads.csv"))
+            num = [c for c in df.columns if c.endswith(("_n", "_nm", "_mpa"))
+                   and not c.startswith("residual") and pd.api.types.is_numeric_dtype(df[c])]
+            agg = df.groupby("set", sort=False)[num].agg(["min", "max"]) if "set" in df and num else None
+            if agg is not None:
+                rows = [[c] + [f"{fmt(agg.loc[st, (c, 'min')])} to {fmt(agg.loc[st, (c, 'max')])}"
+                               if fmt(agg.loc[st, (c, "max")]) else "" for st in agg.index] for c in num]
+                self.table_block("Internal loads at L4-L5 over the 49 scenarios (min to max per set)",
+                                 ["quantity"] + [SET_LABELS.get(st, st) for st in agg.index], rows,
+                                 source=T + "l2s1_internal_loads.csv",
+                                 note=self.caption(T + "l2s1_internal_loads.csv", ""), surrogate=s)
+        else:
+            self.missing("Internal loads (l2s1_internal_loads.csv)")
+
+    def grid_table4(self, surrogate):
+        rel = T + "table4_rom_synopsis.csv"
+        if not self.has(rel):
+            self.missing("Table 4 synopsis (table4_rom_synopsis.csv)")
+            return
+        df = _read_csv(self.path(rel))
+        sets = list(dict.fromkeys(df["set"]))
+        dirs = [d for d in DIRECTION_ABBR if d in set(df["direction"])] + \
+            [d for d in dict.fromkeys(df["direction"]) if d not in DIRECTION_ABBR]
+        keyed = {(r.set, r.stage, r.moment_nm, r.direction): r for r in df.itertuples(index=False)}
+        rows = []
+        for stage in dict.fromkeys(df["stage"]):
+            for m in sorted(set(df.loc[df["stage"] == stage, "moment_nm"])):
+                row = [stage, f"{fmt(m)} N*m"]
+                for st in sets:
+                    for d in dirs:
+                        r = keyed.get((st, stage, m, d))
+                        row.append("" if r is None else NC if not bool(r.converged) else
+                                   CROSS if bool(r.outlier) else CHECK)
+                rows.append(row)
+        header = ["stage", "moment"] + [DIRECTION_ABBR.get(d, d) for _ in sets for d in dirs]
+        group = [("", 2)] + [(SET_LABELS.get(s, s), len(dirs)) for s in sets]
+        self.table_block("Synopsis of the forward-simulated stepwise reduction (Table 4 analog): "
+                         f"{CHECK} within the reference range, {CROSS} outlier, {NC} no equilibrium",
+                         header, rows, source=rel, note=self.caption(rel, ""), surrogate=surrogate,
+                         group_header=group, marks=True, label="Table 4")
+
+    def grid_table5(self, surrogate):
+        rel = T + "table5_idp_synopsis.csv"
+        if not self.has(rel):
+            self.missing("Table 5 synopsis (table5_idp_synopsis.csv)")
+            return
+        df = _read_csv(self.path(rel))
+        sets = list(dict.fromkeys(df["set"]))
+        keyed = {(r.set, r.muscle_setup, r.load_case): r for r in df.itertuples(index=False)}
+        rows = []
+        for mu in dict.fromkeys(df["muscle_setup"]):
+            for lc in dict.fromkeys(df.loc[df["muscle_setup"] == mu, "load_case"]):
+                row = [mu, lc]
+                for st in sets:
+                    r = keyed.get((st, mu, lc))
+                    row.append("" if r is None else NC if not bool(r.converged) else
+                               CROSS if bool(r.outlier) else CHECK)
+                rows.append(row)
+        self.table_block("Synopsis of the forward-simulated IDP experiment (Table 5 analog): "
+                         f"{CHECK} within mean +- SD, {CROSS} outlier, {NC} no equilibrium",
+                         ["muscle set-up", "load case"] + [SET_LABELS.get(s, s) for s in sets], rows, source=rel,
+                         note=self.caption(rel, ""), surrogate=surrogate, marks=True, label="Table 5")
+
+    # -- paper 2
+    def muscle_section(self):
+        self.doc.add(Heading("6 Paraspinal muscles and spinal loading (paper 2)", 1))
+        files = [T + "muscle_model_segment_loads.csv", T + "in_vivo_validation.csv", MM + "in_vivo_metrics.json",
+                 T + "flexion_relaxation.csv", T + "sensitivity_idp.csv", T + "sobol_indices.csv"]
+        figs = sorted(p for p in self.inputs if p.startswith(F + "muscle_") and p.endswith(".png"))
+        if not any(self.has(f) for f in files) and not figs:
+            self.doc.add(Para(f"Muscle study: {NOT_BUILT}.", "note"))
+            return
+        if self.has(MM + "in_vivo_metrics.json"):
+            self.doc.add(Para(self._muscle_sentence()))
+            self.shown.add(_norm(MM + "in_vivo_metrics.json"))
+        else:
+            self.missing("In-vivo validation metrics (in_vivo_metrics.json)")
+        self.figure(F + "muscle_in_vivo_validation.png", "Predicted vs in-vivo L4-L5 intradiscal pressure.")
+        self.csv_table(T + "in_vivo_validation.csv", "In-vivo validation: predicted and measured IDP per activity")
+        self.csv_table(T + "muscle_model_segment_loads.csv", "Segmental loads of the musculoskeletal model")
+        self.csv_table(T + "flexion_relaxation.csv", "Flexion-relaxation: active and passive muscle forces")
+        self.csv_table(T + "sensitivity_idp.csv", "Sensitivity of L4-L5 IDP to the muscle parameters")
+        self.csv_table(T + "sobol_indices.csv", "Sobol indices of L4-L5 IDP")
+        for f in figs:
+            if _norm(f) not in self.shown:
+                name = Path(f).stem.replace("muscle_", "").replace("_", " ")
+                self.figure(f, f"Muscle study: {name}.")
+
+    # -- discrepancy
+    def discrepancy_section(self):
+        self.doc.add(Heading("7 Where model and experiment disagree (discrepancy workflow)", 1))
+        any_d = any(p.startswith(D) for p in self.inputs) or self.has(F + "discrepancy_benchmark.png")
+        if not any_d:
+            self.doc.add(Para(f"Discrepancy workflow: {NOT_BUILT}.", "note"))
+            return
+        for case, label in DISCOVERY_CASES:
+            base = f"{D}{case}/"
+            sur = self.sr_surrogate if case == "default" else self._file_surrogate(base + "discovery.json")
+            self.doc.add(Heading(f"Case: {label}" + (" [SURROGATE reference data]" if sur else ""), 2))
+            if not self.has(base + "discovery.json"):
+                self.doc.add(Para(f"Discovery for case '{case}': {NOT_BUILT}.", "note"))
+                continue
+            d = json.loads(self.path(base + "discovery.json").read_text())
+            self.shown.add(_norm(base + "discovery.json"))
+            keys = ("experiment", "n_scenarios", "named_effect", "parameter_estimate", "gap_before", "gap_after",
+                    "gap_reduction", "confidence", "decision", "measured")
+            rows = [[k, fmt(d[k])] for k in keys if k in d]
+            self.table_block(f"Discovery, case '{case}'", ["quantity", "value"], rows,
+                             source=base + "discovery.json", surrogate=sur)
+            if self.has(base + "section.md"):
+                self.shown.add(_norm(base + "section.md"))
+                self._markdown(self.path(base + "section.md").read_text(), f"case '{case}'", sur,
+                               base + "section.md")
+            else:
+                ranking = d.get("ranking")
+                if isinstance(ranking, list) and ranking:
+                    if isinstance(ranking[0], Mapping):
+                        keys = list(dict.fromkeys(k for r in ranking for k in r))
+                        rows = [[fmt(r.get(k)) for k in keys] for r in ranking[:20]]
+                    else:
+                        keys = ["rank", "effect", "criterion"]
+                        rows = [[str(i)] + [fmt(x) for x in (r if isinstance(r, (list, tuple)) else [r])]
+                                for i, r in enumerate(ranking[:20], 1)]
+                    self.table_block(f"Ranking of candidate effects, case '{case}'", keys, rows,
+                                     source=base + "discovery.json", surrogate=sur)
+            for name, cap in (("disagreement_map", "Where the model disagrees with the experiment"),
+                              ("ranking", "Candidate effects ranked by how much of the gap they explain"),
+                              ("before_after", "Model vs experiment before and after adding the named effect")):
+                if self.has(base + f"{name}.png"):
+                    self.figure(base + f"{name}.png", f"{cap} (case '{case}').", sur)
+        self.doc.add(Heading("Benchmark: planted effects on SURROGATE data", 2))
+        self.figure(F + "discrepancy_benchmark.png", "Discrepancy benchmark: recovery of planted effects "
+                    "(SURROGATE data).", True)
+        if self.has(D + "benchmark_summary.json"):
+            d = json.loads(self.path(D + "benchmark_summary.json").read_text())
+            self.table_block("Discrepancy benchmark summary", ["quantity", "value"],
+                             [[k, fmt(v)] for k, v in _flatten(d)], source=D + "benchmark_summary.json",
+                             surrogate=True)
+        else:
+            self.missing("Benchmark summary (benchmark_summary.json)")
+        self.csv_table(D + "benchmark.csv", "Discrepancy benchmark cases", surrogate=True)
+
+    def _markdown(self, text: str, where: str, surrogate: bool, source: str):
+        """A small Markdown text (headings, bullets, pipe tables, paragraphs) as report blocks; image
+        references are left out (the figures are shown by themselves)."""
+        def clean(s):
+            return re.sub(r"[*`]", "", s).strip()
+        lines = text.splitlines()
+        i, para, bullets = 0, [], []
+
+        def flush():
+            if para:
+                self.doc.add(Para(clean(" ".join(para))))
+                para.clear()
+            if bullets:
+                self.doc.add(Bullets([clean(b) for b in bullets]))
+                bullets.clear()
+        while i < len(lines):
+            s = lines[i].strip()
+            if not s or s.startswith("!["):
+                flush()
+            elif s.startswith("#"):
+                flush()
+                self.doc.add(Heading(clean(s.lstrip("#")), 3))
+            elif s.startswith(("- ", "* ")):
+                if para:
+                    flush()
+                bullets.append(s[2:])
+            elif s.startswith("|"):
+                flush()
+                rows = []
+                while i < len(lines) and lines[i].strip().startswith("|"):
+                    cells = [clean(c) for c in lines[i].strip().strip("|").split("|")]
+                    if not all(re.fullmatch(r":?-{2,}:?", c) for c in cells if c):
+                        rows.append(cells)
+                    i += 1
+                if rows:
+                    self.table_block(f"Discrepancy table, {where}", rows[0], rows[1:], source=source,
+                                     surrogate=surrogate)
+                continue
+            else:
+                if bullets:
+                    flush()
+                para.append(s)
+            i += 1
+        flush()
+
+    def other_figures(self):
+        rest = sorted(p for p in self.inputs if p.endswith(".png") and p not in self.shown and self.has(p))
+        if rest:
+            self.doc.add(Heading("8 Further figures", 1))
+            for p in rest:
+                self.figure(p, f"{Path(p).stem.replace('_', ' ')}.", _mentions_surrogate(p))
+
+    # -- provenance
+    def provenance_section(self):
+        self.doc.add(Heading("Data provenance", 1))
+        self.doc.add(Para(
+            "Kinds: original_text / original_figure = printed in (or read off a figure of) one of the two papers; "
+            "third_party = another publication (cited in source); derived_from_published_fit = computed from "
+            "published values; surrogate = a labelled stand-in where nothing is published, never a result."))
+        sr = self._cfg("stepwise_reduction", default={}) or {}
+        l2 = self._cfg("l2s1", default={}) or {}
+        rows = []
+        for role, measured, surrogate, derived in (
+                ("stepwise reduction ROM reference (Tables 1, 3, 4; Figs. 4-6)", sr.get("measured_table"),
+                 "results/experiments/stepwise_reduction_surrogate.csv", sr.get("disc_only_derived")),
+                ("L2-S1 IDP reference (Table 5, Fig. 7)", l2.get("measured_table"),
+                 "results/experiments/idp_wilke1996_surrogate.csv", None)):
+            if measured:
+                rows.append([role, str(measured), "measured (user-supplied table)", self._kinds_of(measured)])
+            else:
+                rows.append([role, surrogate, "surrogate", self._kinds_of(surrogate)])
+            if derived:
+                rows.append([role + ", disc-only stage", str(derived), "derived_from_published_fit",
+                             self._kinds_of(derived)])
+        self.table_block("Experiment tables: measured, derived from a published fit, or surrogate",
+                         ["role", "table", "class", "kinds in the file"], rows)
+        drows = []
+        for rel in sorted(p for p in self.inputs if p.startswith("data/") and p.endswith(".csv")):
+            if not self.has(rel):
+                continue
+            try:
+                df = _read_csv(self.path(rel))
+            except (ValueError, pd.errors.ParserError) as e:
+                drows.append([rel, "?", f"(not readable as CSV: {' '.join(str(e).split())[:80]})", ""])
+                continue
+            kinds = [c for c in df.columns if c == "kind" or c.endswith("_kind")]
+            srcs = [c for c in df.columns if c == "source" or c.endswith("_source")]
+            kind_txt = "; ".join(
+                ", ".join(f"{k}: {n}" for k, n in df[c].fillna("(empty)").value_counts(sort=False).items())
+                for c in kinds) or "(no kind column)"
+            uniq = list(dict.fromkeys(str(v) for c in srcs for v in df[c].dropna()))
+            src_txt = "; ".join(u if len(u) <= 110 else u[:107] + "..." for u in uniq[:3])
+            if len(uniq) > 3:
+                src_txt += f" (+{len(uniq) - 3} more)"
+            drows.append([rel, str(len(df)), kind_txt, src_txt])
+        if drows:
+            self.table_block("Hand-curated inputs (data/): rows per kind and their sources",
+                             ["file", "rows", "kind", "source"], drows)
+        else:
+            self.doc.add(Para(f"Data tables: {NOT_BUILT} (no data/*.csv among the inputs).", "note"))
+        pub = self._cfg("paths", "published_model_results")
+        self.doc.add(Para(f"Published model results (the paper's counts beside ours) are read at run time from "
+                          f"{pub} (not redistributed): "
+                          + ("present." if self.published else "not present in this run, paper columns empty.")))
+
+    def _kinds_of(self, rel) -> str:
+        p = self.inputs.get(_norm(rel)) or Path(rel)
+        if not Path(p).is_file():
+            return "(file not present)"
+        df = _read_csv(p)
+        c = "kind" if "kind" in df else "data_kind" if "data_kind" in df else None
+        return ", ".join(f"{k}: {n}" for k, n in df[c].value_counts(sort=False).items()) if c else "(no kind column)"
+
+    def config_appendix(self):
+        self.doc.add(Heading("Appendix: configuration and input files", 1))
+        self.table_block("Configuration used (every key)", ["key", "value"],
+                         [[k, fmt(v, 8)] for k, v in _flatten(self.config)])
+        rows = []
+        for rel in sorted(self.inputs):
+            p = self.inputs[rel]
+            if p.is_file():
+                rows.append([rel, str(p.stat().st_size), hashlib.sha256(p.read_bytes()).hexdigest()[:16]])
+            elif p.is_dir():
+                rows.append([rel, "(directory)", ""])
+            else:
+                rows.append([rel, f"({NOT_BUILT})", ""])
+        self.table_block("Input files of this report (SHA-256, first 16 hex digits)", ["file", "bytes", "sha256"],
+                         rows)
+
+
+# ----------------------------------------------------------------------------------------------- HTML
+CSS = """
+body{font-family:Georgia,'Times New Roman',serif;max-width:60em;margin:2em auto;padding:0 1em;line-height:1.45;
+color:#111}
+h1.title{font-size:1.6em;text-align:center} h1{font-size:1.3em;border-bottom:1px solid #999;margin-top:2em}
+h2{font-size:1.1em} p.abstract{background:#f4f4f4;padding:.4em .8em;margin:.3em 0} p.small{font-size:.9em;color:#333}
+p.note{color:#777;font-style:italic} figure{margin:1.2em 0;text-align:center} figure img{max-width:100%}
+figcaption{text-align:left;font-size:.9em} table{border-collapse:collapse;margin:.5em 0 1.5em;font-size:.8em}
+caption{caption-side:top;text-align:left;font-weight:bold;padding:.3em 0}
+th,td{border:1px solid #bbb;padding:.15em .4em}
+th{background:#eee} td.ok{color:#080;text-align:center} td.out{color:#c00;text-align:center;font-weight:bold}
+td.nc{color:#c60;text-align:center} div.tnote{font-size:.8em;color:#333;margin-top:-1.2em;margin-bottom:1.5em}
+"""
+
+
+def _h(s) -> str:
+    return html.escape(str(s), quote=True)
+
+
+def render_html(doc: Doc, builder: _Builder) -> str:
+    out = ["<!DOCTYPE html>", '<html lang="en">', "<head>", '<meta charset="utf-8">',
+           f"<title>{_h(TITLE)}</title>", f"<style>{CSS}</style>", "</head>", "<body>"]
+    for b in doc.blocks:
+        if isinstance(b, Heading):
+            out.append(f'<h1 class="title">{_h(b.text)}</h1>' if b.level == 0 else
+                       f"<h{b.level}>{_h(b.text)}</h{b.level}>")
+        elif isinstance(b, Para):
+            out.append(f'<p class="{b.style}">{_h(b.text)}</p>')
+        elif isinstance(b, Bullets):
+            out.append("<ul>" + "".join(f"<li>{_h(i)}</li>" for i in b.items) + "</ul>")
+        elif isinstance(b, Figure):
+            data = base64.b64encode(builder.path(b.path).read_bytes()).decode("ascii")
+            out.append(f'<figure><img data-source="{_h(builder.rel_to_html(b.path))}" alt="{_h(b.label)}" '
+                       f'src="data:image/png;base64,{data}">'
+                       f"<figcaption><b>{_h(b.label)}</b> {_h(b.caption)}</figcaption></figure>")
+        elif isinstance(b, Table):
+            src = f' data-source="{_h(builder.rel_to_html(b.source))}"' if b.source else ""
+            rows = [f"<table{src}>", f"<caption>{_h(b.title)}</caption>", "<thead>"]
+            if b.group_header:
+                rows.append("<tr>" + "".join(f'<th colspan="{n}">{_h(t)}</th>' for t, n in b.group_header) + "</tr>")
+            rows.append("<tr>" + "".join(f"<th>{_h(h)}</th>" for h in b.header) + "</tr></thead><tbody>")
+            for r in b.rows:
+                cells = []
+                for v in r:
+                    cls = {CHECK: "ok", CROSS: "out", NC: "nc"}.get(v) if b.marks else None
+                    cells.append(f'<td class="{cls}">{_h(v)}</td>' if cls else f"<td>{_h(v)}</td>")
+                rows.append("<tr>" + "".join(cells) + "</tr>")
+            rows.append("</tbody></table>")
+            out.append("\n".join(rows))
+            if b.note:
+                out.append(f'<div class="tnote">{_h(b.note)}</div>')
+    out += ["</body>", "</html>", ""]
+    return "\n".join(out)
+
+
+# ----------------------------------------------------------------------------------------------- PDF
+_FONT = {"regular": "Helvetica", "bold": "Helvetica-Bold", "italic": "Helvetica-Oblique"}
+
+
+def _register_fonts() -> bool:
+    """Use matplotlib's DejaVu Sans (a pinned dependency) in the PDF: it has the check and cross marks and
+    every character of the captions; falls back to the standard Helvetica (Latin-1 only)."""
+    if _FONT["regular"] == "DejaVuSans":
+        return True
+    try:
+        import matplotlib
+        from reportlab.lib.fonts import addMapping
+        from reportlab.pdfbase import pdfmetrics
+        from reportlab.pdfbase.ttfonts import TTFont
+
+        ttf = Path(matplotlib.get_data_path()) / "fonts" / "ttf"
+        faces = {"DejaVuSans": "DejaVuSans.ttf", "DejaVuSans-Bold": "DejaVuSans-Bold.ttf",
+                 "DejaVuSans-Oblique": "DejaVuSans-Oblique.ttf", "DejaVuSans-BoldOblique": "DejaVuSans-BoldOblique.ttf"}
+        for name, file in faces.items():
+            pdfmetrics.registerFont(TTFont(name, str(ttf / file)))
+        addMapping("DejaVuSans", 0, 0, "DejaVuSans")
+        addMapping("DejaVuSans", 1, 0, "DejaVuSans-Bold")
+        addMapping("DejaVuSans", 0, 1, "DejaVuSans-Oblique")
+        addMapping("DejaVuSans", 1, 1, "DejaVuSans-BoldOblique")
+    except Exception as e:  # noqa: BLE001 - the PDF is still written with the standard fonts
+        log.warning("DejaVu Sans not available for the PDF (%s): Helvetica, marks drawn as text", e)
+        return False
+    _FONT.update(regular="DejaVuSans", bold="DejaVuSans-Bold", italic="DejaVuSans-Oblique")
+    return True
+
+
+def _pdf_text(s: str) -> str:
+    s = str(s)
+    if _FONT["regular"] == "Helvetica":
+        s = s.replace(CHECK, "ok").replace(CROSS, "x")
+        s = s.encode("cp1252", "replace").decode("cp1252")
+    return html.escape(s, quote=False)
+
+
+def render_pdf(doc: Doc, builder: _Builder) -> bytes:
+    from reportlab.lib import colors
+    from reportlab.lib.pagesizes import A4
+    from reportlab.lib.styles import ParagraphStyle, getSampleStyleSheet
+    from reportlab.lib.units import mm
+    from reportlab.platypus import Image, KeepTogether, Paragraph, SimpleDocTemplate, Spacer
+    from reportlab.platypus import Table as RLTable
+    from reportlab.platypus import TableStyle
+    from PIL import Image as PILImage
+
+    unicode_font = _register_fonts()
+    reg, bold, ital = _FONT["regular"], _FONT["bold"], _FONT["italic"]
+    ss = getSampleStyleSheet()
+    body = ParagraphStyle("body", parent=ss["BodyText"], fontName=reg)
+    st = {
+        "title": ParagraphStyle("t", parent=ss["Title"], fontName=bold, fontSize=15, leading=18),
+        1: ParagraphStyle("h1", parent=ss["Heading1"], fontName=bold, fontSize=14, keepWithNext=1),
+        2: ParagraphStyle("h2", parent=ss["Heading2"], fontName=bold, fontSize=11.5, keepWithNext=1),
+        3: ParagraphStyle("h3", parent=ss["Heading3"], fontName=bold, fontSize=10, keepWithNext=1),
+        "p": ParagraphStyle("p", parent=body, fontSize=9, leading=11.5),
+        "abstract": ParagraphStyle("a", parent=body, fontSize=9, leading=11.5, backColor="#f2f2f2",
+                                   borderPadding=3, spaceAfter=6),
+        "small": ParagraphStyle("s", parent=body, fontSize=8, leading=10),
+        "note": ParagraphStyle("n", parent=body, fontSize=8.5, textColor="#777777", fontName=ital),
+        "cap": ParagraphStyle("c", parent=body, fontSize=8, leading=10, keepWithNext=1),
+        "cell": ParagraphStyle("cell", parent=body, fontSize=6.5, leading=7.5),
+        "cellb": ParagraphStyle("cellb", parent=body, fontSize=6.5, leading=7.5, fontName=bold),
+    }
+    buf = io.BytesIO()
+    pdf = SimpleDocTemplate(buf, pagesize=A4, leftMargin=16 * mm, rightMargin=16 * mm, topMargin=16 * mm,
+                            bottomMargin=16 * mm, title="lumbar workflow report", author="lumbar workflow",
+                            subject="paper-style report", creator=f"lumbar {__version__}", invariant=1)
+    width = A4[0] - 32 * mm
+    story = []
+    marks = {CHECK: f'<font color="#008800">{CHECK if unicode_font else "ok"}</font>',
+             CROSS: f'<font color="#cc0000"><b>{CROSS if unicode_font else "x"}</b></font>',
+             NC: '<font color="#cc6600">n.c.</font>'}
+    for b in doc.blocks:
+        if isinstance(b, Heading):
+            story.append(Paragraph(_pdf_text(b.text), st["title"] if b.level == 0 else st[min(b.level, 3)]))
+        elif isinstance(b, Para):
+            story.append(Paragraph(_pdf_text(b.text), st.get(b.style, st["p"])))
+        elif isinstance(b, Bullets):
+            for i in b.items:
+                story.append(Paragraph("- " + _pdf_text(i), st["p"]))
+        elif isinstance(b, Figure):
+            p = builder.path(b.path)
+            with PILImage.open(p) as im:
+                w, h = im.size
+            scale = min(width / w, 150 * mm / h)
+            story.append(KeepTogether([Spacer(1, 4), Image(str(p), width=w * scale, height=h * scale),
+                                       Paragraph(f"<b>{_pdf_text(b.label)}</b> {_pdf_text(b.caption)}", st["cap"]),
+                                       Spacer(1, 6)]))
+        elif isinstance(b, Table):
+            ncol = max(len(b.header), max((len(r) for r in b.rows), default=0))
+            cell = st["cell"]
+            data = []
+            spans = []
+            if b.group_header:
+                row, c0 = [], 0
+                for t, n in b.group_header:
+                    row += [Paragraph(_pdf_text(t), st["cellb"])] + [""] * (n - 1)
+                    if n > 1:
+                        spans.append(("SPAN", (c0, 0), (c0 + n - 1, 0)))
+                    c0 += n
+                data.append(row)
+            data.append([Paragraph(_pdf_text(h), st["cellb"]) for h in b.header])
+            for r in b.rows:
+                data.append([Paragraph(marks[v] if (b.marks and v in marks) else _pdf_text(v), cell)
+                             for v in list(r) + [""] * (ncol - len(r))])
+            nhead = 2 if b.group_header else 1
+            if b.marks:
+                first = 2
+                rest = (width - 2 * 22 * mm) / max(ncol - first, 1)
+                colw = [22 * mm, 22 * mm] + [rest] * (ncol - first)
+            else:
+                lens = [max([len(str(b.header[i])) if i < len(b.header) else 1] +
+                            [len(str(r[i])) for r in b.rows if i < len(r)]) for i in range(ncol)]
+                lens = [min(max(n, 4), 60) for n in lens]
+                colw = [width * n / sum(lens) for n in lens]
+            t = RLTable(data, colWidths=colw, repeatRows=nhead)
+            t.setStyle(TableStyle([("GRID", (0, 0), (-1, -1), 0.25, colors.grey),
+                                   ("BACKGROUND", (0, 0), (-1, nhead - 1), colors.HexColor("#eeeeee")),
+                                   ("VALIGN", (0, 0), (-1, -1), "TOP"),
+                                   ("LEFTPADDING", (0, 0), (-1, -1), 2), ("RIGHTPADDING", (0, 0), (-1, -1), 2),
+                                   ("TOPPADDING", (0, 0), (-1, -1), 1), ("BOTTOMPADDING", (0, 0), (-1, -1), 1)]
+                                  + spans))
+            story += [Spacer(1, 4), Paragraph(f"<b>{_pdf_text(b.title)}</b>", st["cap"]), t]
+            if b.note:
+                story.append(Paragraph(_pdf_text(b.note), st["small"]))
+            story.append(Spacer(1, 8))
+
+    def _page(canvas, _doc):
+        canvas.saveState()
+        canvas.setFont(reg, 7)
+        canvas.drawRightString(A4[0] - 16 * mm, 9 * mm, f"lumbar workflow report - page {canvas.getPageNumber()}")
+        canvas.restoreState()
+
+    pdf.build(story, onFirstPage=_page, onLaterPages=_page)
+    return buf.getvalue()
+
+
+# ----------------------------------------------------------------------------------------------- entry point
+def build_document(inputs: Iterable, config: Mapping, html_path, captions_dir=None, published=None):
+    """The report as a document model (``Doc``) and its builder, without writing anything."""
+    b = _Builder(inputs, config, html_path, captions_dir=captions_dir, published=published)
+    return b.build(), b
+
+
+def build_report(inputs: Iterable, config: Mapping, html_path, pdf_path, captions_dir=None,
+                 published=None) -> dict:
+    """Write the paper-style report as HTML (self-contained) and PDF.
+
+    ``inputs``: paths (relative to the working directory, or absolute) of every result and data file the report
+    may show; a file that is not among them is reported as "not built in this configuration".
+    ``config``: the validated workflow configuration (methods, labels). ``captions_dir``: directory of the
+    ``<output stem>.rst`` captions (workflow/report). ``published``: the published-results CSV (paper values,
+    optional). Returns a summary: figure and table counts and which inputs were not built.
+    """
+    inputs = list(inputs)
+    doc, b = build_document(inputs, config, html_path, captions_dir, published)
+    write_text_atomic(render_html(doc, b), html_path)
+    pdf = render_pdf(doc, b)
+    with atomic_writer(pdf_path, "wb") as f:
+        f.write(pdf)
+    notes = [x.text for x in doc.blocks if isinstance(x, Para) and x.style == "note"]
+    return {"figures": b.n_fig, "tables": b.n_tab, "not_built": notes,
+            "surrogate": {"stepwise_reduction": b.sr_surrogate, "idp": b.idp_surrogate}}

@@ -1,0 +1,372 @@
+"""Forward simulation of the stepwise-reduction experiment (paper 1, Sect. 3.1.2, Table 4, Fig. 6).
+
+160 scenarios = 8 reduction stages (``lumbar.fsu.STAGES``) x 5 pure moments x 4 directions, solved
+for one characteristic set in one batch, compared with a reference ROM table (mean, min, max).
+
+Reference ROM tables (schema ``EXPERIMENT_SCHEMA``, documented in ``data/experiments/README.md``):
+one row per (stage, direction, moment_nm) with ``rom_mean_deg``, ``rom_min_deg``, ``rom_max_deg``,
+``n_specimens``, ``kind``, ``source``. The measured table of Heuer et al. (2007) is not available to
+the project: the workflow uses a surrogate from virtual specimens
+(``lumbar.virtual_experiment.stepwise_reduction_table``) whose disc-only stage (``wo_all``) is replaced by
+the rows derived from the paper's published Eq. 3 fit (``data/experiments/``); a user may supply the
+real table in the same schema (config ``stepwise_reduction.measured_table``), which is then used as is.
+
+Outlier rule (project decision): a simulated ROM is an outlier when it lies outside
+``[rom_min_deg, rom_max_deg]`` of its reference row. Rows without a range (the derived disc-only rows,
+kind ``derived_from_published_fit``) use ``mean +- tolerance_deg`` (default 0.5 deg). A scenario
+without equilibrium (``converged = False``) always counts as an outlier.
+
+Extra physical effects (hook for the discrepancy workflow): ``EFFECTS`` maps an effect name to a
+function ``(fsu, value) -> dict`` of per-scenario solver parameters (``lumbar.solve.solve(params=...)``)
+and may modify the (specimen-private) model in place. Register new ones with ``register_effect``.
+"""
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Callable, Mapping
+
+import numpy as np
+import pandas as pd
+
+from . import so3
+from .fsu import DIRECTIONS, MAIN_DIRECTIONS, STAGES, moment_loads
+from .io import Column, TableError, TableSchema, read_table, save_figure_atomic
+from .solve import solve
+
+log = logging.getLogger(__name__)
+
+MOMENTS_NM = (1.0, 2.5, 5.0, 7.5, 10.0)
+DATA_KINDS = frozenset({"measured", "original_text", "original_figure", "third_party",
+                        "derived_from_published_fit", "surrogate"})
+EXPERIMENT_COLUMNS = ("stage", "direction", "moment_nm", "rom_mean_deg", "rom_min_deg", "rom_max_deg",
+                      "n_specimens", "kind", "source")
+EXPERIMENT_SCHEMA = TableSchema("stepwise_reduction_rom", {
+    "stage": Column("str", allowed=frozenset(STAGES)),
+    "direction": Column("str", allowed=frozenset(MAIN_DIRECTIONS)),
+    "moment_nm": Column("float", min=0.0, max=50.0, description="pure moment [N*m]"),
+    "rom_mean_deg": Column("float", min=0.0, description="mean range of motion [deg]"),
+    "rom_min_deg": Column("float", min=0.0, nullable=True, finite=False, description="[deg], empty = no range"),
+    "rom_max_deg": Column("float", min=0.0, nullable=True, finite=False, description="[deg], empty = no range"),
+    "n_specimens": Column("int", min=1, description="specimens behind the row"),
+    "kind": Column("str", allowed=DATA_KINDS),
+    "source": Column("str"),
+    "note": Column("str", required=False, nullable=True),
+})
+
+
+# ------------------------------------------------------------------ effects (extension point)
+def _effect_disc_tension(fsu, value):
+    """Disc axial tensile stiffness k_tension [N/m] (the paper's disc transmits no traction)."""
+    v = float(value)
+    if not np.isfinite(v) or v < 0:
+        raise ValueError(f"effect disc_tension: k_tension must be finite and >= 0 N/m, got {value!r}")
+    return {"k_tension": v}
+
+
+EFFECTS: dict[str, Callable] = {"disc_tension": _effect_disc_tension}
+
+
+def register_effect(name: str, fn: Callable) -> None:
+    """Add an extra physical effect: ``fn(fsu, value) -> dict`` of solver params (may edit fsu.model)."""
+    EFFECTS[name] = fn
+
+
+def effect_params(fsu, effects: Mapping | None) -> dict:
+    """Solver ``params`` for a dict {effect name: value}; unknown names raise ValueError."""
+    params: dict = {}
+    for name, value in (effects or {}).items():
+        if name not in EFFECTS:
+            raise ValueError(f"unknown effect {name!r}; known effects: {sorted(EFFECTS)}")
+        if value is None:
+            continue
+        params.update(EFFECTS[name](fsu, value))
+    return params
+
+
+# ------------------------------------------------------------------ simulation
+def scenario_grid(stages=STAGES, directions=MAIN_DIRECTIONS, moments_nm=MOMENTS_NM) -> pd.DataFrame:
+    """All (stage, direction, moment_nm) combinations in table order."""
+    rows = [(s, d, float(M)) for s in stages for d in directions for M in moments_nm]
+    return pd.DataFrame(rows, columns=["stage", "direction", "moment_nm"])
+
+
+class StageSolver:
+    """Solves ROM scenarios of one FSU repeatedly (calibration: same scenarios, changing parameters).
+
+    Keeps the last converged states as warm starts; scenarios that fail from a warm start are
+    re-solved from the reference configuration before they are reported as not converged.
+    """
+
+    def __init__(self, fsu, scenarios: pd.DataFrame, params=None, max_iter=50, tol=1e-9, load_steps=1,
+                 retry_load_steps=(4,)):
+        self.fsu, self.params = fsu, dict(params or {})
+        self.scen = scenarios.reset_index(drop=True)
+        for d in self.scen["direction"]:
+            if d not in DIRECTIONS:
+                raise ValueError(f"unknown direction {d!r}; expected one of {sorted(DIRECTIONS)}")
+        self.stages = list(dict.fromkeys(self.scen["stage"]))
+        self.si = np.array([self.stages.index(s) for s in self.scen["stage"]], int)
+        self.fm_s, self.cm_s = fsu.masks(self.stages)
+        m = fsu.model
+        self.loads = moment_loads(list(self.scen["direction"]), list(self.scen["moment_nm"]), m.nb)
+        self.axis = np.array([DIRECTIONS[d][0] for d in self.scen["direction"]])
+        self.sign = np.array([DIRECTIONS[d][1] for d in self.scen["direction"]])
+        self.kw = dict(max_iter=max_iter, tol_force=tol, tol_moment=tol, load_steps=load_steps)
+        self.retry = tuple(retry_load_steps)
+        self._warm0 = self._warm = None
+        self.n_solves = 0
+
+    def _solve(self, loads, fm, cm, warm):
+        m = self.fsu.model
+        B = loads.shape[0]
+        p = self.params
+        if warm is not None:
+            res = solve(m, loads, x0=warm[0], R0=warm[1], fmask=fm, cmask=cm, params=p,
+                        retry_load_steps=(), **self.kw)
+            bad = np.flatnonzero(~res.converged)
+            if bad.size:
+                idx = bad
+                sub = {k: (np.asarray(v)[idx] if np.ndim(v) and np.shape(v)[0] == B else v) for k, v in p.items()}
+                cold = solve(m, loads[idx], fmask=fm[idx], cmask=cm[idx], params=sub,
+                             retry_load_steps=self.retry, **self.kw)
+                res.x[idx], res.R[idx], res.converged[idx] = cold.x, cold.R, cold.converged
+                res.residual_force[idx], res.residual_moment[idx] = cold.residual_force, cold.residual_moment
+        else:
+            res = solve(m, loads, fmask=fm, cmask=cm, params=p, retry_load_steps=self.retry, **self.kw)
+        self.n_solves += B
+        return res
+
+    def run(self):
+        """(rom_deg (n,), converged (n,), loaded SolveResult); rom is NaN where not converged."""
+        m = self.fsu.model
+        zero = np.zeros((len(self.stages), m.nb, 6))
+        r0 = self._solve(zero, self.fm_s, self.cm_s, self._warm0)
+        si = self.si
+        if self._warm is None:
+            warm = (r0.x[si], r0.R[si])
+        else:
+            warm = self._warm
+        res = self._solve(self.loads, self.fm_s[si], self.cm_s[si], warm)
+        rot = so3.log(res.R[:, 0] @ np.swapaxes(r0.R[si, 0], -1, -2))
+        rom = np.degrees(rot[np.arange(len(si)), self.axis] * self.sign)
+        conv = res.converged & r0.converged[si]
+        if r0.converged.all():
+            self._warm0 = (r0.x.copy(), r0.R.copy())
+        if conv.all():
+            self._warm = (res.x.copy(), res.R.copy())
+        self.last = res
+        return np.where(conv, rom, np.nan), conv, res
+
+
+def simulate_stepwise_reduction(fsu, stages=STAGES, directions=MAIN_DIRECTIONS, moments_nm=MOMENTS_NM,
+                                effects=None, max_iter=50, tol=1e-8, load_steps=1) -> pd.DataFrame:
+    """ROM of every (stage, direction, moment) scenario: stage, direction, moment_nm, rom_deg, converged,
+    residual_force_n, residual_moment_nm (max residual of the loaded solve; the effects path may omit them).
+
+    ``effects`` {name: value}: names of ``lumbar.effects.EFFECTS`` (the discrepancy candidates) are solved
+    by ``lumbar.effects.simulate_stepwise_reduction``; other names must be registered in ``EFFECTS`` here."""
+    from . import effects as _fx
+    if effects and all(k in _fx.SOLVER_EFFECTS for k in effects):
+        out = _fx.simulate_stepwise_reduction(fsu, stages, directions, moments_nm, effects, max_iter=max_iter, tol=tol)
+        if not out["converged"].all():
+            log.warning("stepwise reduction: %d of %d scenario(s) did not converge (rom_deg NaN, converged=False)",
+                        int((~out["converged"]).sum()), len(out))
+        return out
+    scen = scenario_grid(stages, directions, moments_nm)
+    ss = StageSolver(fsu, scen, params=effect_params(fsu, effects), max_iter=max_iter, tol=tol,
+                     load_steps=load_steps)
+    rom, conv, res = ss.run()
+    out = scen.copy()
+    out["rom_deg"] = rom
+    out["converged"] = conv
+    out["residual_force_n"] = res.residual_force      # of the loaded solve (the 0 N*m state has its own)
+    out["residual_moment_nm"] = res.residual_moment
+    if not conv.all():
+        log.warning("stepwise reduction: %d of %d scenario(s) did not converge (rom_deg NaN, converged=False)",
+                    int((~conv).sum()), len(conv))
+    return out
+
+
+# ------------------------------------------------------------------ reference tables
+def read_experiment_table(path) -> pd.DataFrame:
+    """Read and validate a stepwise-reduction ROM table (errors name file, row and column)."""
+    df = read_table(path, EXPERIMENT_SCHEMA)
+    for i, r in enumerate(df.itertuples(index=False)):
+        lo, hi, mean = r.rom_min_deg, r.rom_max_deg, r.rom_mean_deg
+        if np.isnan(lo) != np.isnan(hi):
+            raise TableError(path, "only one of rom_min_deg / rom_max_deg is given", row=i + 1,
+                             column="rom_min_deg" if np.isnan(lo) else "rom_max_deg",
+                             expected="both empty or both numbers")
+        if not np.isnan(lo) and not (lo <= mean <= hi):
+            raise TableError(path, f"rom_mean_deg {mean:g} is not within [rom_min_deg {lo:g}, rom_max_deg {hi:g}]",
+                             row=i + 1, column="rom_mean_deg", expected="rom_min_deg <= rom_mean_deg <= rom_max_deg")
+    key = df[["stage", "direction", "moment_nm"]].apply(tuple, axis=1)
+    dup = key.duplicated()
+    if dup.any():
+        i = int(np.flatnonzero(dup.to_numpy())[0])
+        raise TableError(path, f"duplicate scenario {key.iloc[i]}", row=i + 1, column="stage",
+                         expected="one row per (stage, direction, moment_nm)")
+    return df
+
+
+def reference_table(experiment: pd.DataFrame, derived: pd.DataFrame | None = None) -> pd.DataFrame:
+    """The table the model is calibrated on and compared with.
+
+    A measured table (no ``surrogate`` rows) is returned as is. For a surrogate table, the disc-only
+    rows (``wo_all``) are replaced by the rows derived from the published Eq. 3 fit when ``derived``
+    is given (those are the only rows computed from published values).
+    """
+    exp = experiment.copy()
+    if derived is not None and (exp["kind"] == "surrogate").all():
+        d = derived.copy()
+        keys = set(map(tuple, d[["stage", "direction", "moment_nm"]].to_numpy().tolist()))
+        keep = [tuple(k) not in keys for k in exp[["stage", "direction", "moment_nm"]].to_numpy().tolist()]
+        exp = pd.concat([exp[keep], d[[c for c in exp.columns if c in d.columns]]], ignore_index=True)
+    order = {s: i for i, s in enumerate(STAGES)}
+    dord = {d: i for i, d in enumerate(MAIN_DIRECTIONS)}
+    exp = exp.assign(_s=exp["stage"].map(order), _d=exp["direction"].map(dord))
+    return exp.sort_values(["_s", "_d", "moment_nm"]).drop(columns=["_s", "_d"]).reset_index(drop=True)
+
+
+def assess(sim: pd.DataFrame, ref: pd.DataFrame, set_name: str, tolerance_deg: float = 0.5) -> pd.DataFrame:
+    """Table 4 rows for one set: simulated ROM beside the reference, outlier flag, data kind.
+
+    Reference rows without a range use mean +- ``tolerance_deg``; not-converged scenarios are outliers.
+    """
+    if not np.isfinite(tolerance_deg) or tolerance_deg < 0:
+        raise ValueError(f"tolerance_deg must be finite and >= 0, got {tolerance_deg}")
+    keys = ["stage", "direction", "moment_nm"]
+    df = sim[keys + ["rom_deg", "converged"]].merge(
+        ref[keys + ["rom_mean_deg", "rom_min_deg", "rom_max_deg", "kind"]], on=keys, how="inner")
+    if len(df) < len(sim):
+        log.warning("set %s: %d simulated scenario(s) have no reference row and are not assessed",
+                    set_name, len(sim) - len(df))
+    no_range = df["rom_min_deg"].isna()
+    lo = np.where(no_range, df["rom_mean_deg"] - tolerance_deg, df["rom_min_deg"])
+    hi = np.where(no_range, df["rom_mean_deg"] + tolerance_deg, df["rom_max_deg"])
+    rom = df["rom_deg"].to_numpy(float)
+    inside = (rom >= lo) & (rom <= hi)
+    out = pd.DataFrame({
+        "set": set_name, "stage": df["stage"], "direction": df["direction"], "moment_nm": df["moment_nm"],
+        "rom_sim_deg": rom, "rom_mean_deg": df["rom_mean_deg"], "rom_min_deg": df["rom_min_deg"],
+        "rom_max_deg": df["rom_max_deg"],
+        "outlier": ~(df["converged"].to_numpy(bool) & inside),
+        "converged": df["converged"].astype(bool),
+        "data_kind": df["kind"],
+        "range_rule": np.where(no_range, f"mean+-{tolerance_deg:g}deg", "min-max"),
+    })
+    return out
+
+
+def outlier_counts(synopsis: pd.DataFrame) -> pd.DataFrame:
+    g = synopsis.groupby("set", sort=False)
+    out = pd.DataFrame({"n_scenarios": g.size(), "n_outliers": g["outlier"].sum().astype(int),
+                        "n_not_converged": g["converged"].apply(lambda c: int((~c.astype(bool)).sum())),
+                        "data_kinds": g["data_kind"].apply(lambda k: "+".join(sorted(set(k))))})
+    return out.reset_index()
+
+
+PAPER_OUTLIER_KEYS = {"calibrated": "outliers_rom_this_paper_model", "chazal1985": "outliers_rom_chazal1985",
+                      "shirazi_adl1986": "outliers_rom_shirazi_adl1986",
+                      "white_panjabi1990": "outliers_rom_white_panjabi1990",
+                      "nolte1990": "outliers_rom_nolte1990", "rupp2015": "outliers_rom_rupp2015"}
+
+
+def compare_with_paper(counts: pd.DataFrame, published_csv=None) -> pd.DataFrame:
+    """Our outlier counts beside the paper's (Sect. 3.1.2); empty paper column if the file is absent."""
+    out = counts[["set", "n_scenarios", "n_outliers"]].copy()
+    out["paper_n_outliers"] = np.nan
+    out["paper_source"] = ""
+    if published_csv is not None and Path(published_csv).is_file():
+        pub = pd.read_csv(published_csv)
+        byq = pub.set_index("quantity")
+        for i, s in enumerate(out["set"]):
+            q = PAPER_OUTLIER_KEYS.get(s)
+            if q in byq.index:
+                out.loc[i, "paper_n_outliers"] = float(byq.loc[q, "value"])
+                out.loc[i, "paper_source"] = str(byq.loc[q, "source"])
+    else:
+        log.warning("published model results %s not found: paper_n_outliers left empty", published_csv)
+    out["paper_n_scenarios"] = 160
+    return out
+
+
+# ------------------------------------------------------------------ figures (matplotlib, Agg)
+def _plt():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def plot_table4_grid(synopsis: pd.DataFrame, path, sets=None) -> None:
+    """Check/cross grid like the paper's Table 4: rows stage x moment, columns set x direction."""
+    plt = _plt()
+    sets = list(dict.fromkeys(synopsis["set"])) if sets is None else list(sets)
+    moments = sorted(synopsis["moment_nm"].unique())
+    rows = [(s, M) for s in STAGES for M in moments]
+    cols = [(k, d) for k in sets for d in MAIN_DIRECTIONS]
+    idx = synopsis.set_index(["set", "stage", "direction", "moment_nm"])
+    fig, ax = plt.subplots(figsize=(1.2 + 0.32 * len(cols), 1.2 + 0.22 * len(rows)))
+    for i, (st, M) in enumerate(rows):
+        for j, (k, d) in enumerate(cols):
+            key = (k, st, d, M)
+            if key not in idx.index:
+                colour, mark = "0.85", ""
+            else:
+                r = idx.loc[key]
+                out = bool(r["outlier"])
+                colour = "#f4b6b6" if out else "#b9e4b9"
+                mark = ("x" if bool(r["converged"]) else "NC") if out else "v"
+            ax.add_patch(plt.Rectangle((j, i), 1, 1, color=colour, ec="white"))
+            ax.text(j + 0.5, i + 0.5, mark, ha="center", va="center", fontsize=6,
+                    color="darkred" if mark in ("x", "NC") else "darkgreen")
+    ax.set_xlim(0, len(cols))
+    ax.set_ylim(len(rows), 0)
+    ax.set_xticks(np.arange(len(cols)) + 0.5)
+    ax.set_xticklabels([f"{k}\n{d[0].upper()}" if d == "flexion" else d[0].upper() for k, d in cols], fontsize=6)
+    ax.set_yticks(np.arange(len(rows)) + 0.5)
+    ax.set_yticklabels([f"{st} {M:g} Nm" for st, M in rows], fontsize=6)
+    kinds = "+".join(sorted(set(synopsis["data_kind"])))
+    ax.set_title(f"Outliers (x), not converged (NC), within range (v); reference data: {kinds}", fontsize=8)
+    fig.tight_layout()
+    save_figure_atomic(fig, path, dpi=130)
+    plt.close(fig)
+
+
+def plot_rom_stepwise_reduction(synopsis: pd.DataFrame, path, set_name="calibrated") -> None:
+    """Fig. 6 analog: bars = reference mean with min-max whiskers per stage, circles = simulated, red x = outliers."""
+    plt = _plt()
+    syn = synopsis[synopsis["set"] == set_name]
+    moments = sorted(syn["moment_nm"].unique())
+    fig, axes = plt.subplots(len(MAIN_DIRECTIONS), 1, figsize=(12, 11), sharex=True)
+    colours = plt.get_cmap("viridis")(np.linspace(0, 0.95, len(STAGES)))
+    width = 0.8 / len(STAGES)
+    for ax, d in zip(axes, MAIN_DIRECTIONS):
+        for k, st in enumerate(STAGES):
+            sub = syn[(syn["direction"] == d) & (syn["stage"] == st)].set_index("moment_nm").reindex(moments)
+            x = np.arange(len(moments)) + (k - len(STAGES) / 2 + 0.5) * width
+            mean = sub["rom_mean_deg"].to_numpy(float)
+            lo = np.where(np.isfinite(sub["rom_min_deg"]), mean - sub["rom_min_deg"], 0)
+            hi = np.where(np.isfinite(sub["rom_max_deg"]), sub["rom_max_deg"] - mean, 0)
+            hatch = "//" if (sub["data_kind"] == "derived_from_published_fit").any() else None
+            ax.bar(x, mean, width, color=colours[k], label=st if d == MAIN_DIRECTIONS[0] else None,
+                   hatch=hatch, edgecolor="k", lw=0.3)
+            ax.errorbar(x, mean, yerr=[lo, hi], fmt="none", ecolor="k", lw=0.6, capsize=1.5)
+            ax.plot(x, sub["rom_sim_deg"], "o", color=colours[k], mec="k", ms=4)
+            out = sub["outlier"].astype(bool).to_numpy()
+            yo = np.where(np.isfinite(sub["rom_sim_deg"]), sub["rom_sim_deg"], mean)
+            ax.plot(x[out], yo[out], "x", color="red", ms=8, mew=2)
+        ax.set_ylabel(f"{d}\nROM [deg]")
+        ax.grid(axis="y", alpha=0.3)
+    axes[-1].set_xticks(np.arange(len(moments)))
+    axes[-1].set_xticklabels([f"{M:g} N*m" for M in moments])
+    axes[0].legend(ncol=8, fontsize=7, loc="upper left")
+    kinds = "+".join(sorted(set(syn["data_kind"])))
+    n_out = int(syn["outlier"].sum())
+    fig.suptitle(f"Stepwise reduction, set '{set_name}': {n_out} outlier(s) of {len(syn)}; bars: reference "
+                 f"({kinds}; hatched = derived from the published Eq. 3 fit, no range)", fontsize=9)
+    fig.tight_layout()
+    save_figure_atomic(fig, path, dpi=110)
+    plt.close(fig)

@@ -1,0 +1,299 @@
+"""Virtual specimens: seeded perturbations of a (geometry, characteristic set) pair.
+
+Where published experimental tables are not available, the workflow generates *surrogate* tables by
+running the experiment on virtual specimens, each of which differs from the calibration model the way a
+cadaver differs from a model: its geometry is scaled and its insertion points displaced, its passive
+characteristics are perturbed log-normally, and the measurement carries noise. Every table produced from
+virtual specimens has ``kind = surrogate`` and the word "surrogate" in its file name.
+
+The experiment-specific generators (stepwise reduction ROM, in-vitro IDP) build on ``virtual_specimen``.
+"""
+from __future__ import annotations
+
+import copy
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class SpecimenVariation:
+    """Spread of the virtual specimens around the calibration model (all defaults are modelling choices)."""
+
+    geometry_scale_sd: float = 0.03      # sd of log isotropic scale of the whole geometry (about 3 %)
+    insertion_sd_m: float = 0.0007       # sd of each ligament-fibre end displacement per axis [m]
+    landmark_sd_m: float = 0.0002        # sd of each facet landmark displacement per axis [m]
+    force_sd: float = 0.20               # sd of log force scale of each ligament law
+    prestrain_sd_pct: float = 1.0        # sd of each ligament's prestrain [% strain]
+    disc_sd: float = 0.10                # sd of log scale of the disc torque law, per direction
+    facet_sd: float = 0.20               # sd of log facet stiffness
+
+    def __post_init__(self):
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if not np.isfinite(v) or v < 0:
+                raise ValueError(f"SpecimenVariation.{f.name} must be finite and >= 0, got {v}")
+
+
+def _scale_law(law, factor, dprestrain):
+    if hasattr(law, "a"):      # softplus: force scales with a and c
+        return dataclasses.replace(law, a=law.a * factor, c=law.c * factor,
+                                   prestrain_pct=law.prestrain_pct + dprestrain)
+    return dataclasses.replace(law, f_a_n=law.f_a_n * factor, f_b_n=law.f_b_n * factor,
+                               prestrain_pct=law.prestrain_pct + dprestrain)
+
+
+def perturb_characteristics(charset, rng: np.random.Generator, v: SpecimenVariation):
+    """A copy of ``charset`` with log-normal force scales, shifted prestrains, scaled disc and facets."""
+    ligs = {}
+    for kind in sorted(charset.ligaments):
+        ligs[kind] = _scale_law(charset.ligaments[kind], float(np.exp(rng.normal(0, v.force_sd))),
+                                float(rng.normal(0, v.prestrain_sd_pct)))
+    torque = {}
+    for d in sorted(charset.disc.torque):
+        p1, p2, p3 = charset.disc.torque[d]
+        f = float(np.exp(rng.normal(0, v.disc_sd)))
+        torque[d] = (p1 * f, p2, p3 * f)
+    disc = dataclasses.replace(charset.disc, torque=torque) if dataclasses.is_dataclass(charset.disc) \
+        else _ns_replace(charset.disc, torque=torque)
+    k = charset.facet.stiffness * float(np.exp(rng.normal(0, v.facet_sd)))
+    facet = dataclasses.replace(charset.facet, stiffness=k) if dataclasses.is_dataclass(charset.facet) \
+        else _ns_replace(charset.facet, stiffness=k)
+    if dataclasses.is_dataclass(charset):
+        return dataclasses.replace(charset, ligaments=ligs, disc=disc, facet=facet)
+    return _ns_replace(charset, ligaments=ligs, disc=disc, facet=facet)
+
+
+def _ns_replace(ns, **kw):
+    out = copy.copy(ns)
+    for k, val in kw.items():
+        setattr(out, k, val)
+    return out
+
+
+def perturb_geometry(geometry, rng: np.random.Generator, v: SpecimenVariation, levels=None):
+    """A deep copy of ``geometry`` scaled about the first level's disc centre, with displaced insertions.
+
+    Only the levels in ``levels`` (default: all) are perturbed; meshes are scaled with the points.
+    """
+    geo = copy.deepcopy(geometry)
+    names = sorted(geo.levels) if levels is None else list(levels)
+    origin = np.asarray(geo.levels[names[0]].disc_centre, float).copy()
+    s = float(np.exp(rng.normal(0, v.geometry_scale_sd)))
+
+    def sc(p):
+        return origin + s * (np.asarray(p, float) - origin)
+
+    for vert in geo.vertebrae.values():
+        vert.centroid = sc(vert.centroid)
+        if getattr(vert, "mesh", None) is not None:
+            vert.mesh.apply_translation(-origin)
+            vert.mesh.apply_scale(s)
+            vert.mesh.apply_translation(origin)
+    for name in sorted(geo.levels):
+        lev = geo.levels[name]
+        lev.disc_centre = sc(lev.disc_centre)
+        lev.disc_csa = lev.disc_csa * s**2
+        lev.disc_height = lev.disc_height * s
+        jitter = name in names
+        for side in sorted(lev.facets):
+            f = lev.facets[side]
+            f.superior, f.inferior = sc(f.superior), sc(f.inferior)
+            if jitter:
+                f.superior = f.superior + rng.normal(0, v.landmark_sd_m, f.superior.shape)
+                f.inferior = f.inferior + rng.normal(0, v.landmark_sd_m, f.inferior.shape)
+        for lig in lev.ligaments:
+            lig.upper, lig.lower = sc(lig.upper), sc(lig.lower)
+            lig.extra_length = np.asarray(lig.extra_length, float) * s
+            if jitter:
+                lig.upper = lig.upper + rng.normal(0, v.insertion_sd_m, lig.upper.shape)
+                lig.lower = lig.lower + rng.normal(0, v.insertion_sd_m, lig.lower.shape)
+    geo.name = f"{geometry.name}_virtual_specimen"
+    return geo
+
+
+def virtual_specimen(geometry, charset, rng: np.random.Generator, variation: SpecimenVariation | None = None,
+                     levels=None):
+    """One virtual specimen: (perturbed geometry, perturbed characteristic set)."""
+    v = variation or SpecimenVariation()
+    return perturb_geometry(geometry, rng, v, levels), perturb_characteristics(charset, rng, v)
+
+
+def specimen_rngs(seed: int, n: int):
+    """Independent, reproducible generators for n specimens (numpy SeedSequence spawning)."""
+    return [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(n)]
+
+
+# ---------------------------------------------------------------- stepwise-reduction surrogate (issue 3)
+def _variation(variation) -> SpecimenVariation:
+    if variation is None:
+        return SpecimenVariation()
+    if isinstance(variation, SpecimenVariation):
+        return variation
+    known = {f.name for f in dataclasses.fields(SpecimenVariation)}
+    bad = sorted(set(variation) - known)
+    if bad:
+        raise ValueError(f"unknown variation key(s) {bad}; expected some of {sorted(known)}")
+    return SpecimenVariation(**dict(variation))
+
+
+def stepwise_reduction_table(geometry, charset, seed, n_specimens=8, variation=None, noise_sd_deg=0.3,
+                             effects=None, moments_nm=(1.0, 2.5, 5.0, 7.5, 10.0), level="L4-L5",
+                             k_shear=None, max_iter=50, tol=1e-8):
+    """Surrogate stepwise-reduction ROM table (Heuer et al. 2007 layout) from ``n_specimens`` virtual specimens.
+
+    Each specimen = ``virtual_specimen(geometry, charset, rng)`` with ``rng`` from
+    ``specimen_rngs(seed, n_specimens)``; its 160 scenarios (8 stages x moments x 4 directions) are
+    simulated (``lumbar.stepwise_reduction.simulate_stepwise_reduction``, with the extra physical
+    ``effects``), and Gaussian measurement noise of ``noise_sd_deg`` is added per specimen and scenario
+    (the same rng, after the perturbation). Per scenario: mean, min and max over the specimens that reached
+    equilibrium; a specimen without equilibrium in a scenario is dropped from that row with a log line
+    and the row's ``n_specimens`` is reduced; a row no specimen reached is left out (logged).
+    Deterministic for a seed. Columns: stage, direction, moment_nm, rom_mean_deg, rom_min_deg,
+    rom_max_deg, n_specimens, kind (= "surrogate"), source.
+    """
+    import logging
+
+    import pandas as pd
+
+    from .fsu import MAIN_DIRECTIONS, STAGES, build_fsu
+    from .stepwise_reduction import simulate_stepwise_reduction
+
+    log = logging.getLogger(__name__)
+    n_specimens = int(n_specimens)
+    if n_specimens < 1:
+        raise ValueError(f"n_specimens must be >= 1, got {n_specimens}")
+    if not np.isfinite(noise_sd_deg) or noise_sd_deg < 0:
+        raise ValueError(f"noise_sd_deg must be finite and >= 0 deg, got {noise_sd_deg}")
+    v = _variation(variation)
+    roms, convs = [], []
+    for k, rng in enumerate(specimen_rngs(int(seed), n_specimens)):
+        geo_k, cs_k = virtual_specimen(geometry, charset, rng, v, levels=[level])
+        fsu = build_fsu(geo_k, cs_k, level, k_shear=k_shear)
+        sim = simulate_stepwise_reduction(fsu, STAGES, MAIN_DIRECTIONS, moments_nm, effects=effects,
+                                          max_iter=max_iter, tol=tol)
+        rom = sim["rom_deg"].to_numpy(float) + rng.normal(0.0, noise_sd_deg, len(sim))
+        conv = sim["converged"].to_numpy(bool)
+        for i in np.flatnonzero(~conv):
+            r = sim.iloc[i]
+            log.warning("virtual specimen %d: no equilibrium at %s %s %g N*m; dropped from that row",
+                        k, r["stage"], r["direction"], r["moment_nm"])
+        neg = conv & (rom < 0)
+        if neg.any():
+            log.info("virtual specimen %d: %d noisy ROM value(s) below 0 deg set to 0", k, int(neg.sum()))
+            rom = np.where(neg, 0.0, rom)
+        roms.append(np.where(conv, rom, np.nan))
+        convs.append(conv)
+    A = np.vstack(roms)
+    n = np.isfinite(A).sum(axis=0)
+    keys = sim[["stage", "direction", "moment_nm"]].reset_index(drop=True)
+    with np.errstate(all="ignore"):
+        import warnings
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            mean, lo, hi = np.nanmean(A, 0), np.nanmin(A, 0), np.nanmax(A, 0)
+    src = (f"lumbar.virtual_experiment.stepwise_reduction_table(seed={int(seed)}, n_specimens={n_specimens}, "
+           f"noise_sd_deg={noise_sd_deg:g}, variation={dataclasses.asdict(v)}"
+           + (f", effects={dict(effects)}" if effects else "")
+           + f"); calibration model: geometry '{geometry.name}' {level} + characteristic set '{charset.name}'")
+    out = pd.DataFrame({"stage": keys["stage"], "direction": keys["direction"], "moment_nm": keys["moment_nm"],
+                        "rom_mean_deg": mean, "rom_min_deg": lo, "rom_max_deg": hi, "n_specimens": n,
+                        "kind": "surrogate", "source": src})
+    empty = n == 0
+    for i in np.flatnonzero(empty):
+        r = keys.iloc[i]
+        log.warning("no virtual specimen reached equilibrium at %s %s %g N*m: row left out",
+                    r["stage"], r["direction"], r["moment_nm"])
+    reduced = int(((n < n_specimens) & ~empty).sum())
+    if reduced:
+        log.warning("%d row(s) have fewer than %d specimens (non-converged specimens dropped)", reduced, n_specimens)
+    return out[~empty].reset_index(drop=True)
+
+
+# ---------------------------------------------------------------- in-vitro IDP surrogate (issue 4)
+def _fx_idp_per_newton(geometry, idp_formula, area_m2=18e-4):
+    """d IDP / d axial force [Pa/N] of the IDP formula (for the axial-preload effect)."""
+    if idp_formula == "paper1":
+        return 1.68 / geometry.levels["L4-L5"].disc_csa
+    return 0.85 / (area_m2 * 0.66)
+
+
+def idp_table(geometry, charset, seed, n_specimens=7, variation=None, noise_sd_mpa=0.02, effects=None,
+              cables=None, idp_formula="paper1", k_shear=None, max_iter=50, tol=1e-8):
+    """Surrogate L4-L5 IDP table (Wilke et al. 1996 layout: 7 muscle set-ups x 7 load cases, L2-S1).
+
+    Each specimen = ``virtual_specimen(geometry, charset, rng)`` (all four levels L2-L3..L5-S1 perturbed)
+    with ``rng`` from ``specimen_rngs(seed, n_specimens)``; its 49 scenarios are solved with
+    ``lumbar.l2s1.run_set`` and Gaussian measurement noise of ``noise_sd_mpa`` [MPa] is added per specimen
+    and scenario. ``effects``: optional {"muscle_setup/load_case": delta_mpa} ("*" matches any) added to
+    every specimen's IDP, for effects the model lacks (default none), or {name: value} of an IDP effect of
+    ``lumbar.effects`` (axial_preload, idp_moment_term, disc_load_share; hidden-effect fixtures).
+    Per scenario: mean and sample SD over the specimens that reached equilibrium; a specimen without
+    equilibrium is dropped from that row with a log line and ``n_specimens`` reduced; a row no specimen reached is left out (logged).
+    Columns: muscle_setup, load_case, idp_mean_mpa, idp_sd_mpa, n_specimens, kind (= "surrogate"), source.
+    """
+    import logging
+    import warnings
+
+    import pandas as pd
+
+    from .l2s1 import LEVELS, derive_cables, run_set
+
+    log = logging.getLogger(__name__)
+    n_specimens = int(n_specimens)
+    if n_specimens < 1:
+        raise ValueError(f"n_specimens must be >= 1, got {n_specimens}")
+    if not np.isfinite(noise_sd_mpa) or noise_sd_mpa < 0:
+        raise ValueError(f"noise_sd_mpa must be finite and >= 0 MPa, got {noise_sd_mpa}")
+    from . import effects as _fx
+    for key, delta in (effects or {}).items():
+        if key in _fx.EFFECTS:
+            _fx.check_effect(key, delta)
+            if "idp_invitro" not in _fx.EFFECTS[key].experiments or key not in _fx.effect_names(kind="idp"):
+                raise ValueError(f"effect {key!r} does not act on the IDP from the disc loads; IDP effects: "
+                                 f"{_fx.effect_names(kind='idp')}")
+    v = _variation(variation)
+    cables = derive_cables() if cables is None else cables
+    vals = []
+    for k, rng in enumerate(specimen_rngs(int(seed), n_specimens)):
+        geo_k, cs_k = virtual_specimen(geometry, charset, rng, v, levels=list(LEVELS))
+        sim, _ = run_set(geo_k, cs_k, cables, idp_formula=idp_formula, k_shear=k_shear, max_iter=max_iter, tol=tol)
+        idp = sim["idp_mpa"].to_numpy(float) + rng.normal(0.0, noise_sd_mpa, len(sim))
+        for key, delta in (effects or {}).items():
+            if key in _fx.EFFECTS:      # a discrepancy candidate acting on the IDP from the disc loads
+                idp = idp + _fx.idp_delta(key, float(delta), sim["idp_mpa"].to_numpy(float) * 1e6,
+                                          sim["disc_moment_sagittal_nm"].to_numpy(float),
+                                          _fx_idp_per_newton(geo_k, idp_formula)) / 1e6 - sim["idp_mpa"].to_numpy(float)
+                continue
+            ms, lc = (str(key).split("/") + ["*"])[:2]
+            hit = ((sim["muscle_setup"] == ms) | (ms == "*")) & ((sim["load_case"] == lc) | (lc == "*"))
+            idp = idp + np.where(hit.to_numpy(), float(delta), 0.0)
+        conv = sim["converged"].to_numpy(bool)
+        for i in np.flatnonzero(~conv):
+            log.warning("virtual specimen %d: no equilibrium at %s/%s; dropped from that row",
+                        k, sim["muscle_setup"].iat[i], sim["load_case"].iat[i])
+        vals.append(np.where(conv, idp, np.nan))
+    A = np.vstack(vals)
+    n = np.isfinite(A).sum(axis=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        mean = np.nanmean(A, 0)
+        sd = np.where(n > 1, np.nanstd(A, 0, ddof=1), 0.0)
+    src = (f"lumbar.virtual_experiment.idp_table(seed={int(seed)}, n_specimens={n_specimens}, "
+           f"noise_sd_mpa={noise_sd_mpa:g}, variation={dataclasses.asdict(v)}"
+           + (f", effects={dict(effects)}" if effects else "")
+           + f", idp_formula={idp_formula}); calibration model: geometry '{geometry.name}' L2-S1 + "
+             f"characteristic set '{charset.name}'")
+    out = pd.DataFrame({"muscle_setup": sim["muscle_setup"], "load_case": sim["load_case"],
+                        "idp_mean_mpa": mean, "idp_sd_mpa": sd, "n_specimens": n,
+                        "kind": "surrogate", "source": src})
+    empty = n == 0
+    for i in np.flatnonzero(empty):
+        log.warning("no virtual specimen reached equilibrium at %s/%s: row left out",
+                    out["muscle_setup"].iat[i], out["load_case"].iat[i])
+    reduced = int(((n < n_specimens) & ~empty).sum())
+    if reduced:
+        log.warning("%d IDP row(s) have fewer than %d specimens (non-converged specimens dropped)", reduced,
+                    n_specimens)
+    return out[~empty].reset_index(drop=True)
