@@ -414,8 +414,8 @@ def make_solver(model, cfg=None):
     """RedundancySolver from the config section ``muscle_model.solver`` (weights, iterations, tracking)."""
     from .muscles.redundancy import RedundancySolver, Weights
     cfg = cfg or {}
-    w = Weights(**{k: cfg[k] for k in ("activation", "fsu_load_per_n2", "tracking_per_deg2") if k in cfg}) \
-        if any(k in cfg for k in ("activation", "fsu_load_per_n2", "tracking_per_deg2")) else Weights()
+    keys = ("activation", "fsu_load_per_n2", "tracking_per_deg2", "length_scale_m")
+    w = Weights(**{k: cfg[k] for k in keys if k in cfg})
     return RedundancySolver(model, w, max_iter=cfg.get("max_iter", 150),
                             max_tracking_deg=cfg.get("max_tracking_deg", 1.0))
 

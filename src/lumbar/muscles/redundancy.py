@@ -19,7 +19,10 @@ Method: sequential quadratic programming with exact first derivatives, in two ph
   is eliminated exactly (J is invertible), ``dq = -J^-1 (Q + B da)``; the remaining bound-constrained linear
   least squares in ``da`` is solved exactly by :func:`box_lsq`. Steps are capped (1 mm, 0.02 rad) and
   accepted by an Armijo test on the L1 merit ``cost + mu |Q|_1`` over six step lengths evaluated as one
-  batch; if none decreases it while out of equilibrium, ``mu`` (below the equilibrium multipliers, so the
+  batch, each trial point first brought back onto the equilibrium manifold by up to ``restore_iter``
+  Newton steps on the poses with its activations fixed (a second-order correction: the QP step balances
+  the bodies only to first order, and on the curved manifold of an S-shaped spine holding a crate the
+  merit otherwise rejected every step length); if none decreases it while out of equilibrium, ``mu`` (below the equilibrium multipliers, so the
   step was no descent direction) is raised tenfold up to ``mu_max`` and the step retried. Stop when the QP's predicted cost decrease is below ``rel_cost_tol`` (relative) with a residual
   below ``polish_from``; a plain Newton polish on the poses (activations fixed) then brings the residual
   of every free body below ``tol`` (1e-8 N and N*m).
@@ -174,6 +177,12 @@ class RedundancySolver:
         self.rel_cost_tol = 1e-6     # stationarity: predicted cost decrease of the QP step, relative
         self.polish_from = 1e-3      # N, N*m: residual below which the final Newton polish takes over
         self.max_step_m, self.max_step_rad = 1e-3, 0.02   # per-iteration step limits of the poses
+        self.restore_iter = 4        # Newton corrections of each trial point back onto equilibrium
+        # start (cold): for thorax targets beyond start_min_deg, the free vertebrae are first put in
+        # equilibrium with the thorax held (a = 0, up to start_iter Newton iterations); nearer the reference
+        # posture the SQP starts from the reference pose directly (the passive spine under gravity alone
+        # stalls that Newton, which cost 5 s of a 6 s standing solve)
+        self.start_iter, self.start_min_deg = 40, 5.0
 
     # ------------------------------------------------------------------ pieces
     def _params(self, params, a, idx):
@@ -265,6 +274,33 @@ class RedundancySolver:
         dq = dq0 + S @ da
         return dq, da, pred, None
 
+    def _restore(self, x, R, a, params, idx):
+        """Second-order correction of trial points: Newton steps on the poses with the activations fixed,
+        back onto the equilibrium manifold (the SQP step satisfies equilibrium only to first order; without
+        the correction the L1 merit rejects good steps near curved parts of the manifold). A trial whose
+        Newton step grows (no nearby equilibrium) keeps its uncorrected pose (and its residual)."""
+        x, R = x.copy(), R.copy()
+        m = self.m
+        live = np.arange(len(x))
+        for _ in range(self.restore_iter):
+            if live.size == 0:
+                break
+            p = self._params(params, a[live], idx[live])
+            Q, J = m.evaluate(x[live], R[live], params=p)
+            n = 6 * m.nb
+            Qf = Q.reshape(-1, n)
+            small = np.abs(Qf).max(-1) > 1e-3 * self.tol
+            live = live[small]
+            if live.size == 0:
+                break
+            d = -np.linalg.solve(J.reshape(-1, n, n)[small], Qf[small][..., None])[..., 0].reshape(-1, m.nb, 6)
+            ok = (np.abs(d[..., :3]).max((-1, -2)) < 2 * self.max_step_m) & \
+                 (np.abs(d[..., 3:]).max((-1, -2)) < 2 * self.max_step_rad)
+            live, d = live[ok], d[ok]
+            x[live] += d[..., :3]
+            R[live] = so3.exp(d[..., 3:]) @ R[live]
+        return x, R
+
     # ------------------------------------------------------------------ driver
     def solve(self, target_flexion_deg, params, x0=None, R0=None, a0=None) -> PostureSolution:
         """One posture (``params`` for a batch of one; see :meth:`solve_batch`)."""
@@ -290,10 +326,14 @@ class RedundancySolver:
         x, R = np.array(x0, float), np.array(R0, float)
         a = np.zeros((B, nm)) if a0 is None else np.clip(np.array(a0, float), 0.0, 1.0)
         allidx = np.arange(B)
-        if x0 is None or a0 is None:   # start: equilibrium of the free vertebrae with the thorax held
-            res = solve(_ThoraxHeld(m), np.zeros((B, m.nb, 6)), x0=x, R0=R, params=self._params(params, a, allidx),
-                        max_iter=40, tol_force=1e-6, tol_moment=1e-6, retry_load_steps=())
-            x, R = res.x, res.R
+        far = np.flatnonzero(np.abs(targets) > self.start_min_deg) if (x0 is None or a0 is None) else []
+        if len(far) and self.start_iter:   # start: free vertebrae in equilibrium, thorax held
+            p = {k: (v[far] if isinstance(v, np.ndarray) and v.ndim and v.shape[0] == B else v)
+                 for k, v in params.items()}
+            p["activation"] = a[far]
+            res = solve(_ThoraxHeld(m), np.zeros((len(far), m.nb, 6)), x0=x[far], R0=R[far], params=p,
+                        max_iter=self.start_iter, tol_force=1e-6, tol_moment=1e-6, retry_load_steps=())
+            x[far], R[far] = res.x, res.R
         st = self._state(x, R, a, params, allidx, targets)
         D = np.full(B, self.trust0)
         mu = np.full(B, self.mu0)
@@ -335,6 +375,8 @@ class RedundancySolver:
             dqt = tt[:, None, None] * dq[rep]
             xn = x[act][rep] + dqt[..., :3]
             Rn = so3.exp(dqt[..., 3:]) @ R[act][rep]
+            if not held and self.restore_iter:
+                xn, Rn = self._restore(xn, Rn, an, params, act[rep])
             sn = self._state(xn, Rn, an, params, act[rep], targets[act][rep])
             iters[act] += 1
             m_old = self._merit({k: v[act] for k, v in st.items()}, mu[act], held)
@@ -426,9 +468,10 @@ class RedundancySolver:
                 msg[i] = f"SQP stopped after {self.max_iter} iterations without meeting its tolerances"
             if not eq:
                 msg[i] = msg[i] or "no equilibrium"
-            elif terr[i] > self.max_tracking_deg:
-                msg[i] = (f"thorax misses its target by {terr[i]:.2f} deg (> {self.max_tracking_deg} deg): "
-                          "the muscles cannot hold this posture")
+            if terr[i] > self.max_tracking_deg:
+                miss = (f"thorax misses its target by {terr[i]:.2f} deg (> {self.max_tracking_deg} deg): "
+                        "the muscles cannot hold this posture")
+                msg[i] = f"{miss}; {msg[i]}" if msg[i] else miss
             conv = bool(eq and terr[i] <= self.max_tracking_deg and (optimal[i] or self.accept_suboptimal))
             if not conv:
                 log.warning("posture %d (target %.1f deg) not converged: %s (residual %.1e N, %.1e N*m, "
