@@ -142,6 +142,40 @@ def test_activations_left_right_symmetric(model, baseline, posture):
     assert np.abs(sol.x[:, 1]).max() < 1e-6                    # m: no lateral shift of any vertebra
 
 
+def test_trial_point_correction_returns_to_equilibrium(model, solver, standing):
+    """The second-order correction of an SQP trial point (activations changed, pose from the linear
+    predictor) brings every free body back to equilibrium (Newton, quadratic: a few steps)."""
+    from lumbar.muscle_model import get_activity
+    F, P = model.load_arrays([get_activity("upright_standing")] * 2)
+    params = {"force_vec": F, "force_pt": P}
+    solver._B = 2
+    a = np.stack([standing.a, standing.a]) + np.array([[0.0], [0.002]])
+    x = np.stack([standing.x, standing.x])
+    R = np.stack([standing.R, standing.R])
+    x[1, 2] += 1e-4                       # a 0.1 mm offset of L3 on top
+    st0 = solver._state(x, R, a, params, np.arange(2), np.zeros(2))
+    assert np.abs(st0["Q"][1]).max() > 0.1      # the perturbed trial is far from equilibrium
+    res, keep = [], solver.restore_iter
+    for n_iter in (2, 8):
+        solver.restore_iter = n_iter
+        xr, Rr = solver._restore(x, R, a, params, np.arange(2))
+        res.append(np.abs(solver._state(xr, Rr, a, params, np.arange(2), np.zeros(2))["Q"]).max())
+    solver.restore_iter = keep
+    assert res[1] < 1e-8 < res[0]          # more Newton steps, closer (uncapped steps: no trial left out)
+
+
+def test_cold_standing_solve_starts_near_reference_and_converges(model):
+    """Near the reference posture the cold solve skips the held start (it stalled under gravity alone)
+    and still converges to the same equilibrium as the solve with the held start."""
+    from lumbar.muscle_model import make_solver, solve_postures
+    fast, held = make_solver(model, {"max_iter": 40}), make_solver(model, {"max_iter": 40})
+    held.start_min_deg = -1.0
+    s1, s2 = (solve_postures(model, s, ["upright_standing"])[0] for s in (fast, held))
+    assert s1.converged and s2.converged
+    assert np.abs(s1.a - s2.a).max() < 1e-3
+    assert np.abs(s1.x - s2.x).max() < 1e-5
+
+
 def test_unreachable_posture_is_flagged_not_silent(model, solver):
     """Specific tension 5 N/cm2 on all muscles cannot hold a 190 N crate 55 cm in front: flagged."""
     from lumbar.muscle_model import apply_parameter, solve_postures

@@ -135,34 +135,18 @@ def _atomic_png(path: Path, rgb: np.ndarray) -> None:
         Image.fromarray(np.ascontiguousarray(rgb[..., :3]).astype(np.uint8)).save(f, format="PNG")
 
 
-def _render_pyvista(items, path: Path) -> None:
+def pyvista_views(path: Path, title: str, views, draw) -> None:
+    """Off-screen pyvista figure of one row of views (label, camera): ``draw(plotter)`` adds the scene to
+    each; a title per view; the PNG is written atomically, and a blank render raises."""
     import pyvista as pv
 
-    p = pv.Plotter(off_screen=True, window_size=WINDOW_SIZE, shape=(1, 2), border=False)
+    p = pv.Plotter(off_screen=True, window_size=WINDOW_SIZE, shape=(1, len(views)), border=False)
     try:
-        for col, (label, camera) in enumerate(_views(items)):
+        for col, (label, camera) in enumerate(views):
             p.subplot(0, col)
             p.set_background("white")
-            for name, v, f, colour in items["meshes"]:
-                faces = np.hstack([np.full((len(f), 1), 3, np.int64), f]).ravel()
-                p.add_mesh(pv.PolyData(v, faces), color=colour, opacity=0.35, smooth_shading=False)
-            p.add_mesh(pv.Sphere(radius=1.5, center=items["centre"]), color="black")
-            if len(items["superior"]):
-                p.add_points(items["superior"], color="red", point_size=9, render_points_as_spheres=True)
-            if len(items["inferior"]):
-                p.add_points(items["inferior"], color="blue", point_size=9, render_points_as_spheres=True)
-            for grid in items["surfaces"].values():
-                p.add_mesh(pv.StructuredGrid(grid[..., 0], grid[..., 1], grid[..., 2]),
-                           color="orange", opacity=0.6)
-            for up_pts, lo_pts in items["fibres"]:
-                n = len(up_pts)
-                if n == 0:
-                    continue
-                pts = np.empty((2 * n, 3))
-                pts[0::2], pts[1::2] = up_pts, lo_pts
-                lines = np.hstack([np.full((n, 1), 2), np.arange(2 * n).reshape(n, 2)]).ravel()
-                p.add_mesh(pv.PolyData(pts, lines=lines).tube(radius=0.35), color=LIGAMENT_COLOUR)
-            p.add_text(f"{items['title']}: {label}", font_size=11, color="black")
+            draw(p)
+            p.add_text(f"{title}: {label}", font_size=11, color="black")
             p.camera_position = list(camera)
             p.camera.view_angle = 30.0
         img = p.screenshot(return_img=True)
@@ -171,6 +155,33 @@ def _render_pyvista(items, path: Path) -> None:
     if float(np.asarray(img, float).std()) < 1.0:
         raise RuntimeError("pyvista produced a blank image")
     _atomic_png(path, img)
+
+
+def _render_pyvista(items, path: Path) -> None:
+    import pyvista as pv
+
+    def draw(p):
+        for name, v, f, colour in items["meshes"]:
+            faces = np.hstack([np.full((len(f), 1), 3, np.int64), f]).ravel()
+            p.add_mesh(pv.PolyData(v, faces), color=colour, opacity=0.35, smooth_shading=False)
+        p.add_mesh(pv.Sphere(radius=1.5, center=items["centre"]), color="black")
+        if len(items["superior"]):
+            p.add_points(items["superior"], color="red", point_size=9, render_points_as_spheres=True)
+        if len(items["inferior"]):
+            p.add_points(items["inferior"], color="blue", point_size=9, render_points_as_spheres=True)
+        for grid in items["surfaces"].values():
+            p.add_mesh(pv.StructuredGrid(grid[..., 0], grid[..., 1], grid[..., 2]),
+                       color="orange", opacity=0.6)
+        for up_pts, lo_pts in items["fibres"]:
+            n = len(up_pts)
+            if n == 0:
+                continue
+            pts = np.empty((2 * n, 3))
+            pts[0::2], pts[1::2] = up_pts, lo_pts
+            lines = np.hstack([np.full((n, 1), 2), np.arange(2 * n).reshape(n, 2)]).ravel()
+            p.add_mesh(pv.PolyData(pts, lines=lines).tube(radius=0.35), color=LIGAMENT_COLOUR)
+
+    pyvista_views(path, items["title"], _views(items), draw)
 
 
 def _render_matplotlib(items, path: Path) -> None:

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .render import LIGAMENT_COLOUR, MM, WINDOW_SIZE, _atomic_png, mpl_view, offscreen_available, save_png_closing
+from .render import LIGAMENT_COLOUR, MM, WINDOW_SIZE, mpl_view, offscreen_available, pyvista_views, save_png_closing
 
 __all__ = ["render_spine"]
 
@@ -66,31 +66,20 @@ def _lines(pairs):
 def _render_pyvista(items, path):
     import pyvista as pv
 
-    p = pv.Plotter(off_screen=True, window_size=WINDOW_SIZE, shape=(1, 2), border=False)
-    try:
-        for col, (label, camera) in enumerate(_views(items)):
-            p.subplot(0, col)
-            p.set_background("white")
-            for _, v, f in items["meshes"]:
-                faces = np.hstack([np.full((len(f), 1), 3, np.int64), f]).ravel()
-                p.add_mesh(pv.PolyData(v, faces), color=BONE, opacity=0.35)
-            p.add_points(items["centroids"], color="black", point_size=12, render_points_as_spheres=True)
-            fib = [(a, b) for up, lo in items["fibres"] for a, b in zip(up, lo)]
-            if fib:
-                pts, lines = _lines(fib)
-                p.add_mesh(pv.PolyData(pts, lines=lines).tube(radius=0.35), color=LIGAMENT_COLOUR)
-            if items["cables"]:
-                pts, lines = _lines(items["cables"])
-                p.add_mesh(pv.PolyData(pts, lines=lines).tube(radius=0.7), color=CABLE_COLOUR)
-            p.add_text(f"{items['title']}: {label}", font_size=11, color="black")
-            p.camera_position = list(camera)
-            p.camera.view_angle = 30.0
-        img = p.screenshot(return_img=True)
-    finally:
-        p.close()
-    if float(np.asarray(img, float).std()) < 1.0:
-        raise RuntimeError("pyvista produced a blank image")
-    _atomic_png(path, img)
+    def draw(p):
+        for _, v, f in items["meshes"]:
+            faces = np.hstack([np.full((len(f), 1), 3, np.int64), f]).ravel()
+            p.add_mesh(pv.PolyData(v, faces), color=BONE, opacity=0.35)
+        p.add_points(items["centroids"], color="black", point_size=12, render_points_as_spheres=True)
+        fib = [(a, b) for up, lo in items["fibres"] for a, b in zip(up, lo)]
+        if fib:
+            pts, lines = _lines(fib)
+            p.add_mesh(pv.PolyData(pts, lines=lines).tube(radius=0.35), color=LIGAMENT_COLOUR)
+        if items["cables"]:
+            pts, lines = _lines(items["cables"])
+            p.add_mesh(pv.PolyData(pts, lines=lines).tube(radius=0.7), color=CABLE_COLOUR)
+
+    pyvista_views(path, items["title"], _views(items), draw)
 
 
 def _render_matplotlib(items, path):
