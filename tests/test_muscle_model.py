@@ -176,6 +176,46 @@ def test_cold_standing_solve_starts_near_reference_and_converges(model):
     assert np.abs(s1.x - s2.x).max() < 1e-5
 
 
+def test_in_situ_standing_gives_in_situ_sarcomere_lengths_in_standing():
+    """in_situ_posture='standing': solved upright standing has every fascicle at its in-situ sarcomere
+    length (to the small pose change of the second solve), unlike the as-segmented reference."""
+    from lumbar.muscle_model import LumbarMuscleModel, make_solver, solve_postures
+    ratios = {}
+    for where in ("reference", "standing"):
+        m = LumbarMuscleModel(in_situ_posture=where)
+        sol = solve_postures(m, make_solver(m, {"max_iter": 40}), ["upright_standing"])[0]
+        assert sol.converged, sol.message
+        sl = m.muscle_forces(sol.x[None], sol.R[None], sol.a)[4][0]
+        ratios[where] = sl / m.props.in_situ_sl_um
+    assert np.abs(ratios["standing"] - 1).max() < 0.02
+    assert np.abs(ratios["reference"] - 1).max() > 0.03
+
+
+def test_intra_abdominal_pressure_unloads_the_spine(model):
+    """An IAP force on the thorax (upward, anterior to L1) takes load off the lumbar levels: with 200 N the
+    L4-L5 compression in upright standing drops, and the solution balances the IAP force too (paper 2,
+    Sect. 2.1 option)."""
+    from lumbar.muscle_model import LumbarMuscleModel, make_solver, solve_postures
+    comp = []
+    for iap in (0.0, 100.0):
+        m = LumbarMuscleModel(iap_force_n=iap)
+        sol = solve_postures(m, make_solver(m, {"max_iter": 40}), ["upright_standing"])[0]
+        assert sol.converged, sol.message
+        F, P = m.load_arrays(["upright_standing"])
+        Q, _ = m.evaluate(sol.x[None], sol.R[None], jacobian=False,
+                          params={"activation": sol.a[None], "force_vec": F, "force_pt": P,
+                                  "forces": m.follower_forces()})
+        assert np.abs(Q).max() < 1e-6
+        comp.append(m.segment_loads(sol.x[None], sol.R[None]).query("level == 'L4-L5'")["compressive_n"].iloc[0])
+    assert comp[1] < comp[0] - 20.0
+
+
+def test_reject_bad_in_situ_posture():
+    from lumbar.muscle_model import LumbarMuscleModel
+    with pytest.raises(ValueError, match="in_situ_posture must be one of"):
+        LumbarMuscleModel(in_situ_posture="supine")
+
+
 def test_unreachable_posture_is_flagged_not_silent(model, solver):
     """Specific tension 5 N/cm2 on all muscles cannot hold a 190 N crate 55 cm in front: flagged."""
     from lumbar.muscle_model import apply_parameter, solve_postures

@@ -37,6 +37,7 @@ FREE = ("L1", "L2", "L3", "L4", "L5")
 DATA = Path(__file__).resolve().parents[2] / "data"
 LENGTH_SCALE = 0.05   # m, moments -> forces in the FSU-load cost
 PROP_FIELDS = ("spt_pa", "k_pa", "ssl_um", "in_situ_sl_um", "pennation_rad")
+IN_SITU_POSTURES = ("reference", "standing")   # where the fascicles have their in-situ sarcomere length
 
 
 @dataclass(frozen=True)
@@ -102,7 +103,7 @@ class LumbarMuscleModel:
 
     def __init__(self, geometry=None, charset=None, muscle_set: MuscleSet | None = None, body_mass_kg=71.0,
                  anthropometry_csv=None, iap_force_n=0.0, characteristics="calibrated", data_dir=None,
-                 symmetric_passive=True):
+                 symmetric_passive=True, in_situ_posture="reference"):
         from .characteristics import load_characteristic_set
         from .geometry import load_geometry
         from .geometry.symmetry import mirror_average
@@ -110,6 +111,8 @@ class LumbarMuscleModel:
             raise ValueError(f"body_mass_kg must be > 0, got {body_mass_kg}")
         if not iap_force_n >= 0:
             raise ValueError(f"iap_force_n must be >= 0, got {iap_force_n}")
+        if in_situ_posture not in IN_SITU_POSTURES:
+            raise ValueError(f"in_situ_posture must be one of {IN_SITU_POSTURES}, got {in_situ_posture!r}")
         self.geo = geometry if geometry is not None else load_geometry("default")
         self.symmetric_passive = bool(symmetric_passive)
         if self.symmetric_passive:
@@ -151,6 +154,24 @@ class LumbarMuscleModel:
         self.iap_force_n = iap_force_n
         self.thorax = 0
         self.l5s1_centre = np.asarray(self.geo.levels["L5-S1"].disc_centre, float)
+        self.in_situ_posture = in_situ_posture
+        if in_situ_posture == "standing":
+            self.anchor_in_situ("upright_standing")
+
+    def anchor_in_situ(self, activity="upright_standing", iterations=2):
+        """Give every fascicle its in-situ sarcomere length in the solved ``activity`` posture instead of the
+        as-segmented reference pose (the paper's model has the multifidus at its in-situ 2.27 um in upright
+        standing, Sect. 3.2.2): the path lengths of that solution become ``l_ref``. The solution depends a
+        little on ``l_ref`` (active force-length), so this is repeated ``iterations`` times."""
+        solver = make_solver(self)
+        for _ in range(iterations):
+            sol = solve_postures(self, solver, [activity])[0]
+            if not sol.converged:
+                raise RuntimeError(f"in-situ posture {activity!r} did not converge: {sol.message}")
+            L, _ = self.paths.lengths(sol.x[None], sol.R[None], gradient=False)
+            self.l_ref = L[0].copy()
+            self.props = self.props.with_(l_ref_m=L[0].copy())
+        return sol
 
     def _segments(self, df):
         out = []
@@ -178,10 +199,16 @@ class LumbarMuscleModel:
             z = self.segments[1][3][2]
             p = np.array([self.l5s1_centre[0] + act.crate_anterior_m, 0.0, z])
             f.append((self.thorax, np.array([0, 0, -act.crate_n]), p, False))
-        if self.iap_force_n:
-            p = self.c[0] + np.array([0.06, 0, 0.05])   # below the diaphragm centre, anterior to L1
-            f.append((self.thorax, np.array([0, 0, self.iap_force_n]), p, True))
-        return PointForces(f)
+        return PointForces(f + list(self.follower_forces()))
+
+    def follower_forces(self):
+        """The intra-abdominal pressure force (``iap_force_n``, follower on the thorax, below the diaphragm
+        centre anterior to L1) as a :class:`PointForces`; empty when off. Passed to the solver as ``forces``
+        beside the per-activity arrays of :meth:`load_arrays`."""
+        if not self.iap_force_n:
+            return PointForces([])
+        p = self.c[0] + np.array([0.06, 0, 0.05])
+        return PointForces([(self.thorax, np.array([0, 0, self.iap_force_n]), p, True)])
 
     def upper_body_weight_n(self):
         return sum(m for _, _, m, _ in self.segments) * G
@@ -190,7 +217,8 @@ class LumbarMuscleModel:
     # ------------------------------------------------------------------ per-scenario inputs
     def load_arrays(self, activities):
         """Point loads of each activity as arrays: forces (B, nf, 3) [N] and points (B, nf, 3) [m] on the
-        bodies ``self.load_bodies`` (weights, crate slot with 0 N when there is no crate, IAP follower)."""
+        bodies ``self.load_bodies`` (weights, crate slot with 0 N when there is no crate); the IAP follower
+        force is :meth:`follower_forces`."""
         segs = self.segments
         nf = len(segs) + 1
         F = np.zeros((len(activities), nf, 3))
@@ -426,6 +454,8 @@ def solve_postures(model, solver, activities, props_list=None, start=None):
     acts = [get_activity(a) for a in activities]
     F, P = model.load_arrays(acts)
     params = {"force_vec": F, "force_pt": P}
+    if model.iap_force_n:
+        params["forces"] = model.follower_forces()
     if props_list is not None:
         params["prop_stack"] = model.props_stack(props_list)
     kw = {}

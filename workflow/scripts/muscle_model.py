@@ -60,7 +60,9 @@ SAVE = dict(dpi=150, metadata={"Software": None})
 
 def _model(p):
     return mm.LumbarMuscleModel(body_mass_kg=p["body_mass_kg"], characteristics=p["characteristics"],
-                                symmetric_passive=p.get("symmetric_passive", True))
+                                symmetric_passive=p.get("symmetric_passive", True),
+                                in_situ_posture=p.get("in_situ_posture", "reference"),
+                                iap_force_n=p.get("iap_force_n", 0.0))
 
 
 def _save(fig, path):

@@ -400,6 +400,10 @@ class RedundancySolver:
                     stepa = ts[j] * np.abs(da[k]).max()
                     stepq = ts[j] * np.abs(dq[k]).max()
                     resid = np.abs(st["Q"][i]).max()
+                    if not held and resid < self.tol:
+                        # back at equilibrium: a merit weight raised far from it would let the restored
+                        # trials' round-off residual (mu * |Q|_1) outweigh small true cost decreases
+                        mu[i] = self.mu0
                     hist[i].append(float(st["c"][i]))
                     h = hist[i]
                     stalled = False
