@@ -342,7 +342,6 @@ class RedundancySolver:
         iters = np.zeros(B, int)
         warm = [None] * B
         msg = [""] * B
-        hist = [[] for _ in range(B)]
         def iterate(held, act):
             dq = np.zeros((act.size, m.nb, 6))
             da = np.zeros((act.size, nm))
@@ -404,11 +403,6 @@ class RedundancySolver:
                         # back at equilibrium: a merit weight raised far from it would let the restored
                         # trials' round-off residual (mu * |Q|_1) outweigh small true cost decreases
                         mu[i] = self.mu0
-                    hist[i].append(float(st["c"][i]))
-                    h = hist[i]
-                    stalled = False
-                    if stalled:
-                        done[i] = optimal[i] = True     # cost stationary to rel_cost_tol over 5 accepted steps
                     if held:
                         mom = np.abs(st["Q"][i][self.rot]).max()
                         if stepa < 10 * self.step_tol and mom < 1e-2:
@@ -439,8 +433,6 @@ class RedundancySolver:
             if act.size == 0:
                 break
             iterate(True, act)
-        for h in hist:
-            h.clear()
         for it in range(self.max_iter):
             act = np.flatnonzero(~done)
             if act.size == 0:
