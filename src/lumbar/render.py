@@ -248,13 +248,21 @@ def render_fsu(geometry, level: str, path, surfaces=None, backend: str = "auto")
     ``lumbar.elements.facet.fit_surface`` if available. backend: "auto" | "pyvista" |
     "matplotlib". Returns the backend actually used.
     """
+    check_backend(backend)
+    return render_with(backend, _items(geometry, level, surfaces), Path(path), _render_pyvista, _render_matplotlib)
+
+
+def check_backend(backend):
     if backend not in ("auto", "pyvista", "matplotlib"):
         raise ValueError(f"backend must be auto, pyvista or matplotlib, not {backend!r}")
-    path = Path(path)
-    items = _items(geometry, level, surfaces)
+
+
+def render_with(backend, items, path: Path, pyvista_fn, matplotlib_fn) -> str:
+    """pyvista off-screen where asked or available (``auto``), else (or if it fails under ``auto``) the
+    matplotlib 3D fallback, with a warning; returns the backend used."""
     if backend == "pyvista" or (backend == "auto" and offscreen_available()):
         try:
-            _render_pyvista(items, path)
+            pyvista_fn(items, path)
             return "pyvista"
         except Exception as exc:
             if backend == "pyvista":
@@ -264,5 +272,5 @@ def render_fsu(geometry, level: str, path, surfaces=None, backend: str = "auto")
         log.warning("pyvista cannot render off-screen here (no EGL/OSMesa?); "
                     "falling back to matplotlib 3D. On Debian: apt-get install libegl1 libgl1-mesa-dri "
                     "or libosmesa6.")
-    _render_matplotlib(items, path)
+    matplotlib_fn(items, path)
     return "matplotlib"

@@ -8,16 +8,15 @@ without time metadata).
 """
 from __future__ import annotations
 
-import logging
 from pathlib import Path
 
 import numpy as np
 
-from .render import LIGAMENT_COLOUR, MM, WINDOW_SIZE, mpl_view, offscreen_available, pyvista_views, save_png_closing
+from .render import (LIGAMENT_COLOUR, MM, WINDOW_SIZE, check_backend, mpl_view, pyvista_views, render_with,
+                     save_png_closing)
 
 __all__ = ["render_spine"]
 
-log = logging.getLogger(__name__)
 CABLE_COLOUR = "#d62728"
 BONE = "#d9c7a3"
 
@@ -111,19 +110,6 @@ def _render_matplotlib(items, path):
 def render_spine(geometry, levels, path, cables=None, cable_draw_m=0.04, backend="auto") -> str:
     """Render the vertebrae of ``levels`` with ligaments and ``cables`` (a ``lumbar.l2s1`` cable table with
     model_x/y/z_m and dir_x/y/z) to PNG. Returns the backend used."""
-    if backend not in ("auto", "pyvista", "matplotlib"):
-        raise ValueError(f"backend must be auto, pyvista or matplotlib, not {backend!r}")
-    path = Path(path)
-    items = _items(geometry, list(levels), cables, cable_draw_m)
-    if backend == "pyvista" or (backend == "auto" and offscreen_available()):
-        try:
-            _render_pyvista(items, path)
-            return "pyvista"
-        except Exception as exc:
-            if backend == "pyvista":
-                raise
-            log.warning("pyvista rendering failed (%s); falling back to matplotlib", exc)
-    elif backend == "auto":
-        log.warning("pyvista cannot render off-screen here (no EGL/OSMesa?); falling back to matplotlib 3D")
-    _render_matplotlib(items, path)
-    return "matplotlib"
+    check_backend(backend)
+    return render_with(backend, _items(geometry, list(levels), cables, cable_draw_m), Path(path), _render_pyvista,
+                       _render_matplotlib)
