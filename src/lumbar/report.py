@@ -144,6 +144,15 @@ def fmt(v, digits: int = 4) -> str:
     return str(v)
 
 
+def _reference_text(section: dict, noise: str) -> str:
+    """What a stage is compared with, from its config section: the measured table it names, or the SURROGATE
+    of virtual specimens (count, generator set and ``noise``, e.g. "noise SD 0.5 deg")."""
+    if section.get("measured_table"):
+        return f"the measured table {section.get('measured_table')}"
+    return (f"a SURROGATE of {fmt(section.get('n_specimens'))} virtual specimens of the "
+            f"'{fmt(section.get('generator_set'))}' set ({noise})")
+
+
 def _flatten(d, prefix="") -> list[tuple[str, Any]]:
     out = []
     for k in d:
@@ -439,10 +448,7 @@ class _Builder:
             f"as outliers. Random seed {fmt(c('seed'))}."))
         sr = c("stepwise_reduction", default={}) or {}
         if sr:
-            ref = (f"the measured table {sr.get('measured_table')}" if sr.get("measured_table") else
-                   f"a SURROGATE of {fmt(sr.get('n_specimens'))} virtual specimens of the "
-                   f"'{fmt(sr.get('generator_set'))}'"
-                   f" set (noise SD {fmt(sr.get('noise_sd_deg'))} deg, seed {fmt(c('seed'))})")
+            ref = _reference_text(sr, f"noise SD {fmt(sr.get('noise_sd_deg'))} deg, seed {fmt(c('seed'))}")
             self.doc.add(Para(
                 f"Stepwise reduction (paper 1, Sect. 2.1-2.2): calibration in reverse removal order and forward "
                 f"simulation at {fmt(sr.get('moments_nm'))} N*m, against {ref}; disc-only rows "
@@ -451,10 +457,7 @@ class _Builder:
                 f"rows without a range use mean +- {fmt(sr.get('outlier_tolerance_deg'))} deg."))
         l2 = c("l2s1", default={}) or {}
         if l2:
-            ref = (f"the measured table {l2.get('measured_table')}" if l2.get("measured_table") else
-                   f"a SURROGATE of {fmt(l2.get('n_specimens'))} virtual specimens of the "
-                   f"'{fmt(l2.get('generator_set'))}'"
-                   f" set (noise SD {fmt(l2.get('noise_sd_mpa'))} MPa)")
+            ref = _reference_text(l2, f"noise SD {fmt(l2.get('noise_sd_mpa'))} MPa")
             self.doc.add(Para(
                 f"L2-S1 intradiscal pressure (paper 1, Sect. 2.3): sets {fmt(l2.get('sets'))}, moments "
                 f"+-{fmt(l2.get('moment_nm'))} N*m on L2, wire cables from {fmt(l2.get('cables'))}, IDP formula "
