@@ -222,6 +222,7 @@ def test_unreachable_posture_is_flagged_not_silent(model, solver):
     props = apply_parameter(model.props, model.ms, "spt_n_per_cm2", 5.0, "ALL")
     sol = solve_postures(model, solver, ["crate_far"], [props])[0]
     assert not sol.converged and sol.message
+    assert not sol.reached and sol.tracking_error_deg > 1.0      # a red star, not an uncertified optimum
 
 
 def test_sensitivity_directions(model, solver, standing):
@@ -247,6 +248,53 @@ def test_sensitivity_directions(model, solver, standing):
     pen = ok[ok["parameter"] == "pennation_deg"]
     assert np.all(np.abs(pen["idp_mpa"] / base - 1) < 0.05)
     assert "negligible" in out[out["parameter"] == "pennation_deg"]["paper_change"].iloc[0]
+    # the mechanism: passive extensor force appears with the short slack length (none at baseline)
+    assert r["extensor_passive_n"].iloc[0] > 10.0 > pen["extensor_passive_n"].max()
+
+
+def test_sensitivity_direction_classification():
+    """Each paper statement gets the direction it asserts; a posture not reached counts as not reached, a
+    reached one whose optimum is not certified keeps its direction (marked); an increase needs more than 5 %,
+    "unchanged" statements use their own tolerance."""
+    from lumbar.muscle_model import paper_direction, sensitivity_directions
+    assert paper_direction("IDP doubled (Sect. 3.2.1)") == "increase"
+    assert paper_direction("36 deg flexion not reached (Sect. 3.2.1)") == "not_reached"
+    assert paper_direction("change <= 20% (Sect. 3.2.2)") == "unchanged"
+    assert paper_direction("") == ""
+    df = pd.DataFrame({"parameter": "x", "value": 1.0, "ssl_um": np.nan, "group_scope": "MUL", "posture": "standing",
+                       "paper_change": ["IDP doubled (Sect. 3.2.1)", "IDP doubled (Sect. 3.2.1)",
+                                        "36 deg flexion not reached (Sect. 3.2.1)", "change <= 20% (Sect. 3.2.2)",
+                                        "negligible (Sect. 3.2.5)", "negligible (Sect. 3.2.5)", "",
+                                        "36 deg flexion not reached (Sect. 3.2.1)"],
+                       "change_pct": [95.0, 3.0, 40.0, -15.0, -6.0, 4.9, 50.0, 12.0],
+                       "converged": [True, True, False, True, True, True, True, False],
+                       "reached": [True, True, False, True, True, True, True, True]})
+    d = sensitivity_directions(df)
+    assert len(d) == 7
+    assert d["simulated_direction"].tolist() == ["increase", "unchanged", "not_reached", "unchanged", "decrease",
+                                                 "unchanged", "increase"]
+    assert d["agrees"].tolist() == [True, False, True, True, False, True, False]
+    assert d["certified"].tolist() == [True, True, False, True, True, True, False]
+
+
+def test_capacity_check_balances_and_scales(model, standing):
+    """At a converged posture the sagittal moments on the part above every level (external loads, passive and
+    active fascicles, the level's tissues) sum to zero; moving the 190 N crate 30 cm further forward adds
+    190 N x 0.30 m at every level; doubling the specific tension doubles the active extension capacity and
+    halves the demand ratio, leaving the needed specific tension unchanged."""
+    from lumbar.muscle_model import capacity_check
+    c0 = capacity_check(model, standing.x, standing.R, "upright_standing", standing.a)
+    assert np.abs(c0["balance_nm"]).max() < 1e-4
+    assert (c0["extension_capacity_nm"] > 20).all() and (c0["flexion_capacity_nm"] > 20).all()
+    near = capacity_check(model, standing.x, standing.R, "crate_close")
+    far = capacity_check(model, standing.x, standing.R, "crate_far")
+    np.testing.assert_allclose(far["external_moment_nm"] - near["external_moment_nm"], 190.0 * 0.30, rtol=1e-9)
+    assert (far["active_muscle_moment_nm"] == 0).all()
+    strong = model.props.with_(spt_pa=2.0 * model.props.spt_pa)
+    c2 = capacity_check(model, standing.x, standing.R, "crate_far", props=strong)
+    np.testing.assert_allclose(c2["extension_capacity_nm"], 2.0 * far["extension_capacity_nm"], rtol=1e-12)
+    np.testing.assert_allclose(c2["passive_muscle_moment_nm"], far["passive_muscle_moment_nm"], rtol=1e-12)
+    np.testing.assert_allclose(c2["spt_needed_n_per_cm2"], far["spt_needed_n_per_cm2"], rtol=1e-12)
 
 
 def test_reject_bad_in_vivo_table(tmp_path):
@@ -271,3 +319,21 @@ def test_invalid_solver_settings_rejected(model):
         RedundancySolver(model, tol=1e-3)
     with pytest.raises(ValueError, match="parameter"):
         sensitivity_rows("stiffness", None, [1.0], ["ALL"], ["standing"])
+
+
+def test_validation_metrics_with_and_without_flagged_postures(model, baseline):
+    """R2/RMSE are over converged activities only; r2_all/rmse_all_mpa add the IDP of flagged postures."""
+    from dataclasses import replace
+
+    from lumbar.muscle_model import validation
+    st, fl = baseline["standing"], baseline["flexion"]
+    sols = [st, fl, st, replace(fl, converged=False)]
+    names = ["upright_standing", "flexion_36deg", "crate_close", "crate_far"]
+    iv = pd.DataFrame({"activity": ["relaxed_standing", "flexion_36deg", "crate_close_chest", "crate_far_60cm"],
+                       "idp_mpa": [0.5, 1.1, 1.0, 0.2], "source": "x", "kind": "x"})
+    _, val, m = validation(model, sols, names, iv)
+    assert (m["n"], m["n_total"]) == (3, 4)
+    ok = val[val["converged"]]
+    assert m["r2"] == pytest.approx(np.corrcoef(ok["idp_sim_mpa"], ok["idp_in_vivo_mpa"])[0, 1] ** 2)
+    assert m["r2_all"] == pytest.approx(np.corrcoef(val["idp_sim_mpa"], val["idp_in_vivo_mpa"])[0, 1] ** 2)
+    assert m["rmse_all_mpa"] > m["rmse_mpa"]      # the flagged row (in vivo 0.2 MPa) is far off

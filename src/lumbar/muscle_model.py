@@ -495,6 +495,91 @@ def flexion_relaxation(model, sols, names):
     return pd.DataFrame(rows)
 
 
+def capacity_check(model, x, R, activity, a=None, props=None) -> pd.DataFrame:
+    """Sagittal moment balance of the part above each level at one pose: can the muscles hold it?
+
+    Per level, moments (flexion +, about +y, world frame) about the disc centre at the pose ``x, R``
+    (one pose: (nb, 3), (nb, 3, 3)) of everything acting on the vertebrae above the level:
+    ``external_moment_nm`` (weights, crate, IAP of ``activity``), ``passive_muscle_moment_nm`` (passive
+    fascicle forces), ``active_muscle_moment_nm`` (active forces at activations ``a``, zero without),
+    ``intervertebral_moment_nm`` (the level's disc, facets and ligaments). At static equilibrium the four
+    sum to zero (``balance_nm``; the levels above act internally). The capacity columns are the largest
+    extension and flexion moments the active fascicles can add at a = 1 (each fascicle counted on the side
+    its moment arm falls at this pose). ``demand_ratio`` = (external + passive muscle moment) / extension
+    capacity: above 1 the fascicles cannot hold the load without the intervertebral tissues or posture
+    change; the active capacity scales with specific tension, so ``spt_needed_n_per_cm2`` = mean SpT x
+    ``demand_ratio`` is the specific tension at which the extensors alone would just hold it."""
+    props = props or model.props
+    x, R = np.asarray(x, float)[None], np.asarray(R, float)[None]
+    act = get_activity(activity)
+    L, Gd = model.paths.lengths(x, R, gradient=True)
+    a1 = np.ones((1, model.ms.n))
+    _, _, act1, pas = props.tension(L, a1)
+    a = np.zeros(model.ms.n) if a is None else np.asarray(a, float)
+    F, P = model.load_arrays([act])
+    loads = [(b, F[0, k], P[0, k], False) for k, b in enumerate(model.load_bodies)] + list(model.follower_forces())
+    FL, _ = model.level_loads(x, R)
+    rows = []
+    for k, lv in enumerate(model.levels):
+        lev = model.geo.levels[lv]
+        up, lo = model.body_index[lev.upper], model.body_index[lev.lower]
+        above = np.arange(up + 1)          # FREE is ordered L1 (with the thorax) .. L5
+        Rl = R[0, lo] if lo >= 0 else np.eye(3)
+        cl = model.c[lo] if lo >= 0 else np.asarray(model.geo.vertebrae[lev.lower].centroid)
+        xl = x[0, lo] if lo >= 0 else cl
+        pd_ = xl + Rl @ (np.asarray(lev.disc_centre) - cl)
+        # generalised force of a unit tension on the bodies above (force at x_b, moment about x_b)
+        g = -Gd[0][:, above]                                        # (nm, nab, 6)
+        unit = g[..., 4] + np.cross(x[0, above] - pd_, g[..., :3])[..., 1]
+        unit = unit.sum(axis=1)                                     # (nm,) moment per N of tension
+        m_act1 = unit * act1[0]
+        ext_cap = float(-m_act1[m_act1 < 0].sum())
+        flex_cap = float(m_act1[m_act1 > 0].sum())
+        m_pas = float(unit @ pas[0])
+        m_act = float(unit @ (a * act1[0]))
+        m_ext = 0.0
+        for b, f, s, follower in loads:
+            if b > up:
+                continue
+            fw = R[0, b] @ f if follower else np.asarray(f, float)
+            pw = x[0, b] + R[0, b] @ (np.asarray(s, float) - model.c[b])
+            m_ext += float(np.cross(pw - pd_, fw)[1])
+        f, mom = FL[0, k, :3], FL[0, k, 3:]
+        m_iv = float((mom + np.cross(x[0, up] - pd_, f))[1])
+        demand = m_ext + m_pas
+        ratio = demand / ext_cap if ext_cap > 0 else np.inf
+        rows.append({"activity": act.name, "level": lv, "external_moment_nm": m_ext,
+                     "passive_muscle_moment_nm": m_pas, "active_muscle_moment_nm": m_act,
+                     "intervertebral_moment_nm": m_iv, "balance_nm": m_ext + m_pas + m_act + m_iv,
+                     "extension_capacity_nm": ext_cap, "flexion_capacity_nm": flex_cap,
+                     "demand_ratio": ratio,
+                     "spt_needed_n_per_cm2": float(np.mean(props.spt_pa)) / N_PER_CM2 * ratio})
+    return pd.DataFrame(rows)
+
+
+def capacity_table(model, sols, names) -> pd.DataFrame:
+    """:func:`capacity_check` of every solved activity at its own solution (column ``pose``); an activity that
+    did not converge is also checked at the pose of a converged activity with the same thorax target (its
+    loads on that posture, no activations): what the muscles would need to hold the target posture."""
+    out = []
+    for name, s in zip(names, sols):
+        d = capacity_check(model, s.x, s.R, name, s.a)
+        d.insert(1, "pose", "own solution")
+        d.insert(2, "converged", s.converged)
+        out.append(d)
+        if s.converged:
+            continue
+        tgt = get_activity(name).thorax_flexion_deg
+        for other, so in zip(names, sols):
+            if so.converged and get_activity(other).thorax_flexion_deg == tgt:
+                d = capacity_check(model, so.x, so.R, name)
+                d.insert(1, "pose", f"{other} solution")
+                d.insert(2, "converged", s.converged)
+                out.append(d)
+                break
+    return pd.concat(out, ignore_index=True)
+
+
 def validation(model, sols, names, in_vivo: pd.DataFrame, area_m2=18e-4):
     """Table 1 analog, Fig. 3 table, metrics and flexion-relaxation from solved activities."""
     seg = []
@@ -520,11 +605,62 @@ def validation(model, sols, names, in_vivo: pd.DataFrame, area_m2=18e-4):
     metrics = {"n": int(len(ok)), "n_total": int(len(val)), "r2": None, "rmse_mpa": None,
                "r2_definition": "squared Pearson correlation (linear fit of simulated vs in-vivo IDP, as the paper)",
                "paper_r2": 0.98}
-    if len(ok) >= 3:
-        r = np.corrcoef(ok["idp_sim_mpa"], ok["idp_in_vivo_mpa"])[0, 1]
-        metrics["r2"] = float(r ** 2)
-        metrics["rmse_mpa"] = float(np.sqrt(np.mean((ok["idp_sim_mpa"] - ok["idp_in_vivo_mpa"]) ** 2)))
+    for suffix, d in (("", ok), ("_all", val)):
+        if len(d) >= 3:
+            r = np.corrcoef(d["idp_sim_mpa"], d["idp_in_vivo_mpa"])[0, 1]
+            metrics["r2" + suffix] = float(r ** 2)
+            metrics["rmse" + suffix + "_mpa"] = float(np.sqrt(np.mean((d["idp_sim_mpa"] - d["idp_in_vivo_mpa"]) ** 2)))
+        else:
+            metrics["r2" + suffix] = metrics["rmse" + suffix + "_mpa"] = None
+    metrics["all_definition"] = ("r2_all, rmse_all_mpa: every activity, including the IDP of postures flagged as "
+                                 "not converged (their thorax misses the target; not a model prediction)")
     return seg, val, metrics
+
+
+# expected direction of each statement in PAPER_CHANGES: "increase" (IDP up by more than the tolerance),
+# "unchanged" (|change| within the tolerance [%]) or "not_reached" (the posture cannot be held)
+UNCHANGED_PCT = {"change <= 20% (Sect. 3.2.2)": 20.0, "total IDP unchanged for SSL > 2.8 (Sect. 3.2.1)": 10.0,
+                 "negligible (Sect. 3.2.5)": 5.0}
+INCREASE_MIN_PCT = 5.0
+
+
+def paper_direction(statement: str) -> str:
+    """Direction a PAPER_CHANGES statement asserts: ``not_reached``, ``unchanged`` or ``increase``."""
+    if not statement:
+        return ""
+    if "not reached" in statement:
+        return "not_reached"
+    if statement in UNCHANGED_PCT:
+        return "unchanged"
+    return "increase"
+
+
+def sensitivity_directions(df: pd.DataFrame) -> pd.DataFrame:
+    """One row per paper statement (``paper_change`` of the sensitivity table, with ``change_pct``,
+    ``converged`` and ``reached``): the direction the paper states, the simulated one and whether they agree.
+    A posture not reached (no equilibrium, or the thorax misses its target by more than 1 deg: the paper's
+    red star) is ``not_reached``; a reached posture whose optimality the SQP did not certify (``converged``
+    False) keeps its direction and is marked in ``certified``. An increase needs more than
+    ``INCREASE_MIN_PCT``; "unchanged" statements use their tolerance (``UNCHANGED_PCT``)."""
+    rows = []
+    for _, r in df[df["paper_change"].fillna("") != ""].iterrows():
+        want = paper_direction(r["paper_change"])
+        tol = UNCHANGED_PCT.get(r["paper_change"], INCREASE_MIN_PCT)
+        ch = float(r["change_pct"])
+        reached = bool(r["reached"]) if "reached" in r else bool(r["converged"])
+        if not reached:
+            got = "not_reached"
+        elif ch > tol:
+            got = "increase"
+        elif ch < -tol:
+            got = "decrease"
+        else:
+            got = "unchanged"
+        rows.append({"parameter": r["parameter"], "value": r["value"], "ssl_um": r["ssl_um"],
+                     "group_scope": r["group_scope"], "posture": r["posture"], "paper_change": r["paper_change"],
+                     "paper_direction": want, "tolerance_pct": tol, "change_pct": ch, "reached": reached,
+                     "certified": bool(r["converged"]), "simulated_direction": got, "agrees": got == want})
+    return pd.DataFrame(rows)
 
 
 def sensitivity_rows(parameter, ssl_um, values, scopes, postures) -> pd.DataFrame:
@@ -550,7 +686,13 @@ def run_sensitivity(model, solver, rows: pd.DataFrame, baseline: dict, area_m2=1
     tot, fp, mp = idp_parts([s["compressive_n"] for s in seg], [s["moment_nm"] for s in seg], area_m2)
     out["idp_mpa"], out["idp_force_mpa"], out["idp_moment_mpa"] = tot, fp, mp
     out["converged"] = [s.converged for s in sols]
+    out["reached"] = [s.reached for s in sols]
     out["tracking_error_deg"] = [s.tracking_error_deg for s in sols]
+    ext, abd = np.isin(model.ms.groups, EXTENSORS), np.isin(model.ms.groups, ABDOMINALS)
+    forces = [model.muscle_forces(s.x[None], s.R[None], s.a, pr)[2:4] for s, pr in zip(sols, props)]
+    out["extensor_active_n"] = [float(a[0, ext].sum()) for a, _ in forces]
+    out["extensor_passive_n"] = [float(q[0, ext].sum()) for _, q in forces]
+    out["abdominal_active_n"] = [float(a[0, abd].sum()) for a, _ in forces]
     out["paper_change"] = [PAPER_CHANGES.get((r["parameter"], float(r["value"]),
                                               None if pd.isna(r["ssl_um"]) else float(r["ssl_um"]),
                                               r["group_scope"], r["posture"]), "")
@@ -565,8 +707,10 @@ SOBOL_BOUNDS = {"ssl_um": (2.0, 3.6), "k_n_per_cm2": (10.0, 1000.0), "in_situ_sl
 def sobol_study(model, solver, baseline: dict, n_base: int, seed: int, scope="ALL", postures=("standing", "flexion"),
                 area_m2=18e-4):
     """Variance-based (Sobol) indices of L4-L5 IDP to the five parameters (uniform on the paper's ranges,
-    applied to ``scope``), Saltelli sampling (SALib), per posture. Non-converged samples are replaced by
-    the posture's mean IDP and counted (``n_failed``)."""
+    applied to ``scope``), Saltelli sampling (SALib), per posture. Samples whose posture is not reached (no
+    equilibrium, or the thorax misses its target by more than 1 deg) are replaced by the posture's mean IDP
+    and counted (``n_failed``); reached samples whose optimality the SQP did not certify are kept and counted
+    (``n_uncertified``)."""
     from SALib.analyze import sobol as sobol_analyze
     from SALib.sample import sobol as sobol_sample
     problem = {"num_vars": len(PARAMETERS), "names": list(PARAMETERS),
@@ -583,11 +727,12 @@ def sobol_study(model, solver, baseline: dict, n_base: int, seed: int, scope="AL
         sols = solve_postures(model, solver, [POSTURES[posture]] * len(X), props, [baseline[posture]] * len(X))
         seg = [model.segment_loads(s.x[None], s.R[None]).query("level == 'L4-L5'").iloc[0] for s in sols]
         y = idp_parts([s["compressive_n"] for s in seg], [s["moment_nm"] for s in seg], area_m2)[0]
-        ok = np.array([s.converged for s in sols])
+        ok = np.array([s.reached for s in sols])
         y = np.where(ok, y, np.mean(y[ok]) if ok.any() else 0.0)
         si = sobol_analyze.analyze(problem, y, calc_second_order=False, seed=seed)
         for k, name in enumerate(PARAMETERS):
             rows.append({"posture": posture, "parameter": name, "S1": si["S1"][k], "S1_conf": si["S1_conf"][k],
                          "ST": si["ST"][k], "ST_conf": si["ST_conf"][k], "n_samples": len(X),
-                         "n_failed": int((~ok).sum()), "scope": scope})
+                         "n_failed": int((~ok).sum()),
+                         "n_uncertified": int(sum(s.reached and not s.converged for s in sols)), "scope": scope})
     return pd.DataFrame(rows)

@@ -400,6 +400,10 @@ class _Builder:
         pub = self.published.get("idp_validation_r2")
         if pub is not None:
             s += f" (paper: R2 = {fmt(pub['value'])}, {pub['source']})"
+        if m.get("r2_all") is not None and m.get("n", n_tot) != n_tot:
+            s += (f"; with the IDP of the {fmt(n_tot - m.get('n'))} posture(s) flagged as not converged included, "
+                  f"R2 = {fmt(m['r2_all'], 3)}, RMSE = {fmt(m['rmse_all_mpa'], 3)} MPa (the muscle capacity table "
+                  "says where the muscles fall short)")
         if _mentions_surrogate(self.path(rel)):
             s += " [SURROGATE data involved]"
         return s + "."
@@ -579,7 +583,8 @@ class _Builder:
     def muscle_section(self):
         self.doc.add(Heading("6 Paraspinal muscles and spinal loading (paper 2)", 1))
         files = [T + "muscle_model_segment_loads.csv", T + "in_vivo_validation.csv", MM + "in_vivo_metrics.json",
-                 T + "flexion_relaxation.csv", T + "sensitivity_idp.csv", T + "sobol_indices.csv"]
+                 T + "flexion_relaxation.csv", T + "muscle_capacity.csv", T + "sensitivity_idp.csv",
+                 T + "sensitivity_directions.csv", T + "sobol_indices.csv"]
         figs = sorted(p for p in self.inputs if p.startswith(F + "muscle_") and p.endswith(".png"))
         if not any(self.has(f) for f in files) and not figs:
             self.doc.add(Para(f"Muscle study: {NOT_BUILT}.", "note"))
@@ -593,7 +598,11 @@ class _Builder:
         self.csv_table(T + "in_vivo_validation.csv", "In-vivo validation: predicted and measured IDP per activity")
         self.csv_table(T + "muscle_model_segment_loads.csv", "Segmental loads of the musculoskeletal model")
         self.csv_table(T + "flexion_relaxation.csv", "Flexion-relaxation: active and passive muscle forces")
+        self.csv_table(T + "muscle_capacity.csv", "Muscle capacity: sagittal moments about each level and the "
+                       "largest extension moment of the active fascicles")
         self.csv_table(T + "sensitivity_idp.csv", "Sensitivity of L4-L5 IDP to the muscle parameters")
+        self.csv_table(T + "sensitivity_directions.csv", "The paper's sensitivity statements: stated and simulated "
+                       "direction of the L4-L5 IDP change")
         self.csv_table(T + "sobol_indices.csv", "Sobol indices of L4-L5 IDP")
         for f in figs:
             if _norm(f) not in self.shown:

@@ -57,6 +57,11 @@ rule muscle_validation:
         ),
         baseline="results/muscle_model/baseline.npz",
         fascicles="results/tables/muscle_fascicles.csv",
+        capacity=report(
+            "results/tables/muscle_capacity.csv",
+            caption="../report/muscle_capacity.rst",
+            category="Muscle model",
+        ),
     log:
         "logs/muscle_validation.log",
     benchmark:
@@ -106,6 +111,11 @@ rule muscle_sensitivity_table:
                 parameter=MUSCLE_FIGURE_PARAMETERS,
             ),
             caption="../report/muscle_sensitivity.rst",
+            category="Muscle model",
+        ),
+        directions=report(
+            "results/tables/sensitivity_directions.csv",
+            caption="../report/sensitivity_directions.rst",
             category="Muscle model",
         ),
     log:

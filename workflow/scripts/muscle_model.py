@@ -19,7 +19,8 @@ OUT = "results/muscle_model"
 BASELINE = f"{OUT}/baseline.npz"
 VALIDATION_OUT = ["results/tables/muscle_model_segment_loads.csv", "results/tables/in_vivo_validation.csv",
                   f"{OUT}/in_vivo_metrics.json", "results/tables/flexion_relaxation.csv",
-                  "results/figures/muscle_in_vivo_validation.png", BASELINE, "results/tables/muscle_fascicles.csv"]
+                  "results/figures/muscle_in_vivo_validation.png", BASELINE, "results/tables/muscle_fascicles.csv",
+                  "results/tables/muscle_capacity.csv"]
 FIGURE_PARAMETERS = ("ssl_um", "k_n_per_cm2", "in_situ_sl_um", "spt_n_per_cm2", "pennation_deg")
 
 
@@ -34,7 +35,8 @@ RULES = {
         input=dict(chunks=sorted(str(f) for f in Path(OUT, "sensitivity").glob("*.csv")),
                    baseline_table="results/tables/in_vivo_validation.csv"),
         output=["results/tables/sensitivity_idp.csv"]
-        + [f"results/figures/muscle_sensitivity_{p}.png" for p in FIGURE_PARAMETERS],
+        + [f"results/figures/muscle_sensitivity_{p}.png" for p in FIGURE_PARAMETERS]
+        + ["results/tables/sensitivity_directions.csv"],
         params=dict(muscle_model=c["muscle_model"])),
     "muscle_sobol": lambda c: dict(
         input=dict(baseline=BASELINE), output=["results/tables/sobol_indices.csv", "results/figures/muscle_sobol.png"],
@@ -158,6 +160,14 @@ if rule == "muscle_validation":
     fas["l_ref_m"] = model.props.l_ref_m
     fas["l_opt_m"] = model.props.l_opt_m
     write_table_atomic(fas, snakemake.output[6])
+    cap = mm.capacity_table(model, [s for n, s in zip(names, sols) if n in keep], keep)
+    write_table_atomic(cap, snakemake.output[7])
+    short = cap[(cap["pose"] == "own solution") & (cap["demand_ratio"] > 1.0)]
+    for _, r in short.iterrows():
+        log.info("%s, %s: external + passive muscle moment %.1f N*m exceeds the active extension capacity %.1f N*m "
+                 "(ratio %.2f; SpT %.0f N/cm2 would be needed)", r["activity"], r["level"],
+                 r["external_moment_nm"] + r["passive_muscle_moment_nm"], r["extension_capacity_nm"],
+                 r["demand_ratio"], r["spt_needed_n_per_cm2"])
 elif rule == "muscle_sensitivity":
     import time
 
@@ -179,12 +189,17 @@ elif rule == "muscle_sensitivity_table":
     df = pd.concat([pd.read_csv(f) for f in snakemake.input.chunks], ignore_index=True)
     base = pd.read_csv(snakemake.input.baseline_table).set_index("activity")
     cols = ["parameter", "value", "ssl_um", "group_scope", "posture", "idp_mpa", "idp_force_mpa", "idp_moment_mpa",
-            "converged", "tracking_error_deg", "paper_change"]
+            "converged", "reached", "tracking_error_deg", "extensor_active_n", "extensor_passive_n", "abdominal_active_n",
+            "paper_change"]
     df = df[cols].copy()
     df["baseline_idp_mpa"] = [base.loc[mm.POSTURES[q], "idp_sim_mpa"] if mm.POSTURES[q] in base.index else np.nan
                               for q in df["posture"]]
     df["change_pct"] = 100 * (df["idp_mpa"] / df["baseline_idp_mpa"] - 1)
     write_table_atomic(df, snakemake.output[0])
+    dirs = mm.sensitivity_directions(df)
+    write_table_atomic(dirs, snakemake.output[-1])
+    log.info("paper statements reproduced in direction: %d of %d (%d reached postures with uncertified optimum)",
+             int(dirs["agrees"].sum()), len(dirs), int((dirs["reached"] & ~dirs["certified"]).sum()))
     scopes = list(p["sensitivity"]["scopes"])
     for k, param in enumerate(FIGURE_PARAMETERS):
         d = df[df["parameter"] == param]
@@ -210,15 +225,18 @@ elif rule == "muscle_sensitivity_table":
                                label=f"{v:g}" if si == 0 else None)
                         ax.bar(xpos, row["idp_moment_mpa"], width * 0.9, bottom=row["idp_force_mpa"], color="none",
                                edgecolor="k", hatch="//", lw=0.4)
-                        if not row["converged"]:
+                        if not row["reached"]:
                             ax.plot(xpos, max(row["idp_mpa"], 0) + 0.05, "r*", ms=9)
+                        elif not row["converged"]:
+                            ax.plot(xpos, max(row["idp_mpa"], 0) + 0.05, "o", ms=5, mfc="none", mec="0.4")
                 b = dd["baseline_idp_mpa"].iloc[0] if len(dd) else np.nan
                 if np.isfinite(b):
                     ax.axhline(b, color="k", lw=1, ls="--", label="baseline")
                 ax.set_xticks(range(len(scopes)), scopes)
                 ax.set_ylabel("L4-L5 IDP [MPa]")
                 ttl = f"{param} ({post}" + (f", SSL {sv:g} um)" if sv != -1 else ")")
-                ax.set_title(ttl + "; solid: force part, hatched: moment part; red star: not converged", fontsize=8)
+                ax.set_title(ttl + "; solid: force part, hatched: moment part; red star: not reached; "
+                             "open circle: reached, optimum not certified", fontsize=8)
                 ax.legend(fontsize=6, ncol=7, loc="upper left")
         fig.tight_layout()
         _save(fig, snakemake.output[1 + k])
@@ -240,7 +258,8 @@ elif rule == "muscle_sobol":
         ax.bar(xs - 0.2, d["S1"], 0.4, yerr=d["S1_conf"], label="first order S1")
         ax.bar(xs + 0.2, d["ST"], 0.4, yerr=d["ST_conf"], label="total ST")
         ax.set_xticks(xs, d["parameter"], rotation=30, fontsize=7)
-        ax.set_title(f"{post}: N = {int(d['n_samples'].iloc[0])} samples, {int(d['n_failed'].iloc[0])} failed",
+        ax.set_title(f"{post}: N = {int(d['n_samples'].iloc[0])} samples, {int(d['n_failed'].iloc[0])} not reached, "
+                     f"{int(d['n_uncertified'].iloc[0])} optimum not certified",
                      fontsize=8)
         ax.legend(fontsize=7)
     fig.tight_layout()

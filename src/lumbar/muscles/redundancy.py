@@ -119,6 +119,9 @@ class PostureSolution:
     cost: float
     iterations: int
     message: str = ""
+    reached: bool = True           # equilibrium and tracking error <= max_tracking_deg (no red star); a reached
+    #                                posture that is not ``converged`` is an equilibrium on target whose
+    #                                optimality the SQP could not certify
 
 
 def rot_target(theta_deg):
@@ -473,7 +476,8 @@ class RedundancySolver:
                 log.warning("posture %d (target %.1f deg) not converged: %s (residual %.1e N, %.1e N*m, "
                             "tracking error %.2f deg)", i, targets[i], msg[i], rf[i], rm[i], terr[i])
             out.append(PostureSolution(x[i].copy(), R[i].copy(), a[i].copy(), conv, eq, float(terr[i]),
-                                       float(rf[i]), float(rm[i]), float(st["c"][i]), int(iters[i]), msg[i]))
+                                       float(rf[i]), float(rm[i]), float(st["c"][i]), int(iters[i]), msg[i],
+                                       bool(eq and terr[i] <= self.max_tracking_deg)))
         return out
 
     def _initial_pose(self, theta_deg):
