@@ -164,6 +164,22 @@ def test_trial_point_correction_returns_to_equilibrium(model, solver, standing):
     assert res[1] < 1e-8 < res[0]          # more Newton steps, closer (uncapped steps: no trial left out)
 
 
+def test_final_polish_brings_an_off_equilibrium_posture_back(model, standing):
+    """A posture the SQP leaves off the equilibrium manifold (here: the standing solution with L3 moved 3 mm,
+    no SQP iterations) is brought back by the final Newton polish with capped steps (activations fixed): an
+    equilibrium, reported ``reached`` with its thorax on target, never a silent out-of-equilibrium state."""
+    from lumbar.muscle_model import get_activity
+    from lumbar.muscles.redundancy import RedundancySolver
+    F, P = model.load_arrays([get_activity("upright_standing")])
+    x = standing.x.copy()
+    x[2, 0] += 3e-3
+    sol = RedundancySolver(model, max_iter=0).solve_batch([0.0], {"force_vec": F, "force_pt": P}, x0=x[None],
+                                                           R0=standing.R[None], a0=standing.a[None])[0]
+    assert sol.equilibrium and sol.residual_force_n < 1e-6 and sol.residual_moment_nm < 1e-6
+    assert sol.reached and sol.tracking_error_deg < 0.1
+    np.testing.assert_allclose(sol.a, standing.a)
+
+
 def test_cold_standing_solve_starts_near_reference_and_converges(model):
     """Near the reference posture the cold solve skips the held start (it stalled under gravity alone)
     and still converges to the same equilibrium as the solve with the held start."""

@@ -441,21 +441,28 @@ class RedundancySolver:
             if act.size == 0:
                 break
             iterate(False, act)
-        # polish: plain Newton on the poses with the activations fixed (equilibrium to tol)
+        # polish: Newton on the poses with the activations fixed (equilibrium to tol). Steps are capped at
+        # twice the SQP's pose step limits and kept only where they lower the residual, so a posture the
+        # SQP left off the equilibrium manifold (line search failed after a rejected trial) is brought back
+        # onto it; whether its thorax is then on target decides ``reached``.
         for _ in range(40):
             bad = np.flatnonzero(np.abs(st["Q"]).max(-1) >= self.tol)
             if bad.size == 0:
                 break
             d = -np.linalg.solve(st["J"][bad], st["Q"][bad][..., None])[..., 0].reshape(-1, m.nb, 6)
-            small = np.abs(d).max((-1, -2)) < 1e-3
-            bad, d = bad[small], d[small]
-            if bad.size == 0:
+            cap = np.maximum(np.abs(d[..., :3]).max((-1, -2)) / (2 * self.max_step_m),
+                             np.abs(d[..., 3:]).max((-1, -2)) / (2 * self.max_step_rad))
+            d /= np.maximum(cap, 1.0)[:, None, None]
+            xt = x[bad] + d[..., :3]
+            Rt = so3.exp(d[..., 3:]) @ R[bad]
+            sb = self._state(xt, Rt, a[bad], params, bad, targets[bad])
+            better = np.abs(sb["Q"]).max(-1) < np.abs(st["Q"][bad]).max(-1)
+            if not better.any():
                 break
-            x[bad] += d[..., :3]
-            R[bad] = so3.exp(d[..., 3:]) @ R[bad]
-            sb = self._state(x[bad], R[bad], a[bad], params, bad, targets[bad])
+            keep = bad[better]
+            x[keep], R[keep] = xt[better], Rt[better]
             for key in st:
-                st[key][bad] = sb[key]
+                st[key][keep] = sb[key][better]
         out = []
         Q = st["Q"].reshape(B, m.nb, 6)
         rf = np.abs(Q[..., :3]).max((-1, -2))
