@@ -19,6 +19,7 @@ include: "workflow/rules/calibration.smk"
 include: "workflow/rules/stepwise_reduction.smk"
 include: "workflow/rules/l2s1.smk"
 include: "workflow/rules/muscle_model.smk"
+include: "workflow/rules/validation.smk"
 include: "workflow/rules/discover.smk"
 include: "workflow/rules/report.smk"
 

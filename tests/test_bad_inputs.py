@@ -9,6 +9,7 @@ message content and that neither the output nor a temporary file of the atomic w
 import csv
 import io
 import os
+import re
 import runpy
 import shutil
 import sys
@@ -347,7 +348,8 @@ def test_bad_characteristics_table_fails_job_without_result_snakemake(smk_tree, 
                    parameter="torque_p1", direction="flexion")
     target = "results/tables/fsu_rom_intact.csv"
     r = snakemake(target, "--cores", "1", "--configfile", "config/test/config.yaml", "--config",
-                  f"characteristics={{data_dir: {data}}}", cwd=smk_tree, timeout=300)
+                  # rupp2015 only: the calibrated set of fsu_rom comes from rule calibrate, which reads disc.csv first
+                  f"characteristics={{sets: [rupp2015], data_dir: {data}}}", cwd=smk_tree, timeout=300)
     assert r.returncode != 0
     log = (smk_tree / "logs" / "fsu_rom.log").read_text()
     expected = f"{data / 'disc.csv'}, row {row}, column 'value': got 'abc', which is not a number"
@@ -515,3 +517,401 @@ def test_reject_ligament_insertion_off_its_vertebra():
         check_insertions(g)
     assert_message(e.value, "L4-L5 ligament SSL: point 0 (upper end, on L4)", "mm from the L4 mesh surface",
                    "expected within 10 mm")
+
+
+# ---------------------------------------------------------------- stale results and interrupts (issue 18)
+def _smk_ok(tree, *args, timeout=300) -> str:
+    r = snakemake("--configfile", "config/test/config.yaml", *args, cwd=tree, timeout=timeout)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    return r.stdout
+
+
+def _pending(tree) -> dict:
+    """{output file: rule} of every output Snakemake would (re)build, judged by modification time and content
+    (``--summary --rerun-triggers mtime``: params or code changes do not count)."""
+    rows = [line.split("\t") for line in _smk_ok(tree, "--summary", "--rerun-triggers", "mtime").splitlines()[1:]]
+    return {r[0]: r[2] for r in rows if len(r) > 5 and r[5] != "no update"}
+
+
+def _forced(tree, *rules) -> set:
+    """Rules of the jobs that ``--forcerun rules`` would run: the rules and everything downstream of them."""
+    out = _smk_ok(tree, "-n", "--forcerun", *rules)
+    stats = out.split("Job stats:", 1)[1].split("total", 1)[0]
+    return {m.group(1) for m in re.finditer(r"^(\w+)\s+\d+\s*$", stats, re.M)} - {"all", "job"}
+
+
+@pytest.fixture(scope="module")
+def touched_tree(tmp_path_factory):
+    """A copy of the repository in which every output of the test config's DAG exists and is up to date
+    (empty files, then ``snakemake --touch``): the dry-run state after a complete run, in seconds."""
+    pytest.importorskip("snakemake")
+    tree = copy_repo(tmp_path_factory.mktemp("stale") / "repo")
+    for line in _smk_ok(tree, "--summary").splitlines()[1:]:
+        p = tree / line.split("\t")[0]
+        if p.suffix:
+            p.parent.mkdir(parents=True, exist_ok=True)
+            p.touch()
+        else:                                   # directory() outputs (the benchmark fixtures)
+            p.mkdir(parents=True, exist_ok=True)
+    _smk_ok(tree, "--touch", "--cores", "1")
+    assert _pending(tree) == {}
+    return tree
+
+
+def _edit_in_place(path: Path, old: str, new: str):
+    """Rewrite one value of a data file in place (the folder's mtime does not change), mtime in the future."""
+    text = path.read_text()
+    assert old in text, (path, old)
+    path.write_text(text.replace(old, new, 1))
+    t = path.stat().st_mtime + 5
+    os.utime(path, (t, t))
+
+
+@pytest.mark.workflow
+def test_in_place_edit_of_characteristics_table_reruns_exactly_its_readers(touched_tree):
+    """Issue 18.1: rewriting ligament_prestrain.csv in place re-ran only paper_report (the rules took the folder
+    as input) and fsu_rom_intact.csv kept the old ROM. Now every reader of the file, and only they, re-run."""
+    f = touched_tree / "data" / "characteristics" / "ligament_prestrain.csv"
+    before = f.read_text()
+    try:
+        _edit_in_place(f, "\nSSL,-6,", "\nSSL,-5,")
+        pending = _pending(touched_tree)
+    finally:
+        f.write_text(before)            # the recorded checksum matches again: the tree is up to date
+    # the softplus sets (calibrated) read the prestrains: the intact ROM, the surrogates, the calibration and
+    # everything downstream of them
+    for out in ("results/tables/fsu_rom_intact.csv", "results/experiments/stepwise_reduction_surrogate.csv",
+                "results/experiments/idp_wilke1996_surrogate.csv", "results/tables/table1_disc_calibrated.csv",
+                "results/stepwise_reduction/rom_calibrated.csv", "results/l2s1/idp_calibrated.csv",
+                "results/tables/muscle_model_segment_loads.csv", "results/report/paper.html"):
+        assert out in pending, f"{out} not re-run after an in-place edit of {f.name}"
+    # rupp2015 has its own prestrains (ligaments_rupp2015.csv), the geometry rules read no characteristics
+    not_readers = {"results/tables/fsu_geometry.csv", "results/figures/fig1_l4l5_model.png",
+                   "results/figures/fig3_l2s1_cables.png", "results/stepwise_reduction/rom_rupp2015.csv",
+                   "results/l2s1/idp_rupp2015.csv"}
+    assert not not_readers & set(pending), sorted(not_readers & set(pending))
+
+
+@pytest.mark.workflow
+def test_in_place_edit_of_experiment_table_reruns_only_its_readers(touched_tree):
+    """The vertebral-arch artefact table is read by discovery_va_artefact only (and the report, which lists
+    every data table): exactly these re-run."""
+    f = touched_tree / "data" / "experiments" / "heuer2007_va_artefact_original_text.csv"
+    before = f.read_text()
+    lines = before.splitlines(keepends=True)
+    try:
+        f.write_text("".join(lines[:1] + [lines[1].replace(",", ", ", 1)] + lines[2:]))   # same data, new bytes
+        os.utime(f, (f.stat().st_mtime + 5,) * 2)
+        pending = _pending(touched_tree)
+    finally:
+        f.write_text(before)            # the recorded checksum matches again: the tree is up to date
+    assert set(pending.values()) == _forced(touched_tree, "discovery_va_artefact", "paper_report"), pending
+
+
+@pytest.mark.workflow
+def test_published_model_results_is_an_input_when_present(touched_tree, tmp_path):
+    """Issue 18: adding ../shared after a run changed nothing (paths.published_model_results was a parameter).
+    Now the file is an input of the rules that fill the paper columns, and the workflow runs without it."""
+    pub = tmp_path / "published_model_results.csv"
+    cfg = tmp_path / "config.yaml"
+    test_cfg = yaml.safe_load((touched_tree / "config" / "test" / "config.yaml").read_text())
+    cfg.write_text(yaml.safe_dump({**test_cfg, "paths": {"published_model_results": str(pub)}}))
+    r = snakemake("-n", "--forceall", "--configfile", str(cfg), cwd=touched_tree, timeout=300)
+    assert r.returncode == 0 and str(pub) not in r.stdout, r.stdout[-2000:] + r.stderr[-2000:]
+    pub.write_text("x\n")
+    r = snakemake("-n", "--forceall", "--configfile", str(cfg), cwd=touched_tree, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    readers = {m.group(1) for m in re.finditer(r"^rule (\w+):\n    input: [^\n]*" + re.escape(str(pub)),
+                                                 r.stdout, re.M)}
+    assert {"table4", "table5", "paper_report"} <= readers, readers
+
+
+def _readme_resume_commands() -> list[list[str]]:
+    """The README's resume command after an interrupt (``snakemake --unlock && snakemake ...``), split."""
+    text = (ROOT / "README.md").read_text()
+    m = re.search(r"\*\*After an interrupt\*\*.*?`(snakemake --unlock[^`]*)`", text, re.S)
+    assert m, "README.md has no 'After an interrupt' paragraph with the resume command"
+    return [c.split() for c in m.group(1).split("&&")]
+
+
+@pytest.mark.workflow
+@pytest.mark.parametrize("sig", ["SIGKILL", "SIGINT"])
+def test_readme_resume_command_after_interrupt(tmp_path, sig):
+    """Issue 18: after SIGINT/SIGKILL the README's plain re-run failed (IncompleteFilesException, then
+    LockException). Interrupt a one-job run while its job runs, then resume with the README's command."""
+    import signal
+    import subprocess
+    import time
+    pytest.importorskip("snakemake")
+    tree = copy_repo(tmp_path / "repo")
+    target = ["results/tables/fsu_geometry.csv", "--configfile", "config/test/config.yaml"]
+    proc = subprocess.Popen([sys.executable, "-m", "snakemake", "--cores", "1", *target], cwd=tree,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        t0 = time.time()           # wait until the job runs: its incomplete marker exists
+        while not any((tree / ".snakemake" / "incomplete").glob("*")) and proc.poll() is None:
+            assert time.time() - t0 < 60, "the job did not start"
+            time.sleep(0.05)
+        assert proc.poll() is None, "the job finished before it could be interrupted"
+        # Ctrl-C in a terminal signals the whole process group; SIGKILL: Snakemake and its job, no clean-up
+        os.killpg(proc.pid, getattr(signal, sig))
+        proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    out = tree / target[0]
+    assert not out.exists() or not any((tree / ".snakemake" / "incomplete").glob("*")), "a cut-off result was kept"
+    for cmd in _readme_resume_commands():
+        assert cmd[0] == "snakemake", cmd
+        extra = [] if "--unlock" in cmd else target
+        r = subprocess.run([sys.executable, "-m", *cmd, *extra], cwd=tree, capture_output=True, text=True,
+                           timeout=300)
+        assert r.returncode == 0, f"{' '.join(cmd)} failed:\n{r.stdout[-3000:]}{r.stderr[-3000:]}"
+    assert (tree / target[0]).stat().st_size > 0
+
+
+# ---------------------------------------------------------------- issue 18: silent wrong numbers -> loud errors
+VH = DATA / "geometry" / "visible_human_lss"
+
+
+def _vh_copy(tmp_path) -> Path:
+    if not VH.is_dir():
+        pytest.skip("data/geometry/visible_human_lss not present")
+    d = tmp_path / "vh"
+    shutil.copytree(VH, d)
+    return d
+
+
+def _replace_line(path: Path, i: int, fn):
+    lines = path.read_text().splitlines(keepends=True)
+    lines[i] = fn(lines[i])
+    path.write_text("".join(lines))
+
+
+def test_reject_nan_disc_node_names_file_and_line(tmp_path):
+    """Was: numpy 'SVD did not converge' with no file."""
+    from lumbar.geometry import GeometryError, load_geometry
+    d = _vh_copy(tmp_path)
+    f = d / "disc_fe" / "L45_NP.node"
+    _replace_line(f, 2, lambda s: s.replace("0.00140958", "nan"))
+    with pytest.raises(GeometryError) as e:
+        load_geometry("visible_human", path=d, levels=["L4-L5"])
+    assert_message(e.value, f"{f}: line 3: non-finite coordinate", "expected finite 'index x y z' numbers (metres)")
+
+
+def test_reject_nan_in_lig_file_names_file_and_line(tmp_path):
+    """Was: "'x' must be finite" with no file name."""
+    from lumbar.geometry import GeometryError, load_geometry
+    d = _vh_copy(tmp_path)
+    f = d / "ligaments" / "L45_Ligs_AS.lig"
+    _replace_line(f, 2, lambda s: s.replace("-0.023729", "NaN"))
+    with pytest.raises(GeometryError) as e:
+        load_geometry("visible_human", path=d, levels=["L4-L5"])
+    assert_message(e.value, f"{f}: line 3 (L45_CL_R fibre 1): non-finite coordinate", "expected finite x, y, z")
+
+
+def test_reject_disc_nodes_in_millimetres_blames_the_node_file(tmp_path):
+    """Was: blamed on L45_Ligs_MP.lig."""
+    from lumbar.geometry import GeometryError, load_geometry
+    d = _vh_copy(tmp_path)
+    f = d / "disc_fe" / "L45_NP.node"
+    rows = [line.split() for line in f.read_text().splitlines() if line.strip()]
+    f.write_text("".join(f"{r[0]} {float(r[1]) * 1e3:.6f} {float(r[2]) * 1e3:.6f} {float(r[3]) * 1e3:.6f}\n"
+                         for r in rows))
+    with pytest.raises(GeometryError) as e:
+        load_geometry("visible_human", path=d, levels=["L4-L5"])
+    assert_message(e.value, str(f), "(millimetres?)", "expected 'index x y z' in metres")
+    assert "Ligs" not in str(e.value)
+
+
+DUP_CASES = [
+    # id, set, file, row to duplicate (match), changed column/value of the copy, expected parts
+    ("reject_duplicate_prestrain_row", "calibrated", "ligament_prestrain.csv", dict(ligament="SSL"),
+     ("prestrain", "50"), ["column 'ligament'", "duplicate row for ligament 'SSL'", "expected one row per ligament"]),
+    ("reject_duplicate_facet_row", "calibrated", "facet.csv", dict(parameter="stiffness"), ("value", "24000"),
+     ["column 'parameter'", "duplicate row for parameter 'stiffness'", "expected each parameter once"]),
+    ("reject_duplicate_rupp_row", "rupp2015", "ligaments_rupp2015.csv", dict(ligament="SSL", parameter="prestrain"),
+     ("kind", "original_text"), ["column 'parameter'", "duplicate row for ligament 'SSL' parameter 'prestrain'",
+                                 "expected each parameter once per ligament"]),
+    ("reject_duplicate_softplus_row", "chazal1985", "ligaments_softplus.csv",
+     dict(set="calibrated", ligament="ALL", variant="primary", parameter="a"), ("kind", "original_text"),
+     ["column 'parameter'", "duplicate row for (set, ligament, variant, parameter) ('calibrated', 'ALL', 'primary', 'a')"]),
+]
+
+
+@pytest.mark.parametrize("set_name,fname,match,change,parts", [c[1:] for c in DUP_CASES], ids=[c[0] for c in DUP_CASES])
+def test_duplicate_characteristic_rows_are_errors(tmp_path, set_name, fname, match, change, parts):
+    """Was: last row wins (a duplicated SSL row turned -6 % prestrain into 50 %)."""
+    from lumbar.characteristics import CharacteristicsError, load_characteristic_set
+    data = tmp_path / "characteristics"
+    shutil.copytree(DATA / "characteristics", data)
+    df = read_rows(DATA / "characteristics" / fname)
+    i = first_row(df, **match)
+    dup = df.iloc[[i]].copy()
+    dup[change[0]] = change[1]
+    df = pd.concat([df, dup], ignore_index=True)
+    write_rows(df, data / fname)
+    with pytest.raises(CharacteristicsError) as e:
+        load_characteristic_set(set_name, data_dir=data)
+    assert_message(e.value, f"{data / fname}, row {len(df)}", *parts)
+
+
+BOUND_CASES = [
+    ("reject_prestrain_1e6_pct", "calibrated", "ligament_prestrain.csv", "prestrain", "1e6", dict(ligament="SSL"),
+     ["column 'prestrain'", "1000000.0 % for the prestrain of SSL is outside its physical range",
+      "expected a value in [-50, 50] %"]),
+    ("reject_rupp_prestrain_80_pct", "rupp2015", "ligaments_rupp2015.csv", "value", "80",
+     dict(ligament="FL", parameter="prestrain"), None),
+    ("reject_facet_stiffness_in_wrong_unit", "calibrated", "facet.csv", "value", "12e9", dict(parameter="stiffness"),
+     ["column 'value'", "for parameter 'stiffness' is outside its physical range", "expected a value in [0, 1e+07] N/m"]),
+]
+
+
+@pytest.mark.parametrize("set_name,fname,column,value,match,parts", [c[1:] for c in BOUND_CASES],
+                         ids=[c[0] for c in BOUND_CASES])
+def test_characteristic_outside_physical_bounds_rejected(tmp_path, set_name, fname, column, value, match, parts):
+    from lumbar.characteristics import CharacteristicsError, load_characteristic_set
+    data = tmp_path / "characteristics"
+    shutil.copytree(DATA / "characteristics", data)
+    if fname == "ligaments_rupp2015.csv":       # keep value_as_printed consistent with the new value
+        df = read_rows(DATA / "characteristics" / fname)
+        i = first_row(df, **match)
+        df.loc[i, ["value", "value_as_printed"]] = [value, value]
+        write_rows(df, data / fname)
+        row = i + 1
+        parts = ["column 'value'", "80.0 % for parameter 'prestrain' of FL is outside its physical range",
+                 "expected a value in [-50, 50] %"]
+    else:
+        row = set_cell(DATA / "characteristics" / fname, data / fname, column, value, **match)
+    with pytest.raises(CharacteristicsError) as e:
+        load_characteristic_set(set_name, data_dir=data)
+    assert_message(e.value, f"{data / fname}, row {row}", *parts)
+
+
+def test_duplicate_yaml_key_in_config_rejected_by_library(tmp_path):
+    """Was: a second `fsu:` section silently replaced the first."""
+    from lumbar.config import ConfigError, load_config
+    f = tmp_path / "c.yaml"
+    f.write_text("fsu:\n  moments_nm: [1]\nsolver:\n  max_iter: 3\nfsu:\n  level: L4-L5\n")
+    with pytest.raises(ConfigError) as e:
+        load_config(f)
+    assert_message(e.value, str(f), "duplicate key 'fsu' (first at line 1)", "line 5")
+
+
+def test_duplicate_yaml_key_in_config_rejected_by_snakemake(tmp_path):
+    f = tmp_path / "c.yaml"
+    f.write_text("solver:\n  max_iter: 3\n  max_iter: 30\n")
+    r = snakemake("-n", "--configfile", str(f), cwd=ROOT, timeout=120)
+    assert r.returncode != 0
+    assert f"Error in config file {f}, line 3: duplicate key 'max_iter' (first at line 2)" in r.stdout + r.stderr
+
+
+@pytest.mark.parametrize("section,values,parts", [
+    ("solver", {"tol_force_n": 1.0e6, "tol_moment_nm": 1.0e6},
+     ["solver.tol_force_n: 1000000.0 is out of range; expected a value <= 0.001",
+      "solver.tol_moment_nm: 1000000.0 is out of range; expected a value <= 0.0001"]),
+    ("fsu", {"moments_nm": [10, 20, 50]},
+     ["fsu.moments_nm[1]: 20 is out of range; expected a value <= 10", "set fsu.beyond_experiment true"]),
+    ("stepwise_reduction", {"moments_nm": [1, 5, 12]}, ["stepwise_reduction.moments_nm[2]: 12 is out of range"]),
+    ("l2s1", {"moment_nm": 7.5}, ["l2s1.moment_nm: 7.5 is out of range; expected a value <= 3.75",
+                                  "set l2s1.beyond_experiment true"]),
+], ids=["tolerances_1e6", "fsu_moment_50", "stepwise_moment_12", "l2s1_moment_7_5"])
+def test_config_bounds_tolerances_and_moments(section, values, parts):
+    from lumbar.config import ConfigError, load_config
+    with pytest.raises(ConfigError) as e:
+        load_config({section: values})
+    assert_message(e.value, *parts)
+
+
+def test_moments_beyond_experiment_need_explicit_opt_in():
+    from lumbar.config import load_config
+    assert load_config({"fsu": {"moments_nm": [20], "beyond_experiment": True}})["fsu"]["moments_nm"] == [20]
+
+
+def test_loose_tolerance_never_reports_unloaded_state_converged(caplog):
+    """Was: tolerances 1e6 -> every ROM 0 deg, converged=True, residual moments up to 20 N*m in the table."""
+    from lumbar import solve as S
+    from lumbar.characteristics import load_characteristic_set
+    from lumbar.fsu import build_fsu, range_of_motion
+    from lumbar.geometry import load_geometry
+    fsu = build_fsu(load_geometry("default", levels=["L4-L5"]), load_characteristic_set("calibrated"))
+    df = range_of_motion(fsu, [10.0], ["flexion"], tol=1.0e6)
+    assert "looser than the physical limit" in caplog.text
+    ok = df[df["converged"]]
+    assert (ok["residual_force_n"] <= S.PHYSICAL_TOL_FORCE_N).all()
+    assert (ok["residual_moment_nm"] <= S.PHYSICAL_TOL_MOMENT_NM).all()
+    assert (df["rom_deg"].dropna() > 1.0).all()          # a real equilibrium, not the unloaded start
+
+
+def test_fsu_cli_flags_states_outside_force_law_validity(capsys):
+    """Was: 122.9 deg at 50 N*m, the upper vertebra 30.8 mm lower, converged=True, rc 0."""
+    from lumbar.fsu import main
+    rc = main(["--moment", "10", "20", "50", "--direction", "lateral_bending"])
+    out, err = capsys.readouterr()
+    assert rc == 1
+    assert "valid" in out.splitlines()[1]
+    rows = [line.split() for line in out.splitlines()[2:]]
+    valid = [r[-1] for r in rows]
+    assert valid[0] == "True" and valid[-1] == "False", out      # 10 N*m: the experiments' range; 50: far beyond
+    assert "N*m) lie OUTSIDE the validity of the force laws" in err and "50 N*m" in err
+
+
+def test_fsu_cli_visible_human_defaults_to_config_geometry_path(capsys, monkeypatch, tmp_path):
+    """Was: a message about a library argument (path=)."""
+    from lumbar.config import default_geometry_path
+    from lumbar.fsu import main
+    monkeypatch.chdir(tmp_path)                 # the config path resolves from the repository too
+    if not default_geometry_path().is_dir():
+        pytest.skip("the configuration's geometry.path is not present")
+    rc = main(["--geometry", "visible_human", "--moment", "2.5", "--direction", "flexion"])
+    out, err = capsys.readouterr()
+    assert rc == 0, err
+    assert "# geometry=visible_human" in out
+
+
+def test_fsu_cli_level_has_help(capsys):
+    from lumbar.fsu import main
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    assert "motion segment to load" in capsys.readouterr().out
+
+
+def test_output_path_that_is_a_file_or_folder_is_a_clear_error(tmp_path):
+    from lumbar.io import OutputError, write_table_atomic
+    blocker = tmp_path / "out"
+    blocker.write_text("")
+    with pytest.raises(OutputError) as e:
+        write_table_atomic(pd.DataFrame({"a": [1]}), blocker / "t.csv")
+    assert_message(e.value, f"cannot write {blocker / 't.csv'}: {blocker} is a file, not a folder")
+    with pytest.raises(OutputError) as e:
+        write_table_atomic(pd.DataFrame({"a": [1]}), tmp_path)
+    assert_message(e.value, f"cannot write {tmp_path}: it is a folder; expected a file path")
+
+
+@pytest.mark.skipif(hasattr(os, "geteuid") and os.geteuid() == 0, reason="root ignores read-only permissions")
+def test_read_only_output_folder_is_a_clear_error(tmp_path):
+    from lumbar.io import OutputError, write_table_atomic
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o555)
+    try:
+        with pytest.raises(OutputError) as e:
+            write_table_atomic(pd.DataFrame({"a": [1]}), ro / "t.csv")
+    finally:
+        ro.chmod(0o755)
+    assert_message(e.value, f"cannot write {ro / 't.csv'}: the folder {ro} is read-only")
+
+
+def test_measured_rom_table_sharing_no_scenario_with_config_is_an_error(tmp_path, monkeypatch):
+    """Was: accepted, Table 4 with no assessed scenario."""
+    path, _ = _measured(tmp_path, lambda df: None)        # moments 1 .. 10 N*m
+    cfg = config_file(tmp_path, stepwise_reduction={"measured_table": str(path), "moments_nm": [3, 4, 6]})
+    sims = tmp_path / "sims"
+    sims.mkdir()
+    from lumbar import stepwise_reduction as sr
+    sim = sr.scenario_grid(moments_nm=(3.0, 4.0, 6.0)).assign(rom_deg=1.0, converged=True, set="calibrated")
+    with pytest.raises(ValueError) as e:
+        sr.assess(sim, sr.read_experiment_table(path), "calibrated")
+    assert_message(e.value, "shares no scenario (stage, direction, moment_nm)", "simulated moments [3.0, 4.0, 6.0]",
+                   "Set stepwise_reduction.moments_nm")

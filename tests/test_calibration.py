@@ -1,5 +1,6 @@
-"""Backward calibration (lumbar.calibration): round trip on a noise-free surrogate, the disc-only stage,
-the written characteristic directory and its loader."""
+"""Backward calibration (lumbar.calibration): round trip on a noise-free surrogate started away from the
+truth, round trip with specimen variation and noise (which parameters the experiment identifies), the
+disc-only stage, the written characteristic directory and its loader."""
 import dataclasses
 import math
 
@@ -38,13 +39,25 @@ def truth_set():
     return dataclasses.replace(base, ligaments=ligs)
 
 
+# start of every fit, away from the truth: facet stiffness / 3 (the calibration starts from initial's), and
+# ligament laws 4 x a, b + 6 %, 2.5 x d
+START = {k: (a * 4.0, b + 6.0, d * 2.5) for k, (a, b, d) in TRUTH.items()}
+
+
+def away_from(cs):
+    ligs = {k: SoftplusLaw(a, b, cal.c_zero(a, b, d), d, cs.ligaments[k].prestrain_pct) for k, (a, b, d) in START.items()}
+    return dataclasses.replace(cs, facet=dataclasses.replace(cs.facet, stiffness=cs.facet.stiffness / 3.0),
+                               ligaments={**cs.ligaments, **ligs})
+
+
 @pytest.fixture(scope="module")
 def round_trip(geometry, truth_set):
     table = stepwise_reduction_table(geometry, truth_set, seed=1, n_specimens=1, variation=ZERO, noise_sd_deg=0.0)
-    res = cal.calibrate(geometry, reference_table(table), initial=truth_set)
+    res = cal.calibrate(geometry, reference_table(table), initial=away_from(truth_set), start=START)
     return table, res
 
 
+@pytest.mark.slow
 def test_round_trip_rom_residual_below_0_01_deg(geometry, round_trip):
     table, res = round_trip
     sim = simulate_stepwise_reduction(build_fsu(geometry, res.charset))
@@ -54,6 +67,7 @@ def test_round_trip_rom_residual_below_0_01_deg(geometry, round_trip):
     assert err.max() < 0.01, m.loc[err.idxmax()]
 
 
+@pytest.mark.slow
 def test_round_trip_recovers_disc_and_facet(truth_set, round_trip):
     _, res = round_trip
     for d, p in truth_set.disc.torque.items():
@@ -61,12 +75,21 @@ def test_round_trip_recovers_disc_and_facet(truth_set, round_trip):
     assert res.facet_stiffness == pytest.approx(truth_set.facet.stiffness, rel=0.05)
 
 
+@pytest.mark.slow
 def test_round_trip_recovers_ligament_laws(truth_set, round_trip):
-    """Parameters where identifiable; everywhere: the force over the strains the fit stage visits."""
+    """Parameters where identifiable; everywhere: the force over the strains the fit stage visits. A ligament
+    whose stage ROM does not respond to its law (the truth's SSL, slack: b = +2 % beyond its -6 % prestrain)
+    is reported not identifiable and keeps its start law (START), never a made-up fit."""
     _, res = round_trip
     pts = res.ligament_points
+    summary = res.summary.set_index("structure")
     for k, (a, b, d) in TRUTH.items():
-        eps = pts.loc[pts["ligament"] == k, "strain_pct"].to_numpy()
+        eps = pts.loc[pts["ligament"] == k, "strain_pct"].to_numpy() if len(pts) else np.array([])
+        if eps.size == 0:
+            assert k == "SSL", f"{k}: no fit points"
+            assert "not identifiable" in summary.loc[k, "parameters"]
+            np.testing.assert_allclose([res.ligaments[k][i] for i in (0, 1, 3)], START[k], rtol=1e-9)
+            continue
         law = truth_set.ligaments[k]
         f_true = softplus_force(eps, law.a, law.b, law.c, law.d)[0]
         f_fit = softplus_force(eps, *res.ligaments[k])[0]
@@ -90,6 +113,7 @@ def test_disc_only_stage_reproduces_derived_rows(geometry):
     assert (m["rom_deg"] - m["rom_mean_deg"]).abs().max() < 0.1
 
 
+@pytest.mark.slow
 def test_write_characteristics_loadable(tmp_path, round_trip):
     _, res = round_trip
     out = cal.write_characteristics(res, ROOT / "data" / "characteristics", tmp_path / "chars", "test table")
@@ -124,3 +148,134 @@ def test_c_zero_gives_zero_force_at_zero_strain():
         assert cal.softplus_zero_law(0.0, a, b, d) == pytest.approx(0.0, abs=1e-12)
         assert a * math.log1p(math.exp(b / d)) + cal.c_zero(a, b, d) == pytest.approx(0.0, abs=1e-9)
     assert EXPERIMENT_SCHEMA.required[:3] == ["stage", "direction", "moment_nm"]
+
+
+# ---------------------------------------------------------------- round trip with specimen variation and noise
+NOISY_MOMENTS = (2.5, 5.0, 10.0)          # N*m: 3 moments, the minimum of the disc fit (keeps the test small)
+NOISE_SD_DEG = 0.3                        # the surrogate's measurement noise (virtual_experiment default)
+N_SPECIMENS = 3
+
+
+def _law(a, b, d, prestrain):
+    return SoftplusLaw(a, b, cal.c_zero(a, b, d), d, prestrain)
+
+
+def _with_ligament(cs, kind, a, b, d):
+    return dataclasses.replace(cs, ligaments={**cs.ligaments, kind: _law(a, b, d, cs.ligaments[kind].prestrain_pct)})
+
+
+def _stage_rom(geo, cs, stage, facet_stiffness=None):
+    fsu = build_fsu(geo, cs, facet_stiffness=facet_stiffness)
+    df = simulate_stepwise_reduction(fsu, stages=[stage], moments_nm=NOISY_MOMENTS)
+    assert df["converged"].all(), (stage, df[~df["converged"]])      # near the truth: always in equilibrium
+    return df["rom_deg"].to_numpy()
+
+
+def identifiability(geo, truth, noise_sd_deg=NOISE_SD_DEG, n=N_SPECIMENS):
+    """Local identifiability at the truth, from the experiment design alone (not from the fit): the ROM
+    sensitivity of each structure's fit stage to its parameters (log a, b [%], log d; log facet stiffness),
+    by central differences, gives the Fisher information S^T S / sigma^2 with sigma = noise / sqrt(n).
+    Returns {structure: {parameter: standard error}} (log parameters: relative error)."""
+    sigma = noise_sd_deg / math.sqrt(n)
+    out = {}
+    for kind, (a, b, d) in TRUTH.items():
+        stage = cal.LIGAMENT_STAGE[kind]
+        cols = []
+        for j, h in enumerate((0.05, 0.5, 0.05)):
+            q = np.array([math.log(a), b, math.log(d)])
+            up, dn = q.copy(), q.copy()
+            up[j] += h
+            dn[j] -= h
+            r = [_stage_rom(geo, _with_ligament(truth, kind, math.exp(v[0]), v[1], math.exp(v[2])), stage)
+                 for v in (up, dn)]
+            cols.append((r[0] - r[1]) / (2 * h))
+        S = np.column_stack(cols)
+        info = S.T @ S / sigma**2
+        se = np.sqrt(np.diag(np.linalg.pinv(info))) if np.abs(S).max() > 1e-9 else np.full(3, np.inf)
+        out[kind] = dict(zip(("log_a", "b_pct", "log_d"), se))
+    k = truth.facet.stiffness
+    r = [_stage_rom(geo, truth, cal.FACET_STAGE, facet_stiffness=k * f) for f in (math.exp(0.05), math.exp(-0.05))]
+    s = (r[0] - r[1]) / 0.1
+    out["facets"] = {"log_k": float(sigma / np.linalg.norm(s)) if np.linalg.norm(s) > 1e-9 else math.inf}
+    return out
+
+
+# a parameter is called identifiable when its standard error is below these (log: 10 %, b: 1 % strain)
+IDENTIFIABLE_SE = {"log_a": 0.1, "b_pct": 1.0, "log_d": 0.1, "log_k": 0.1}
+
+
+@pytest.fixture(scope="module")
+def noisy_round_trip():
+    """Synthetic (mirror-symmetric) unit, truth = TRUTH ligaments + facet stiffness 20 kN/m; 3 virtual
+    specimens with the default specimen variation (geometry, insertions, forces, prestrains, disc, facets)
+    and 0.3 deg noise; calibration started away from the truth (START laws, facet stiffness / 5)."""
+    from lumbar.geometry.synthetic import symmetric_fsu
+
+    geo = symmetric_fsu()
+    base = load_characteristic_set("calibrated")
+    truth = dataclasses.replace(base, ligaments={k: _law(a, b, d, base.ligaments[k].prestrain_pct)
+                                                 for k, (a, b, d) in TRUTH.items()},
+                                facet=dataclasses.replace(base.facet, stiffness=20000.0))
+    table = stepwise_reduction_table(geo, truth, seed=7, n_specimens=N_SPECIMENS, noise_sd_deg=NOISE_SD_DEG,
+                                     moments_nm=NOISY_MOMENTS)
+    away = dataclasses.replace(truth, facet=dataclasses.replace(truth.facet, stiffness=4000.0),
+                               ligaments={k: _law(*START[k], truth.ligaments[k].prestrain_pct) for k in TRUTH})
+    res = cal.calibrate(geo, reference_table(table), initial=away, start=START)
+    return geo, truth, table, res
+
+
+@pytest.mark.slow
+def test_noisy_round_trip_reaches_noise_level_from_away_and_reports_identifiability(noisy_round_trip):
+    """With specimen variation and noise, started away from the truth: every fit stage ends at the ROM
+    scatter of the data (rms < 1 deg; noise 0.3 deg plus the spread of 3 specimens) although it started
+    degrees away; which parameters the ROM data identify follows from the design (``identifiability``),
+    and a structure whose ROM sensitivity is zero stays where it started.
+
+    Measured (synthetic unit, seed 7): the SSL of the truth is slack over the whole experiment (zero
+    sensitivity: not identifiable, left at its start); of the other ligaments' (log a, b, log d) none is
+    identifiable alone at 10 % (the smallest standard errors: ALL's log d ~0.2, log a ~0.4): ROM data
+    fix one or two combinations per ligament (the force over the strains the stage visits), not the
+    three parameters - which is why Table 3's parameters are not compared with the paper's one by one."""
+    geo, truth, table, res = noisy_round_trip
+    ident = identifiability(geo, truth)
+    summary = res.summary.set_index("structure")
+    rows = []
+    start_set = away_from(truth)
+    for kind in TRUTH:
+        stage = cal.LIGAMENT_STAGE[kind]
+        start_cs = dataclasses.replace(start_set, ligaments={
+            **res.charset.ligaments, kind: _law(*START[kind], truth.ligaments[kind].prestrain_pct)})
+        ref = table[table["stage"] == stage]
+        keys = ["stage", "direction", "moment_nm"]
+        at_start = simulate_stepwise_reduction(build_fsu(geo, start_cs), stages=[stage], moments_nm=NOISY_MOMENTS)
+        m = at_start.merge(ref, on=keys)
+        err = (m["rom_deg"] - m["rom_mean_deg"]).where(m["converged"], np.nan)
+        rows.append({"structure": kind, "stage": stage,
+                     "rms_fit_deg": float(summary.loc[kind, "rms_residual"]),
+                     "rms_start_deg": float(np.sqrt(np.nanmean(err**2))),
+                     "start_not_converged": int((~m["converged"]).sum()),
+                     **{f"se_{p}": v for p, v in ident[kind].items()},
+                     "identifiable": [p for p, v in ident[kind].items() if v < IDENTIFIABLE_SE[p]],
+                     "truth": TRUTH[kind], "fitted": tuple(round(v, 3) for v in res.ligaments[kind])})
+    rows.append({"structure": "facets", "stage": cal.FACET_STAGE,
+                 "rms_fit_deg": float(summary.loc["facets", "rms_residual"]), "se_log_k": ident["facets"]["log_k"],
+                 "identifiable": [p for p, v in ident["facets"].items() if v < IDENTIFIABLE_SE[p]],
+                 "truth": truth.facet.stiffness, "fitted": round(res.facet_stiffness, 1)})
+    report = pd.DataFrame(rows)
+    print("\nidentifiability (noise 0.3 deg, 3 specimens, synthetic unit):\n" + report.to_string())
+
+    fit = report.set_index("structure")
+    assert (fit["rms_fit_deg"] < 1.0).all(), fit["rms_fit_deg"]
+    engaged = [k for k in TRUTH if np.isfinite(ident[k]["log_a"])]
+    assert engaged == ["ALL", "PLL", "CL", "FL", "ISL"]
+    # the fit moved: over the engaged ligaments' stages the fitted set is closer to the data than the start
+    # (measured: rms 0.80 deg at the start, 0.56 deg fitted; one stage alone may not improve (FL), because the
+    # fit weights each row by 1 / its specimen range, noisy with 3 specimens)
+    tot = lambda col: float(np.sqrt((fit.loc[engaged, col] ** 2).mean()))  # noqa: E731
+    assert tot("rms_fit_deg") < 0.8 * tot("rms_start_deg"), fit[["rms_fit_deg", "rms_start_deg"]]
+    # SSL: slack at the truth, zero ROM sensitivity -> unidentifiable, and the fit leaves it at its start
+    assert ident["SSL"] == {"log_a": math.inf, "b_pct": math.inf, "log_d": math.inf}
+    np.testing.assert_allclose([res.ligaments["SSL"][i] for i in (0, 1, 3)], START["SSL"], rtol=1e-6)
+    # the best-determined ligament parameter is known within a factor ~1.5 (ALL's log d), none below 10 %
+    assert min(min(v.values()) for k, v in ident.items() if k != "facets") < 0.5
+    assert not any(fit.loc[k, "identifiable"] for k in TRUTH)

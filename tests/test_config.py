@@ -19,13 +19,13 @@ def test_schema_found_via_package():
 
 def test_defaults_filled_from_empty():
     cfg = load_config({})
-    assert cfg["geometry"] == {"kind": "default", "path": "../shared/geometry/visible_human_lss"}
+    assert cfg["geometry"] == {"kind": "visible_human", "path": "data/geometry/visible_human_lss"}
     assert cfg["characteristics"]["sets"] == [
         "calibrated", "chazal1985", "shirazi_adl1986", "white_panjabi1990", "nolte1990", "rupp2015"]
-    assert cfg["fsu"] == {"level": "L4-L5", "moments_nm": [1, 2.5, 5, 7.5, 10],
+    assert cfg["fsu"] == {"level": "L4-L5", "moments_nm": [1, 2.5, 5, 7.5, 10], "beyond_experiment": False,
                           "directions": ["flexion", "extension", "lateral_bending", "axial_rotation"],
-                          "facet_stiffness_n_per_m": 12000, "disc_shear_stiffness_n_per_m": None}
-    assert cfg["solver"] == {"tol_force_n": 1e-8, "tol_moment_nm": 1e-8, "max_iter": 50, "load_steps": 1}
+                          "facet_stiffness_n_per_m": None, "disc_shear_stiffness_n_per_m": None}
+    assert cfg["solver"] == {"tol_force_n": 1e-6, "tol_moment_nm": 1e-7, "max_iter": 50, "load_steps": 1}
     assert cfg["seed"] == 20261123
 
 
@@ -37,8 +37,8 @@ def test_main_config_equals_schema_defaults():
 def test_partial_section_keeps_given_values_and_fills_the_rest():
     cfg = load_config(ROOT / "config" / "test" / "config.yaml")
     assert cfg["fsu"]["moments_nm"] == [2.5, 7.5]
-    assert cfg["fsu"]["facet_stiffness_n_per_m"] == 12000
-    assert cfg["solver"]["tol_force_n"] == 1e-8 and cfg["solver"]["max_iter"] == 30
+    assert cfg["fsu"]["facet_stiffness_n_per_m"] is None      # null = the characteristic set's facet.csv value
+    assert cfg["solver"]["tol_force_n"] == 1e-6 and cfg["solver"]["max_iter"] == 30
 
 
 def test_input_dict_not_modified_and_defaults_not_shared():
@@ -84,7 +84,7 @@ def test_reject_negative_moment_names_index():
 
 def test_reject_unknown_geometry_kind():
     msg = _error({"geometry": {"kind": "visible_female"}})
-    assert "geometry.kind" in msg and "default" in msg and "visible_human" in msg
+    assert "geometry.kind" in msg and "myo_sim" in msg and "visible_human" in msg
 
 
 def test_invalid_type():

@@ -55,15 +55,24 @@ def test_disc_axial_force_compression_only_by_default():
     assert Ft == pytest.approx(-100.0)  # traction pulls the upper vertebra back down
 
 
-@pytest.mark.parametrize("law,eps,force", [
-    ((173.5, -10.06, -26.82, 5.625), 0.0, 0.01), ((173.5, -10.06, -26.82, 5.625), 8.0, 64.6),
-    ((48.12, -43.97, -2.5, 15.0), 10.0, 2.3), ((98.94, 18.97, -82.2, 73.33), 10.0, 7.8),
-    ((0.4517, -3.502, 0.0, 0.02414), 4.0, 9.3), ((47.11, 4.21, 54.85, -11.25), 10.0, 66.6),
-    ((47.11, 4.21, 54.85, -11.25), 15.0, 62.7),
+def eq7_by_hand(eps, a, b, c, d):
+    """Paper 1, Eq. 7 as printed above Table 3: F = a ln(exp((eps + b) / d) + 1) + c, tension only (F >= 0)."""
+    import math
+    return max(a * math.log(math.exp((eps + b) / d) + 1.0) + c, 0.0)
+
+
+@pytest.mark.parametrize("law,eps", [
+    ((173.5, -10.06, -26.82, 5.625), 3.0), ((173.5, -10.06, -26.82, 5.625), 8.0),     # ALL (Table 3)
+    ((48.12, -43.97, -2.5, 15.0), 10.0), ((98.94, 18.97, -82.2, 73.33), 10.0),        # PLL, CL
+    ((0.4517, -3.502, 0.0, 0.02414), 4.0), ((47.11, 4.21, 54.85, -11.25), 10.0),      # ISL, FL
+    ((47.11, 4.21, 54.85, -11.25), 15.0), ((1.218, -22.97, 0.0, 1.369), 30.0),        # FL, SSL
 ])
-def test_softplus_law_matches_table3_values(law, eps, force):
+def test_softplus_law_is_eq7_of_table3(law, eps):
+    """The implemented law equals Eq. 7 computed by hand from Table 3's parameters (e.g. ALL at 8 %:
+    173.5 ln(e^((8 - 10.06) / 5.625) + 1) - 26.82 = 64.6 N; FL at 10 %: 66.6 N, at 15 %: 62.7 N)."""
     F, _ = softplus_force(eps, *law, slack_width_pct=0.0)
-    assert F == pytest.approx(force, abs=0.06)
+    assert F == pytest.approx(eq7_by_hand(eps, *law), rel=1e-12, abs=1e-12)
+    assert eq7_by_hand(8.0, 173.5, -10.06, -26.82, 5.625) == pytest.approx(64.6, abs=0.05)
 
 
 def test_softplus_slack_and_tension_only():

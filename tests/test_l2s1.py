@@ -1,5 +1,4 @@
 """The L2-S1 model with wire cables: 294 solves, equilibrium, symmetry, cable effects, inputs, workflow."""
-import copy
 from pathlib import Path
 
 import numpy as np
@@ -9,9 +8,9 @@ import pytest
 from lumbar import l2s1
 from lumbar.characteristics import CHARACTERISTIC_SETS, load_characteristic_set
 from lumbar.geometry import load_geometry
-from lumbar.geometry.core import SpineGeometry, Vertebra
-from lumbar.geometry.synthetic import DISC_HEIGHT, BODY, symmetric_fsu
 from lumbar.io import TableError
+
+from conftest import synthetic_l2s1_chain
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -85,29 +84,7 @@ def test_idp_rises_with_compressive_cable_load(geo, cables):
     assert a["multifidus_cranial"] < a["none"]
 
 
-def _synthetic_chain():
-    """L2-S1 from the mirror-symmetric synthetic unit stacked four times (exactly symmetric in y)."""
-    t = symmetric_fsu()
-    lev = t.levels["L4-L5"]
-    dz = DISC_HEIGHT + BODY[2]
-    names = ["S1", "L5", "L4", "L3", "L2"]
-    verts = {}
-    for j, v in enumerate(names):
-        m = t.vertebrae["L5"].mesh.copy()
-        m.apply_translation([0, 0, j * dz])
-        verts[v] = Vertebra(v, m, t.vertebrae["L5"].centroid + [0, 0, j * dz])
-    levels = {}
-    for i, lv in enumerate(["L5-S1", "L4-L5", "L3-L4", "L2-L3"]):
-        L = copy.deepcopy(lev)
-        s = np.array([0, 0, i * dz])
-        L.name, (L.upper, L.lower) = lv, lv.split("-")
-        L.disc_centre = lev.disc_centre + s
-        for lig in L.ligaments:
-            lig.upper, lig.lower = lig.upper + s, lig.lower + s
-        for f in L.facets.values():
-            f.superior, f.inferior = f.superior + s, f.inferior + s
-        levels[lv] = L
-    return SpineGeometry("synthetic_chain", "test", verts, levels)
+_synthetic_chain = synthetic_l2s1_chain
 
 
 def test_mirror_symmetric_configuration_gives_equal_left_right_idp(cables):
@@ -222,6 +199,18 @@ def test_l2s1_rules_run(dag_workdir):
         assert vs.loc["calibrated", "paper_outliers"] == 8 and vs.loc["rupp2015", "paper_outliers"] == 11
     internal = pd.read_csv(tmp_path / targets[2])
     assert {"disc_axial_force_n", "facet_left_n", "facet_right_n", "lig_ALL_n"} <= set(internal.columns)
+    # values: paper-1 IDP = 1.68 F / CSA (l2s1.idp_formula paper1 in config/test), CSA = the L4-L5 endplate area
+    # of rule fsu_geometry (same geometry): every solved row, and delta IDP = 1.68 delta F / CSA between rows
+    csa_m2 = pd.read_csv(tmp_path / "results/tables/fsu_geometry.csv").set_index("level").loc["L4-L5", "disc_csa_mm2"] * 1e-6
+    ok = internal[internal["converged"].astype(bool)]
+    assert len(ok) >= 0.9 * len(internal)
+    np.testing.assert_allclose(ok["idp_sim_mpa"] * 1e6, 1.68 * ok["disc_axial_force_n"] / csa_m2, rtol=1e-4)
+    np.testing.assert_allclose(np.diff(ok["idp_sim_mpa"] * 1e6), 1.68 * np.diff(ok["disc_axial_force_n"]) / csa_m2,
+                               rtol=1e-3, atol=10.0)
+    # and the cables press the disc: all five pairs (200 N of cable tension) raise the neutral IDP
+    neutral = ok[ok["load_case"] == "neutral"].set_index(["set", "muscle_setup"])["idp_sim_mpa"]
+    for s in ("calibrated", "rupp2015"):
+        assert neutral[(s, "all")] > neutral[(s, "none")] + 0.05, s
     from PIL import Image
     for f in targets[3:]:
         assert float(np.asarray(Image.open(tmp_path / f).convert("RGB"), float).std()) > 5.0, f

@@ -23,6 +23,7 @@ def _png_std(path) -> float:
     return float(np.asarray(Image.open(path).convert("RGB"), float).std())
 
 
+@pytest.mark.workflow
 def test_dry_run_on_test_config():
     r = _smk("-n", "--forceall", "--configfile", TEST_CONFIG)  # all jobs, whatever results/ holds
     assert r.returncode == 0, r.stdout + r.stderr
@@ -31,6 +32,7 @@ def test_dry_run_on_test_config():
         assert re.search(rf"^{rule}\s+1$", out, re.M), f"{rule} missing from the dry-run job table\n{out}"
 
 
+@pytest.mark.workflow
 def test_dry_run_rejects_invalid_config(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("fsu:\n  facet_stiffness_n_per_m: -1\n")
@@ -39,6 +41,7 @@ def test_dry_run_rejects_invalid_config(tmp_path):
     assert "facet_stiffness_n_per_m" in r.stdout + r.stderr
 
 
+@pytest.mark.workflow
 def test_lint_clean_for_geometry_rules():
     r = _smk("--lint", "--configfile", TEST_CONFIG)
     out = r.stdout + r.stderr
@@ -66,8 +69,9 @@ def test_library_does_not_import_snakemake():
 
 @pytest.fixture(scope="module")
 def synthetic_geometry():
-    synthetic = pytest.importorskip("lumbar.geometry.synthetic")
-    return synthetic.symmetric_fsu()
+    from lumbar.geometry.synthetic import symmetric_fsu   # a broken import fails the test, never skips it
+
+    return symmetric_fsu()
 
 
 def test_render_matplotlib_fallback_not_blank(tmp_path, synthetic_geometry):
@@ -98,17 +102,13 @@ def test_render_unknown_level_names_available(tmp_path, synthetic_geometry):
         render_fsu(synthetic_geometry, "L1-L2", tmp_path / "x.png", backend="matplotlib")
 
 
-def _geometry_ready():
-    try:
-        from lumbar.geometry import load_geometry  # noqa: F401
-    except ImportError as exc:
-        pytest.skip(f"lumbar.geometry.load_geometry not available yet: {exc}")
-
-
 def test_geometry_rules_run(dag_workdir):
-    """fsu_geometry and fig1_l4l5_model on config/test, from the session's DAG run (conftest.dag_workdir)."""
-    _geometry_ready()
+    """fsu_geometry and fig1_l4l5_model on config/test, from the session's DAG run (conftest.dag_workdir):
+    the table's L4-L5 row is the geometry the library loads for the same config (values, not only the file)."""
     import pandas as pd
+    import yaml
+
+    from lumbar.geometry import load_geometry
 
     targets = ["results/tables/fsu_geometry.csv", "results/figures/fig1_l4l5_model.png"]
     table = pd.read_csv(dag_workdir / targets[0])
@@ -117,6 +117,13 @@ def test_geometry_rules_run(dag_workdir):
     assert 500 < row["disc_csa_mm2"] < 4000          # adult lumbar endplate area, mm^2
     assert 3 < row["disc_height_mm"] < 25
     assert np.isclose(np.linalg.norm(row[["disc_normal_x", "disc_normal_y", "disc_normal_z"]].astype(float)), 1, atol=1e-3)
+    g = yaml.safe_load((dag_workdir / TEST_CONFIG).read_text())["geometry"]
+    path = g.get("path")
+    lev = load_geometry(g["kind"], path=(dag_workdir / path) if path and g["kind"] == "visible_human" else None,
+                        levels=["L4-L5"]).levels["L4-L5"]
+    assert row["disc_csa_mm2"] == pytest.approx(lev.disc_csa * 1e6, rel=1e-6)
+    np.testing.assert_allclose(row[["disc_normal_x", "disc_normal_y", "disc_normal_z"]].astype(float),
+                               np.asarray(lev.disc_normal) / np.linalg.norm(lev.disc_normal), atol=1e-6)
     assert _png_std(dag_workdir / targets[1]) > 5.0
     assert (dag_workdir / "logs" / "fig1_l4l5_model.log").read_text().strip()
     assert (dag_workdir / "results" / "benchmarks" / "fig1_l4l5_model.tsv").exists()

@@ -67,7 +67,7 @@ ORDER = [("disc", DISC_STAGE), ("ALL", "wo_pll"), ("PLL", "wo_va"), ("facets", F
          ("CL", "wo_fl"), ("FL", "wo_isl"), ("ISL", "wo_ssl"), ("SSL", "intact")]
 CALIBRATED_LIGAMENTS = ("ALL", "PLL", "FL", "CL", "ISL", "SSL")
 A_BOUNDS, B_BOUNDS, D_BOUNDS = (0.01, 5000.0), (-60.0, 40.0), (0.05, 50.0)
-K_FACET_BOUNDS = (100.0, 1.0e6)
+K_FACET_BOUNDS = (100.0, 1.0e7)
 F0_BOUNDS = (0.0, 300.0)
 CONCAVE_CANDIDATES = ("FL",)
 PENALTY = 10.0
@@ -165,9 +165,31 @@ def _widths(rows, tolerance_deg):
 
 
 def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_shear=None,
-              tolerance_deg=0.5, data_kind="surrogate", max_iter=50, tol=1e-9, max_nfev=60,
-              start=None, concave=CONCAVE_CANDIDATES) -> CalibrationResult:
+              tolerance_deg=0.5, data_kind="surrogate", max_iter=50, tol=1e-7, max_nfev=60,
+              start=None, concave=CONCAVE_CANDIDATES, surrogate_weight=1.0,
+              real_targets: pd.DataFrame | None = None, real_fit_kw=None, family="monotone",
+              anchor_start=True) -> CalibrationResult:
     """Calibrate disc, facet stiffness and ligaments on ``reference`` (see module doc).
+
+    ``family``: the ligament law family of steps 2-8. "monotone" (module doc: a, b, d fitted with F(0) = 0,
+    d > 0, plus a concave branch for the FL); "scaled_published": the ``initial`` set's law of each ligament
+    (the paper's Table 3, the published shape, prestrain and sign of d kept) with two fitted parameters, a
+    force scale s (a -> s a, c -> s c; log10 s in [-3, 1]) and a knee shift (b -> b + db, db in [-20, 20] %).
+    The latter contains the published laws (s = 1, db = 0), so a surrogate generated from (a force-scaled)
+    published set can be recovered (round trip), which the monotone family cannot do for the paper's
+    concave FL.
+    ``anchor_start`` (with ``real_targets``): step 0 fits the ``initial`` set's force scales, facet stiffness
+    and disc shear stiffness to the real rows (:func:`fit_real_targets`, the same fit that anchors the
+    surrogate generator) and the stepwise steps start from that set.
+    ``surrogate_weight``: weight of the residual of reference rows with ``kind == "surrogate"`` relative to
+    real rows (weight 1): real data, where the reference has them, dominate the stepwise fits.
+    ``real_targets``: real ROM rows (stage, direction, moment_nm, rom_mean_deg), e.g. the intact ROM of
+    Yamamoto et al. (1989); after the stepwise steps, :func:`fit_real_targets` refines force scales of
+    the calibrated set on them (summary step ``real_targets``; its parameters are listed one per row in
+    ``info["real_fit"]``).
+    Every step records ``identifiable`` (a structure whose parameters change no ROM of its fit stage by
+    ``IDENTIFIABLE_MIN_DEG`` per step is not fitted: it keeps the ``initial`` set's law, e.g. a ligament
+    that stays slack) and ``at_bound`` (a fitted parameter within ``AT_BOUND_FRACTION`` of a bound).
 
     ``initial``: characteristic set providing everything that is not fitted (axial disc law, shear
     stiffness, prestrains, damping); default ``load_characteristic_set("calibrated")``.
@@ -177,6 +199,22 @@ def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_
     t0 = time.perf_counter()
     base = initial if initial is not None else load_characteristic_set("calibrated")
     steps = []
+    info = {}
+    # ---- step 0: the start set anchored on the real rows (the same fit as the surrogate generator's)
+    if real_targets is not None and len(real_targets) and anchor_start:
+        a0 = fit_real_targets(geometry, base, real_targets, level=level, k_shear=k_shear, max_iter=max_iter,
+                              **(real_fit_kw or {}))
+        base = a0.charset
+        info["anchor"] = a0.parameters
+        bound0 = a0.parameters[a0.parameters["at_bound"]]["parameter"].tolist()
+        err0 = a0.targets["rom_sim_deg"] - a0.targets["rom_mean_deg"]
+        steps.append({"step": 0, "structure": "start_set_on_real_targets", "stage": ",".join(
+                          sorted(set(real_targets["stage"]))), "n_scenarios": len(real_targets),
+                      "parameters": "; ".join(f"{r.parameter}={r.value:.4g} {r.unit}" for r in a0.parameters.itertuples()),
+                      "rms_residual": float(np.sqrt(np.nanmean(err0 ** 2))), "residual_unit": "deg",
+                      "n_not_converged": int((~a0.targets["converged"]).sum()), "n_evaluations": a0.n_evaluations,
+                      "identifiable": bool(a0.parameters["identifiable"].any()), "at_bound": bool(bound0),
+                      "at_bound_parameters": ";".join(bound0)})
     # ---- step 1: disc
     rows = _stage_rows(reference, DISC_STAGE)
     torque = dict(base.disc.torque)
@@ -195,13 +233,20 @@ def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_
         resid = eq3(phi, p) - M
         steps.append({"step": 1, "structure": f"disc:{d}", "stage": DISC_STAGE, "n_scenarios": len(r),
                       "parameters": "p1,p2,p3", "rms_residual": float(np.sqrt(np.mean(resid**2))),
-                      "residual_unit": "N*m", "n_not_converged": 0, "n_evaluations": 1})
+                      "residual_unit": "N*m", "n_not_converged": 0, "n_evaluations": 1,
+                      "identifiable": True, "at_bound": False, "at_bound_parameters": ""})
     disc = _replace(base.disc, torque=torque)
     # ---- model with every calibrated ligament (start values); unfitted ones are masked by the stages
     start = dict(start or {})
     ligs = {}
+    if family not in ("monotone", "scaled_published"):
+        raise ValueError(f"calibration family {family!r}; expected 'monotone' or 'scaled_published'")
     for kind in CALIBRATED_LIGAMENTS:
         pre = base.ligaments[kind].prestrain_pct if kind in base.ligaments else 0.0
+        pub = base.ligaments.get(kind)
+        if family == "scaled_published" and pub is not None and hasattr(pub, "a"):
+            ligs[kind] = SoftplusLaw(pub.a, pub.b, pub.c, pub.d, pre, source="calibration start (published law)")
+            continue
         a, b, d = start.get(kind, (20.0, -pre, 2.0))
         ligs[kind] = SoftplusLaw(a, b, c_zero(a, b, d), d, pre, source="calibration start")
     cs = _replace(base, name="calibrated", disc=disc, ligaments=ligs,
@@ -216,6 +261,8 @@ def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_
     for step, (what, stage) in enumerate(ORDER[1:], start=2):
         rows = _stage_rows(reference, stage)
         w = _widths(rows, tolerance_deg)
+        if "kind" in rows.columns:
+            w = w / np.where(rows["kind"].to_numpy() == "surrogate", float(surrogate_weight), 1.0)
         target = rows["rom_mean_deg"].to_numpy(float)
         ss = StageSolver(fsu, rows[["stage", "direction", "moment_nm"]], max_iter=max_iter, tol=tol)
         n_eval = [0]
@@ -234,10 +281,20 @@ def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_
                                [math.log10(K_FACET_BOUNDS[1])], [0.3], None))
         else:
             kind = what
+            law = ligs[kind]
+            if family == "scaled_published":
+                def apply_s(q, kind=kind, law=law):     # published shape: force scale and knee shift
+                    sel = np.isin(m.f_group, _kind_groups(m, kind))
+                    sc = 10.0 ** q[0]
+                    m.f_par[sel, :4] = (law.a * sc, law.b + q[1], law.c * sc, law.d)
+                candidates.append((apply_s, [0.0, 0.0], [-3.0, -20.0], [1.0, 20.0], [0.3, 2.0],
+                                   lambda q, law=law: (law.a * 10.0 ** q[0], law.b + q[1], law.c * 10.0 ** q[0],
+                                                       law.d)))
 
             def apply_m(q, kind=kind):          # monotone branch: d > 0, F(0) = 0
                 _set_law(m, kind, 10.0 ** q[0], q[1], 10.0 ** q[2])
-            law = ligs[kind]
+            if family == "scaled_published":
+                law = _replace(law, a=20.0, b=-law.prestrain_pct, d=2.0)   # unused: only candidate 0 is fitted
             candidates.append((apply_m, [math.log10(law.a), law.b, math.log10(law.d)],
                                [math.log10(A_BOUNDS[0]), B_BOUNDS[0], math.log10(D_BOUNDS[0])],
                                [math.log10(A_BOUNDS[1]), B_BOUNDS[1], math.log10(D_BOUNDS[1])], [0.3, 2.0, 0.3],
@@ -253,17 +310,55 @@ def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_
                                    [0.3, 2.0, 0.3, 20.0],
                                    lambda q: (10.0 ** q[0], q[1],
                                               q[3] + c_zero(10.0 ** q[0], q[1], -(10.0 ** q[2])), -(10.0 ** q[2]))))
-        best = None
-        for apply, x0, lb, ub, xs, to_law in candidates:
-            x0 = np.clip(x0, lb, ub)
-            sol = least_squares(lambda q: residual(q, apply), x0, method="trf", bounds=(lb, ub), x_scale=xs,
-                                diff_step=1e-5, xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=max_nfev)
-            if best is None or sol.cost < best[0].cost - 1e-12:
-                best = (sol, apply, to_law)
-        sol, apply, to_law = best
-        apply(sol.x)
+        if family == "scaled_published":
+            candidates = candidates[:1]
+        # identifiability: does a step of every parameter change the stage's ROM at all?
+        apply0, x00, lb0, ub0, xs0 = candidates[0][:5]
+        x00 = np.clip(x00, lb0, ub0)
+        r_base = residual(x00, apply0) * w
+        identifiable = False
+        for j in range(len(x00)):
+            dq = np.array(x00, float)
+            dq[j] = dq[j] + (xs0[j] if dq[j] + xs0[j] <= ub0[j] else -xs0[j])
+            if np.nanmax(np.abs(residual(dq, apply0) * w - r_base)) >= IDENTIFIABLE_MIN_DEG:
+                identifiable = True
+                break
+        at_bound = []
+        if not identifiable:
+            if what == "facets":
+                m.k_stiff[:] = k_stiff0 * (k_fac0 / k_fac0)
+            else:
+                pub = base.ligaments.get(what)
+                if pub is not None and hasattr(pub, "a"):
+                    sel = np.isin(m.f_group, _kind_groups(m, what))
+                    m.f_par[sel, :4] = (pub.a, pub.b, pub.c, pub.d)
+            log.warning("calibration step %d (%s on %s): not identifiable (no ROM of the stage changes by %.2g "
+                        "deg when its parameters change): kept at the start set's value", step, what, stage,
+                        IDENTIFIABLE_MIN_DEG)
+        else:
+            best = None
+            for apply, x0, lb, ub, xs, to_law in candidates:
+                x0 = np.clip(x0, lb, ub)
+                sol = least_squares(lambda q: residual(q, apply), x0, method="trf", bounds=(lb, ub), x_scale=xs,
+                                    diff_step=1e-5, xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=max_nfev)
+                if best is None or sol.cost < best[0].cost - 1e-12:
+                    best = (sol, apply, to_law, np.asarray(lb, float), np.asarray(ub, float))
+            sol, apply, to_law, lb, ub = best
+            apply(sol.x)
+            span = ub - lb
+            at_bound = [j for j in range(len(sol.x))
+                        if sol.x[j] - lb[j] <= AT_BOUND_FRACTION * span[j] or ub[j] - sol.x[j] <= AT_BOUND_FRACTION * span[j]]
         rom, conv, res = ss.run()
-        if what == "facets":
+        if not identifiable:
+            if what == "facets":
+                params = f"c_stiff={k_fac:.6g} N/m (not identifiable: start value)"
+            else:
+                pub = base.ligaments.get(what)
+                fitted[what] = (pub.a, pub.b, pub.c, pub.d) if pub is not None and hasattr(pub, "a") else \
+                    tuple(float(v) for v in m.f_par[np.isin(m.f_group, _kind_groups(m, what))][0, :4])
+                params = "a={:.5g} N, b={:.5g} %, c={:.5g} N, d={:.5g} % (not identifiable: start set)".format(
+                    *fitted[what])
+        elif what == "facets":
             k_fac = 10.0 ** sol.x[0]
             params = f"c_stiff={k_fac:.6g} N/m"
         else:
@@ -280,9 +375,13 @@ def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_
                                         "direction": rows["direction"][i], "moment_nm": rows["moment_nm"][i],
                                         "strain_pct": float(strain[i, sel].mean()), "force_n": float(gf[i, g])})
         err = rom - target
+        names = ["log10 c_stiff"] if what == "facets" else (
+            ["log10 force scale", "knee shift db"] if family == "scaled_published" else ["log10 a", "b", "log10 |d|", "F0"])
         steps.append({"step": step, "structure": what, "stage": stage, "n_scenarios": len(rows),
                       "parameters": params, "rms_residual": float(np.sqrt(np.nanmean(err**2))),
-                      "residual_unit": "deg", "n_not_converged": int((~conv).sum()), "n_evaluations": n_eval[0]})
+                      "residual_unit": "deg", "n_not_converged": int((~conv).sum()), "n_evaluations": n_eval[0],
+                      "identifiable": identifiable, "at_bound": bool(at_bound),
+                      "at_bound_parameters": ";".join(names[j] for j in at_bound)})
         log.info("calibration step %d (%s on %s): %s; rms ROM error %.4f deg, %d evaluations",
                  step, what, stage, params, steps[-1]["rms_residual"], n_eval[0])
         rom_fit.append(pd.DataFrame({"structure": what, "stage": stage, "direction": rows["direction"],
@@ -293,6 +392,26 @@ def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_
                   for k in CALIBRATED_LIGAMENTS}
     facet = _replace(base.facet, stiffness=k_fac)
     cal = _replace(cs, ligaments=final_ligs, facet=facet, alternatives={})
+    if real_targets is not None and len(real_targets):
+        rf = fit_real_targets(geometry, cal, real_targets, level=level, k_shear=k_shear, max_iter=max_iter,
+                              secondary=reference, secondary_weight=surrogate_weight, tolerance_deg=tolerance_deg,
+                              **(real_fit_kw or {}))
+        cal = rf.charset
+        k_fac = float(cal.facet.stiffness)
+        for kind_l in CALIBRATED_LIGAMENTS:
+            law = cal.ligaments[kind_l]
+            fitted[kind_l] = (law.a, law.b, law.c, law.d)
+        info["real_fit"] = rf.parameters
+        info["real_fit_targets"] = rf.targets
+        err = rf.targets["rom_sim_deg"] - rf.targets["rom_mean_deg"]
+        bound = rf.parameters[rf.parameters["at_bound"]]["parameter"].tolist()
+        steps.append({"step": max(int(st["step"]) for st in steps) + 1, "structure": "real_targets", "stage": ",".join(
+                          sorted(set(real_targets["stage"]))), "n_scenarios": len(real_targets),
+                      "parameters": "; ".join(f"{r.parameter}={r.value:.4g} {r.unit}" for r in rf.parameters.itertuples()),
+                      "rms_residual": float(np.sqrt(np.nanmean(err ** 2))), "residual_unit": "deg",
+                      "n_not_converged": int((~rf.targets["converged"]).sum()), "n_evaluations": rf.n_evaluations,
+                      "identifiable": bool(rf.parameters["identifiable"].any()), "at_bound": bool(bound),
+                      "at_bound_parameters": ";".join(bound)})
     surf_rows = []
     lev = geometry.levels[level]
     for side in ("left", "right"):
@@ -300,7 +419,7 @@ def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_
         if fl is None:
             continue
         medial = np.array([0.0, -1.0 if side == "left" else 1.0, 0.0])
-        s = fit_surface(fl.superior, fl.inferior, medial_hint=medial)
+        s = fit_surface(fl.superior, fl.inferior, medial_hint=medial, contact=getattr(fl, "contact", "mean_surface"))
         p30, p03, p20, p02, p00 = s.coef
         # Eq. 4 in mm: f_mm = p30*1e-6 x_mm^3 + p03*1e-6 y^3 + p20*1e-3 x^2 + p02*1e-3 y^2 + p00*1e3
         for name, v, unit in (("p30", p30 * 1e-6, "1/mm^2"), ("p03", p03 * 1e-6, "1/mm^2"),
@@ -312,7 +431,7 @@ def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_
         summary=pd.DataFrame(steps), rom_fit=pd.concat(rom_fit, ignore_index=True),
         disc_points=pd.DataFrame(disc_pts), ligament_points=pd.DataFrame(lig_pts),
         facet_surfaces=pd.DataFrame(surf_rows), data_kind=data_kind,
-        wall_time_s=time.perf_counter() - t0)
+        wall_time_s=time.perf_counter() - t0, info=info)
 
 
 # ------------------------------------------------------------------ output
@@ -338,6 +457,13 @@ def write_characteristics(result: CalibrationResult, src_dir, out_dir, reference
             disc.loc[i, "value"] = repr(float(result.disc[r["direction"]][k]))
             disc.loc[i, ["kind", "source"]] = [kind, src_note]
             disc.loc[i, "note"] = f"Eq. 3 fitted (trf) to T(ROM_mean) = M on stage {DISC_STAGE}"
+    ks = getattr(result.charset.disc, "k_shear", None)
+    if ks is not None and "real_fit" in result.info:
+        disc = disc[disc["parameter"] != "shear_stiffness"]
+        disc = pd.concat([disc, pd.DataFrame([{
+            "parameter": "shear_stiffness", "direction": "shear", "value": repr(float(ks)), "unit": "N/m", "kind": kind,
+            "source": src_note, "note": "fitted within the sourced range shear_stiffness_min..max on the real "
+                                        "target rows (lumbar.calibration.fit_real_targets)"}])], ignore_index=True)
     write_table_atomic(disc, out / "disc.csv")
     fac = pd.read_csv(src / "facet.csv", dtype=str, keep_default_na=False)
     for i, r in fac.iterrows():
@@ -497,3 +623,192 @@ def plot_ligament_characteristics(points: pd.DataFrame, table: pd.DataFrame, pat
     fig.tight_layout()
     save_figure_atomic(fig, path, dpi=110)
     plt.close(fig)
+
+
+# ------------------------------------------------------------------ fit on real targets
+#: parameters of the real-target fit: log10 scale factors of the facet contact stiffness, the disc shear
+#: stiffness and the force of each ligament law (the law's shape, knee and prestrain are kept)
+REAL_FIT_PARAMETERS = ("facet_stiffness", "disc_shear", "ALL", "PLL", "FL", "CL", "ISL", "SSL")
+#: bounds of the log10 scales (decades) relative to the start set; the disc shear stiffness is instead
+#: bounded by its sourced range (data/characteristics/disc.csv shear_stiffness_min/max)
+FACET_STIFFNESS_RANGE = (1.0e3, 9.9e6)   # N/m, absolute bounds of the facet stiffness in the real-target fit
+REAL_FIT_LOG10_BOUNDS = {"ALL": (-3.0, 1.0), "PLL": (-3.0, 1.0),
+                         "FL": (-3.0, 1.0), "CL": (-3.0, 1.0), "ISL": (-3.0, 1.0), "SSL": (-3.0, 1.0)}
+AT_BOUND_FRACTION = 0.01          # a parameter within 1 % of its bound range from a bound is flagged at_bound
+IDENTIFIABLE_MIN_DEG = 0.05       # ROM change [deg] per decade below which a parameter is not identifiable
+
+
+@dataclass
+class RealFit:
+    """Result of :func:`fit_real_targets`: the fitted set and one row per parameter."""
+
+    charset: object
+    parameters: pd.DataFrame     # parameter, start, value, unit, log10_scale, lower, upper, at_bound, identifiable,
+                                 # sensitivity_deg_per_decade
+    targets: pd.DataFrame        # stage, direction, moment_nm, rom_mean_deg, rom_sim_deg, rel_error, converged
+    cost: float
+    n_evaluations: int
+
+
+def _scale_charset(cs, names, scales, k_shear):
+    """``cs`` with ligament forces (softplus a and c; Rupp forces) and the facet stiffness scaled."""
+    ligs = dict(cs.ligaments)
+    for name, s in zip(names, scales):
+        if name in ligs:
+            law = ligs[name]
+            if hasattr(law, "a"):
+                ligs[name] = _replace(law, a=law.a * s, c=law.c * s)
+            else:
+                ligs[name] = _replace(law, f_a_n=law.f_a_n * s, f_b_n=law.f_b_n * s)
+    facet = cs.facet
+    if "facet_stiffness" in names:
+        facet = _replace(facet, stiffness=float(facet.stiffness * scales[list(names).index("facet_stiffness")]))
+    disc = _replace(cs.disc, k_shear=float(k_shear)) if k_shear is not None else cs.disc
+    return _replace(cs, ligaments=ligs, facet=facet, disc=disc)
+
+
+def fit_real_targets(geometry, charset, targets: pd.DataFrame, level="L4-L5", parameters=REAL_FIT_PARAMETERS,
+                     k_shear=None, reg_weight=0.02, max_iter=50, tol=1e-7, max_nfev=80,
+                     secondary: pd.DataFrame | None = None, secondary_weight=0.3, tolerance_deg=0.5) -> RealFit:
+    """Fit force scales of the passive structures so that the unit matches measured ROM rows.
+
+    ``targets``: rows (stage, direction, moment_nm, rom_mean_deg) of real data (e.g. the intact L4-L5 ROM
+    at 10 N*m of Yamamoto et al. 1989). Residual: relative ROM error (sim - measured) / measured per row,
+    plus ``reg_weight`` times each log10 scale (a weak pull towards the start set, so that directions the
+    data do not constrain stay at the start values). Parameters (``REAL_FIT_PARAMETERS``): log10 scale
+    factors of the facet stiffness and of each ligament's force; ``disc_shear`` is fitted within the
+    sourced range ``charset.disc.k_shear_range`` (N/m). Before the fit, parameters whose ROM sensitivity is
+    below ``IDENTIFIABLE_MIN_DEG`` per decade in every target row (e.g. a ligament that stays slack) are
+    not fitted: they keep the start value and are listed with ``identifiable = False``. After the fit,
+    ``at_bound`` flags parameters within ``AT_BOUND_FRACTION`` of a bound.
+    """
+    t = targets.reset_index(drop=True)
+    if t.empty:
+        raise ValueError("fit_real_targets: no target rows")
+    measured = t["rom_mean_deg"].to_numpy(float)
+    if not np.all(np.isfinite(measured) & (measured > 0)):
+        raise ValueError("fit_real_targets: every target rom_mean_deg must be finite and > 0 deg")
+    n_real = len(t)
+    # residual scales: real rows in units of 25 % of the measured value (the acceptance band of
+    # lumbar.validation), secondary (surrogate) rows in units of their range, times secondary_weight
+    scale = 0.25 * measured / 1.0
+    keys = ["stage", "direction", "moment_nm"]
+    if secondary is not None and len(secondary):
+        sec = secondary.reset_index(drop=True)
+        sec = sec[~sec[keys].apply(tuple, axis=1).isin(set(t[keys].apply(tuple, axis=1)))].reset_index(drop=True)
+        sw = _widths(sec, tolerance_deg)
+        if "kind" in sec.columns:
+            sw = sw / np.where(sec["kind"].to_numpy() == "surrogate", float(secondary_weight), 1.0)
+        t_all = pd.concat([t[keys + ["rom_mean_deg"]], sec[keys + ["rom_mean_deg"]]], ignore_index=True)
+        measured_all = t_all["rom_mean_deg"].to_numpy(float)
+        scale = np.concatenate([scale, sw])
+    else:
+        t_all, measured_all = t, measured
+    ks0 = float(k_shear if k_shear is not None else charset.disc.k_shear)
+    names, lo, hi, x0 = [], [], [], []
+    for p in parameters:
+        if p == "disc_shear":
+            rng = charset.disc.k_shear_range
+            if rng is None:
+                continue
+            names.append(p)
+            lo.append(math.log10(rng[0]))
+            hi.append(math.log10(rng[1]))
+            x0.append(float(np.clip(math.log10(ks0), lo[-1], hi[-1])))
+        elif p == "facet_stiffness":
+            names.append(p)
+            k_start = float(charset.facet.stiffness)
+            lo.append(math.log10(FACET_STIFFNESS_RANGE[0] / k_start))
+            hi.append(math.log10(FACET_STIFFNESS_RANGE[1] / k_start))
+            x0.append(float(np.clip(0.0, lo[-1], hi[-1])))
+        elif p in charset.ligaments:
+            names.append(p)
+            b = REAL_FIT_LOG10_BOUNDS[p]
+            lo.append(b[0])
+            hi.append(b[1])
+            x0.append(0.0)
+    lo, hi, x0 = np.array(lo), np.array(hi), np.array(x0)
+    fsu = build_fsu(geometry, charset, level, k_shear=ks0)
+    m = fsu.model
+    par_scale0, k0 = m.f_scale.copy(), m.k_stiff.copy()
+    groups = {k: np.isin(m.f_group, _kind_groups(m, k)) for k in names}
+    ss = StageSolver(fsu, t_all[["stage", "direction", "moment_nm"]], max_iter=max_iter, tol=tol)
+    n_eval = [0]
+
+    def apply(q):
+        m.f_scale[:] = par_scale0
+        m.k_stiff[:] = k0
+        for name, v in zip(names, q):
+            if name == "facet_stiffness":
+                m.k_stiff[:] = k0 * 10.0 ** v
+            elif name == "disc_shear":
+                for d in m.discs:
+                    d.k_shear = 10.0 ** v
+            else:
+                m.f_scale[groups[name]] = par_scale0[groups[name]] * 10.0 ** v
+
+    def rom(q):
+        apply(q)
+        n_eval[0] += 1
+        r, conv, _ = ss.run()
+        return r, conv
+
+    r0, c0 = rom(x0)
+    sens = np.zeros(len(names))
+    for j in range(len(names)):
+        dq = x0.copy()
+        step = 0.1 if dq[j] + 0.1 <= hi[j] else -0.1
+        dq[j] += step
+        r1, c1 = rom(dq)
+        ok = c0 & c1
+        sens[j] = float(np.max(np.abs((r1 - r0)[ok]) / abs(step))) if ok.any() else 0.0
+    free = sens >= IDENTIFIABLE_MIN_DEG
+
+    def residual(qf):
+        q = x0.copy()
+        q[free] = qf
+        r, conv = rom(q)
+        return np.concatenate([np.where(conv, (r - measured_all) / scale, PENALTY), reg_weight * (q - x0)[free]])
+
+    q = x0.copy()
+    if free.any():
+        sol = least_squares(residual, x0[free], method="trf", bounds=(lo[free], hi[free]), x_scale=0.3,
+                            diff_step=1e-3, xtol=1e-8, ftol=1e-8, gtol=1e-8, max_nfev=max_nfev)
+        q[free] = sol.x
+    r, conv = rom(q)
+    r, conv = r[:n_real], conv[:n_real]
+    width = hi - lo
+    at_bound = free & ((q - lo <= AT_BOUND_FRACTION * width) | (hi - q <= AT_BOUND_FRACTION * width))
+    scales = 10.0 ** q
+    lig_names = [n for n in names if n not in ("disc_shear",)]
+    lig_scales = [10.0 ** q[names.index(n)] for n in lig_names]
+    ks = 10.0 ** q[names.index("disc_shear")] if "disc_shear" in names else ks0
+    cs = _scale_charset(charset, lig_names, lig_scales, ks)
+    rows = []
+    for j, n in enumerate(names):
+        if n == "disc_shear":
+            start, value, unit = 10.0 ** x0[j], float(ks), "N/m"
+        elif n == "facet_stiffness":
+            start, value, unit = float(charset.facet.stiffness) * 10.0 ** x0[j], float(cs.facet.stiffness), "N/m"
+        else:
+            start, value, unit = 1.0, float(scales[j]), "force scale (-)"
+        rows.append({"parameter": n, "start": start, "value": value, "unit": unit,
+                     "log10_change": float(q[j] - x0[j]),
+                     "lower": float(10.0 ** lo[j] * (1.0 if n == "disc_shear" else charset.facet.stiffness)
+                                    if n in ("disc_shear", "facet_stiffness") else 10.0 ** lo[j]),
+                     "upper": float(10.0 ** hi[j] * (1.0 if n == "disc_shear" else charset.facet.stiffness)
+                                    if n in ("disc_shear", "facet_stiffness") else 10.0 ** hi[j]),
+                     "bound_unit": "N/m" if n in ("disc_shear", "facet_stiffness") else "force scale (-)",
+                     "sensitivity_deg_per_decade": float(sens[j]), "identifiable": bool(free[j]),
+                     "at_bound": bool(at_bound[j])})
+    tt = t[["stage", "direction", "moment_nm", "rom_mean_deg"]].copy()
+    tt["rom_sim_deg"] = r
+    tt["rel_error"] = (r - measured) / measured
+    tt["converged"] = conv
+    for row in rows:
+        if row["at_bound"]:
+            log.warning("real-target fit: %s ends at its bound (%.4g %s)", row["parameter"], row["value"], row["unit"])
+        if not row["identifiable"]:
+            log.info("real-target fit: %s not identifiable from these rows (%.3g deg per decade): kept at %.4g",
+                     row["parameter"], row["sensitivity_deg_per_decade"], row["start"])
+    return RealFit(cs, pd.DataFrame(rows), tt, float(np.sum(tt["rel_error"] ** 2)), n_eval[0])

@@ -267,6 +267,36 @@ _RUPP_PARAMS = {
 }
 _SIGN_TEXT = {"pos": "a positive number", "nonneg": "a number >= 0", "nonzero": "a non-zero number"}
 
+# physical range of every characteristic, in SI (softplus: N and % strain), generous around the published
+# values: a value outside is a typo or a unit slip (e.g. a prestrain of 1e6 %), never a model choice
+_BOUNDS = {
+    "torque_p1": (-100.0, 100.0, "N*m"), "torque_p2": (-1.0, 1.0, "rad^3"), "torque_p3": (-1000.0, 1000.0, "N*m/rad"),
+    "axial_quadratic": (0.0, 1e11, "N/m^2"), "axial_linear": (0.0, 1e8, "N/m"), "axial_tension": (0.0, 1e8, "N/m"),
+    "shear_stiffness": (1e3, 1e7, "N/m"), "shear_stiffness_min": (1e3, 1e7, "N/m"),
+    "shear_stiffness_max": (1e3, 1e7, "N/m"),
+    "facet.stiffness": (0.0, 1e7, "N/m"),
+    "prestrain": (-50.0, 50.0, "%"),
+    "l_a": (0.0, 0.02, "m"), "l_b": (0.0, 0.02, "m"), "f_a": (0.0, 5000.0, "N"), "f_b": (0.0, 5000.0, "N"),
+    "n_strands": (1.0, 20.0, "1"),
+    "softplus.a": (-1e6, 1e6, "N"), "softplus.c": (-1e6, 1e6, "N"),
+    "softplus.b": (-200.0, 200.0, "%"), "softplus.d": (-200.0, 200.0, "%"),
+}
+
+
+def _check_bounds(path, row, column, key, value, label=None):
+    """Raise when ``value`` (SI) lies outside the physical range of characteristic ``key``."""
+    lo, hi, unit = _BOUNDS[key]
+    if not lo <= value <= hi:
+        raise _err(path, row, column, f"{value!r} {unit} for {label or repr(key)} is outside its physical range",
+                   f"a value in [{lo:g}, {hi:g}] {unit}")
+
+
+def _no_duplicate(path, row, seen: set, key, column, what, expected):
+    """Duplicate rows are an error (never last-wins)."""
+    if key in seen:
+        raise _err(path, row, column, f"duplicate row for {what}", expected)
+    seen.add(key)
+
 
 def _err(path, row, column, message, expected):
     return CharacteristicsError(path, message, row=row, column=column, expected=expected)
@@ -319,6 +349,8 @@ def _load_disc(d: Path) -> DiscParams:
         if key in vals:
             raise _err(path, row, "parameter", f"duplicate parameter {key}", "each parameter once")
         vals[key] = _si_value(path, row, p, r["value"], r["unit"], _DISC_PARAMS[p])
+        if p in _BOUNDS:
+            _check_bounds(path, row, "value", p, vals[key], f"parameter '{p}'")
     need = [(f"torque_p{i}", dr) for dr in DISC_DIRECTIONS for i in (1, 2, 3)]
     need += [(p, "") for p in ("axial_quadratic", "axial_linear", "axial_tension",
                                "damping_translational", "damping_rotational")]
@@ -350,12 +382,19 @@ def _load_facet(d: Path) -> FacetParams:
     df = _read(path, FACET_SCHEMA)
     vals: dict[str, float] = {}
     surface: dict[str, dict[str, float]] = {}
+    seen: set = set()
     for row, r in _iter(df):
         p = r["parameter"]
         if p not in _FACET_PARAMS:
             raise _err(path, row, "parameter", f"unknown parameter {p!r}",
                        "one of " + ", ".join(sorted(_FACET_PARAMS)))
+        key = p if p in ("stiffness", "damping") else (p, r["side"])
+        _no_duplicate(path, row, seen, key, "parameter", f"parameter {p!r}"
+                      + ("" if isinstance(key, str) else f" side {r['side']!r}"),
+                      "each parameter once (surface coefficients once per side)")
         v = _si_value(path, row, p, r["value"], r["unit"], _FACET_PARAMS[p])
+        if p == "stiffness":
+            _check_bounds(path, row, "value", "facet.stiffness", v, "parameter 'stiffness'")
         if p in ("stiffness", "damping"):
             vals[p] = v
         else:
@@ -374,6 +413,9 @@ def _load_prestrain(d: Path) -> dict[str, float]:
     for row, r in _iter(df):
         if r["unit"] != "%":
             raise _err(path, row, "unit", f"unit {r['unit']!r} is not valid for a prestrain", "'%'")
+        if r["ligament"] in out:
+            raise _err(path, row, "ligament", f"duplicate row for ligament {r['ligament']!r}", "one row per ligament")
+        _check_bounds(path, row, "prestrain", "prestrain", r["prestrain"], f"the prestrain of {r['ligament']}")
         out[r["ligament"]] = r["prestrain"]
     return out
 
@@ -383,6 +425,7 @@ def _load_softplus(d: Path, name: str, prestrain: dict[str, float]):
     df = _read(path, SOFTPLUS_SCHEMA)
     params: dict[tuple[str, str], dict[str, float]] = {}
     srcs: dict[tuple[str, str], str] = {}
+    seen: set = set()
     for row, r in _iter(df):
         p = r["parameter"]
         if r["unit"] != _SOFTPLUS_UNITS[p]:
@@ -390,6 +433,13 @@ def _load_softplus(d: Path, name: str, prestrain: dict[str, float]):
                        f"'{_SOFTPLUS_UNITS[p]}' (Eq. 7 uses N and percent strain)")
         if p == "d" and r["value"] == 0:
             raise _err(path, row, "value", "d = 0 (division by zero in Eq. 7)", "a non-zero number")
+        _check_bounds(path, row, "value", f"softplus.{p}", r["value"],
+                      f"softplus parameter '{p}' of {r['set']} {r['ligament']}")
+        dkey = (r["set"], r["ligament"], r["variant"], p)
+        if dkey in seen:
+            raise _err(path, row, "parameter", f"duplicate row for (set, ligament, variant, parameter) {dkey}",
+                       "each parameter once per set, ligament and variant")
+        seen.add(dkey)
         if r["set"] != name:
             continue
         key = (r["ligament"], r["variant"])
@@ -440,6 +490,10 @@ def _load_rupp(d: Path):
         v = _si_value(path, row, p, r["value"], r["unit"], _RUPP_PARAMS[p])
         if p == "n_strands" and v != int(v):
             raise _err(path, row, "value", f"n_strands {v!r} is not an integer", "a positive integer")
+        if p in vals.get(r["ligament"], {}):
+            raise _err(path, row, "parameter", f"duplicate row for ligament {r['ligament']!r} parameter {p!r}",
+                       "each parameter once per ligament")
+        _check_bounds(path, row, "value", p, v, f"parameter '{p}' of {r['ligament']}")
         vals.setdefault(r["ligament"], {})[p] = v
         srcs[r["ligament"]] = r["source"]
     ligs = {}
@@ -533,3 +587,19 @@ def load_shape_check(data_dir=None):
     """The paper's calculated Rupp shape parameters (rupp2015_shape_check.csv) as a DataFrame."""
     d = Path(data_dir) if data_dir is not None else default_data_dir()
     return _read(d / "rupp2015_shape_check.csv", SHAPE_CHECK_SCHEMA)
+
+
+# ------------------------------------------------------------------ one resolver of a characteristic set
+def resolve_characteristic_set(name: str, data_dir=None, calibrated_dir=None, overrides=None) -> CharacteristicSet:
+    """The one place that decides where a characteristic set comes from (every stage asks it).
+
+    ``"calibrated"`` comes from ``calibrated_dir`` (the workflow's calibration output,
+    results/calibration/characteristics, fitted on the geometry it runs on) when that directory holds a
+    disc.csv, else from ``data_dir`` (data/characteristics: the paper's published Table 3 set, as printed).
+    Every other name (the literature sets) comes from ``data_dir``. The facet stiffness and the disc shear
+    stiffness are the set's own values (facet.csv / disc.csv); a caller overrides them only explicitly
+    (``overrides``, or ``build_fsu(facet_stiffness=...)`` from the config key fsu.facet_stiffness_n_per_m).
+    """
+    if name == "calibrated" and calibrated_dir is not None and (Path(calibrated_dir) / "disc.csv").is_file():
+        return load_characteristic_set(name, data_dir=calibrated_dir, overrides=overrides)
+    return load_characteristic_set(name, data_dir=data_dir, overrides=overrides)

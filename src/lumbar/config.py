@@ -22,7 +22,7 @@ from typing import Any
 import yaml
 from jsonschema import Draft202012Validator, validators
 
-__all__ = ["ConfigError", "load_config", "default_schema_path", "key_path"]
+__all__ = ["ConfigError", "load_config", "default_schema_path", "key_path", "resolve_path", "default_geometry_path"]
 
 _SCHEMA_RELPATH = Path("workflow") / "schemas" / "config.schema.yaml"
 
@@ -102,13 +102,29 @@ def _describe(error) -> tuple[str, str]:
     return key_path(path), error.message
 
 
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """SafeLoader that rejects a key repeated in one mapping (PyYAML keeps the last one silently: a second
+    ``fsu:`` section would replace the first)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = {}
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            if key in seen and key != "<<":
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"duplicate key {key!r} (first at line {seen[key] + 1}); each key may appear once "
+                    "per mapping: the later one would silently replace the earlier", key_node.start_mark)
+            seen[key] = key_node.start_mark.line
+        return super().construct_mapping(node, deep=deep)
+
+
 def _read(path_or_dict) -> dict:
     if isinstance(path_or_dict, Mapping):
         return copy.deepcopy(dict(path_or_dict))
     path = Path(path_or_dict)
     try:
         with open(path) as fh:
-            data = yaml.safe_load(fh)
+            data = yaml.load(fh, Loader=_UniqueKeyLoader)
     except OSError as exc:
         raise ConfigError([("<file>", f"cannot read {path}: {exc}")]) from exc
     except yaml.YAMLError as exc:
@@ -124,6 +140,22 @@ def _schema_doc(path: str, mtime_ns: int) -> dict:
     """The parsed schema, cached by path and modification time (never modified: defaults are deep-copied)."""
     with open(path) as fh:
         return yaml.load(fh, Loader=_SafeLoader)
+
+
+def resolve_path(path: str | Path) -> Path:
+    """A config path (relative to the working directory, normally the repository root): as given when it exists
+    there or is absolute, else relative to the repository root this package belongs to (for library and CLI use
+    from another directory)."""
+    p = Path(path)
+    if p.is_absolute() or p.exists():
+        return p
+    root = Path(__file__).resolve().parents[2] / p
+    return root if root.exists() else p
+
+
+def default_geometry_path() -> Path:
+    """The configuration's default ``geometry.path`` (the Visible Human folder), resolved by :func:`resolve_path`."""
+    return resolve_path(load_config({})["geometry"]["path"])
 
 
 def load_config(path_or_dict: str | Path | Mapping[str, Any], schema: str | Path | None = None) -> dict:

@@ -126,7 +126,7 @@ def add_level(model: SpineModel, level, charset, facet_stiffness=None, k_shear=N
         if fl is None:
             continue
         medial = np.array([0.0, -1.0 if side == "left" else 1.0, 0.0])
-        surf = fit_surface(fl.superior, fl.inferior, medial_hint=medial)
+        surf = fit_surface(fl.superior, fl.inferior, medial_hint=medial, contact=getattr(fl, "contact", "mean_surface"))
         model.add_facet(up, lo, surf, fl.inferior, k_fac)
         sides.append(side)
     return kinds, sides
@@ -155,9 +155,19 @@ def moment_loads(directions, moments_nm, nb=1, body=0):
     return L
 
 
+#: Largest rotation [deg] of the upper vertebra within the range the disc and ligament laws were fitted on (the
+#: stepwise-reduction experiment to 10 N*m reached ~13 deg disc-only in flexion; beyond 20 deg the laws extrapolate).
+MAX_VALID_ROTATION_DEG = 20.0
+
+
 def range_of_motion(fsu: FSU, moments_nm=(1, 2.5, 5, 7.5, 10), directions=MAIN_DIRECTIONS,
                     stages=("intact",), load_steps=1, max_iter=50, tol=1e-8) -> pd.DataFrame:
-    """ROM table (one row per stage x direction x moment), solved as one batch."""
+    """ROM table (one row per stage x direction x moment), solved as one batch.
+
+    ``valid`` is False where a converged state lies outside the validity of the force laws: the disc centre
+    approaches the lower vertebra by more than the disc height (``disc_compression_mm``), or the upper vertebra
+    rotates by more than :data:`MAX_VALID_ROTATION_DEG` from the stage's 0 N*m state (and where not converged).
+    """
     for d in directions:
         if d not in DIRECTIONS:
             raise ValueError(f"unknown direction {d!r}; expected one of {sorted(DIRECTIONS)}")
@@ -178,6 +188,19 @@ def range_of_motion(fsu: FSU, moments_nm=(1, 2.5, 5, 7.5, 10), directions=MAIN_D
     sign = np.array([DIRECTIONS[g[1]][1] for g in grid])
     rom = np.degrees(rot[np.arange(len(grid)), axis] * sign)
     conv = res.converged & r0.converged[si]
+    # validity of the force laws: no point of the disc's upper endplate (a circle of the disc's area, carried by
+    # the upper vertebra) may approach the lower endplate by more than the disc height, and the rotation from the
+    # stage's 0 N*m state stays within the range the laws were fitted on (MAX_VALID_ROTATION_DEG)
+    c = np.asarray(fsu.level.disc_centre, float)
+    e = disc_frame(fsu.level.disc_normal)
+    t = np.linspace(0.0, 2 * np.pi, 24, endpoint=False)
+    rim = c + np.sqrt(fsu.level.disc_csa / np.pi) * (np.cos(t)[:, None] * e[0] + np.sin(t)[:, None] * e[1])
+    x_ref = m.reference_state(1)[0][0, 0]
+    moved = res.x[:, 0, None] + np.einsum("bij,pj->bpi", res.R[:, 0], rim - x_ref)
+    compression = (-(moved - rim) @ e[2]).max(axis=1)
+    angle = np.degrees(np.linalg.norm(rot, axis=-1))
+    height = float(fsu.level.disc_height)
+    valid = conv & (compression < height) & (angle <= MAX_VALID_ROTATION_DEG)
     df = pd.DataFrame({
         "stage": [stages[g[0]] for g in grid],
         "direction": [g[1] for g in grid],
@@ -189,25 +212,40 @@ def range_of_motion(fsu: FSU, moments_nm=(1, 2.5, 5, 7.5, 10), directions=MAIN_D
         "converged": conv,
         "residual_force_n": res.residual_force, "residual_moment_nm": res.residual_moment,
         "iterations": res.iterations,
+        "disc_compression_mm": compression * 1e3,
+        "valid": valid,
     })
     if not conv.all():
         log.warning("ROM: %d of %d scenarios did not converge; their rom_deg is NaN and converged=False",
                     int((~conv).sum()), len(conv))
+    bad = conv & ~valid
+    if bad.any():
+        log.warning("ROM: %d of %d converged scenarios lie outside the validity of the force laws (disc compressed "
+                    "beyond its height %.1f mm, or a rotation above %g deg; largest %.1f mm, %.1f deg at %g N*m): "
+                    "valid=False", int(bad.sum()), len(conv), height * 1e3, MAX_VALID_ROTATION_DEG,
+                    compression[bad].max() * 1e3, angle[bad].max(), max(g[2] for g, b in zip(grid, bad) if b))
     return df
 
 
 def main(argv=None) -> int:
-    from .characteristics import CHARACTERISTIC_SETS, load_characteristic_set
+    from .characteristics import CHARACTERISTIC_SETS, resolve_characteristic_set
     from .geometry import load_geometry
     p = argparse.ArgumentParser(prog="python -m lumbar.fsu", description=__doc__.split("\n\n")[0])
     p.add_argument("--moment", type=float, nargs="+", default=[10.0], help="pure moment(s) [N*m]")
     p.add_argument("--direction", default="all",
                    help="all | comma list of " + ", ".join(sorted(DIRECTIONS)))
     p.add_argument("--geometry", default="default", help="default | visible_human | synthetic")
-    p.add_argument("--geometry-dir", default=None, help="folder of the Visible Human set")
+    p.add_argument("--geometry-dir", default=None,
+                   help="folder of the Visible Human set (--geometry visible_human; default: the configuration's "
+                        "geometry.path)")
     p.add_argument("--set", default="calibrated", choices=CHARACTERISTIC_SETS, help="characteristic set")
+    p.add_argument("--calibrated-dir", default="results/calibration/characteristics",
+                   help="where --set calibrated comes from: the workflow's calibration output (used when it holds "
+                        "disc.csv; else the paper's published set in data/characteristics)")
     p.add_argument("--stage", default="intact", help="all | comma list of " + ", ".join(STAGES))
-    p.add_argument("--level", default="L4-L5")
+    p.add_argument("--level", default="L4-L5",
+                   help="motion segment to load, 'upper-lower': L1-L2, L2-L3, L3-L4, L4-L5 or L5-S1 (default L4-L5, "
+                        "the unit of paper 1)")
     p.add_argument("--shear-stiffness", type=float, default=None, help="disc shear stiffness [N/m]")
     p.add_argument("--facet-stiffness", type=float, default=None, help="facet contact stiffness [N/m]")
     a = p.parse_args(argv)
@@ -217,22 +255,38 @@ def main(argv=None) -> int:
     for m in a.moment:
         if not np.isfinite(m) or m < 0:
             p.error(f"--moment must be finite and >= 0 N*m, got {m}")
+    geometry_dir = a.geometry_dir
+    if a.geometry == "visible_human" and geometry_dir is None:
+        from .config import default_geometry_path
+        geometry_dir = default_geometry_path()
+        if not geometry_dir.is_dir():
+            p.error(f"--geometry visible_human: no --geometry-dir given and the configuration's geometry.path "
+                    f"{str(geometry_dir)!r} is not a folder; pass --geometry-dir <visible_human_lss folder>")
     try:
-        geo = load_geometry(a.geometry, path=a.geometry_dir)
-        cs = load_characteristic_set(a.set)
+        geo = load_geometry(a.geometry, path=geometry_dir)
+        cs = resolve_characteristic_set(a.set, calibrated_dir=a.calibrated_dir)
         fsu = build_fsu(geo, cs, a.level, facet_stiffness=a.facet_stiffness, k_shear=a.shear_stiffness)
         df = range_of_motion(fsu, a.moment, directions, stages)
     except (ValueError, KeyError, FileNotFoundError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     cols = ["stage", "direction", "moment_nm", "rom_deg", "rot_x_deg", "rot_y_deg", "rot_z_deg",
-            "trans_x_mm", "trans_y_mm", "trans_z_mm", "converged"]
-    print(f"# geometry={geo.name} set={cs.name} level={a.level}")
+            "trans_x_mm", "trans_y_mm", "trans_z_mm", "disc_compression_mm", "converged", "valid"]
+    from pathlib import Path  # noqa: PLC0415
+    origin = (a.calibrated_dir if a.set == "calibrated" and (Path(a.calibrated_dir) / "disc.csv").is_file()
+              else "data/characteristics (as published)")
+    print(f"# geometry={geo.name} set={cs.name} ({origin}) level={a.level}")
     print(df[cols].to_string(index=False, float_format=lambda v: f"{v:.3f}"))
     ok = bool(df["converged"].all())
     if not ok:
         print(f"# {int((~df['converged']).sum())} scenario(s) did NOT converge", file=sys.stderr)
-    return 0 if ok else 1
+    invalid = df["converged"] & ~df["valid"]
+    if invalid.any():
+        print(f"# {int(invalid.sum())} scenario(s) (moment {', '.join(f'{m:g}' for m in sorted(set(df.loc[invalid, 'moment_nm'])))} "
+              f"N*m) lie OUTSIDE the validity of the force laws (valid=False: disc compressed beyond its height "
+              f"{geo.levels[a.level].disc_height * 1e3:.1f} mm or rotation > {MAX_VALID_ROTATION_DEG:g} deg); "
+              "their numbers are extrapolations, not predictions", file=sys.stderr)
+    return 0 if ok and not invalid.any() else 1
 
 
 if __name__ == "__main__":

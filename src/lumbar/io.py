@@ -29,6 +29,7 @@ This module imports nothing from the rest of ``lumbar``.
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import math
 import os
@@ -43,6 +44,7 @@ __all__ = [
     "Column",
     "TableSchema",
     "TableError",
+    "OutputError",
     "read_table",
     "atomic_writer",
     "write_text_atomic",
@@ -53,6 +55,14 @@ __all__ = [
 ]
 
 CSV_FLOAT_FORMAT = "%.6g"
+
+
+class OutputError(OSError):
+    """An output path cannot be written (a folder, below a file, read-only, disk full); the message names the
+    path and what is expected. An ``OSError``, so existing handlers still catch it."""
+
+    def __str__(self):
+        return self.strerror
 
 
 class TableError(ValueError):
@@ -246,8 +256,24 @@ def atomic_writer(path, mode: str = "w", encoding: str | None = "utf-8",
     with ``os.replace``; on an exception it is removed and ``path`` is left
     untouched."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    if path.is_dir():
+        raise OutputError(errno.EISDIR, f"cannot write {path}: it is a folder; expected a file path")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        blocker = next((q for q in [path.parent, *path.parent.parents] if q.exists() and not q.is_dir()), path.parent)
+        raise OutputError(errno.ENOTDIR, f"cannot write {path}: {blocker} is a file, not a folder; "
+                                         "expected a path inside a folder") from None
+    except PermissionError:
+        raise OutputError(errno.EACCES, f"cannot write {path}: no permission to create the folder {path.parent}; "
+                                        "expected a writable location") from None
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:
+        why = "is read-only" if isinstance(exc, PermissionError) or exc.errno == errno.EROFS else \
+            f"cannot hold a new file ({exc.strerror})"
+        raise OutputError(exc.errno or errno.EIO, f"cannot write {path}: the folder {path.parent} {why}; "
+                                                  "expected a writable folder") from None
     os.fchmod(fd, 0o666 & ~_umask())   # mkstemp makes 0600; results get the usual permissions
     try:
         if "b" in mode:
@@ -259,9 +285,12 @@ def atomic_writer(path, mode: str = "w", encoding: str | None = "utf-8",
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+        if isinstance(exc, OSError) and exc.errno == errno.ENOSPC:
+            raise OutputError(errno.ENOSPC, f"cannot write {path}: no space left on the device; nothing was "
+                                            "written (the previous file, if any, is unchanged)") from None
         raise
 
 

@@ -398,6 +398,10 @@ def outlier_counts(syn: pd.DataFrame, published: pd.DataFrame | None = None) -> 
                         "not_converged": g["converged"].apply(lambda s: int((~s.astype(bool)).sum())).to_numpy(),
                         "scenarios": g.size().to_numpy().astype(int)})
     out["data_kind"] = g["data_kind"].agg(lambda s: ";".join(sorted(set(s.astype(str))))).to_numpy()
+    real = syn["data_kind"].astype(str) != "surrogate"
+    out["n_scenarios_real"] = real.groupby(syn["set"], sort=False).sum().astype(int).to_numpy()
+    out["n_outliers_real"] = (syn["outlier"].astype(bool) & real).groupby(syn["set"], sort=False).sum().astype(int).to_numpy()
+    out["surrogate_comparison"] = "method check (round trip on virtual specimens)"
     return out
 
 
@@ -408,7 +412,8 @@ PUBLISHED_KEY = {"calibrated": "outliers_idp_this_paper_model", "chazal1985": "o
 
 def versus_paper(counts: pd.DataFrame, published_csv=None) -> pd.DataFrame:
     """Outlier counts beside the paper's (Table 5 / Sect. 3.2); empty paper columns if the file is absent."""
-    out = counts[["set", "outliers", "scenarios", "data_kind"]].copy()
+    out = counts[["set", "outliers", "scenarios", "data_kind"]
+                 + [c for c in ("n_scenarios_real", "n_outliers_real") if c in counts.columns]].copy()
     out["paper_outliers"] = np.nan
     out["paper_source"] = ""
     if published_csv is not None and Path(published_csv).is_file():

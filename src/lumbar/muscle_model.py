@@ -19,6 +19,8 @@ the rank-one tension-stiffness term ``-dT/dL g g^T`` added here.
 """
 from __future__ import annotations
 
+import logging
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -31,6 +33,8 @@ from .geometry.core import LEVEL_NAMES
 from .model import SpineModel
 from .muscles.muscle_set import ABDOMINALS, EXTENSORS, GROUPS, SCENARIOS, MuscleSet, load_muscle_set
 from .muscles.paths import N_PER_CM2, MusclePaths, baseline_properties
+
+log = logging.getLogger(__name__)
 
 G = 9.81
 FREE = ("L1", "L2", "L3", "L4", "L5")
@@ -465,6 +469,30 @@ def solve_postures(model, solver, activities, props_list=None, start=None):
     return solver.solve_batch([a.thorax_flexion_deg for a in acts], params, **kw)
 
 
+def solve_with_progress(model, solver, activities, props_list=None, start=None, batch_size=16, label="scenarios"):
+    """:func:`solve_postures` in batches of ``batch_size`` scenarios, logging after each batch the scenarios
+    done / total, the elapsed time and an estimate of the remaining time (through this module's logger; the
+    workflow scripts send it to the rule's log and the console)."""
+    n = len(activities)
+    out, t0 = [], time.perf_counter()
+    for k in range(0, n, batch_size):
+        sl = slice(k, k + batch_size)
+        out += solve_postures(model, solver, list(activities[sl]),
+                              None if props_list is None else list(props_list[sl]),
+                              None if start is None else list(start[sl]))
+        el = time.perf_counter() - t0
+        log.info("%s: %d / %d scenarios done, %.0f s elapsed, ~%.0f s remaining (%d reached, %d certified)",
+                 label, len(out), n, el, el / len(out) * (n - len(out)), sum(s.reached for s in out),
+                 sum(s.certified for s in out))
+    return out
+
+
+def certificate(s) -> dict:
+    """The optimality certificate of a solved posture as table columns: ``reached`` (equilibrium, thorax on
+    target), ``certified`` (reached and KKT residual <= the solver's ``kkt_tol``) and ``kkt_residual``."""
+    return {"reached": bool(s.reached), "certified": bool(s.certified), "kkt_residual": float(s.kkt_residual)}
+
+
 def read_in_vivo(path) -> pd.DataFrame:
     df = pd.read_csv(path)
     need = {"activity", "idp_mpa", "source", "kind"}
@@ -490,6 +518,7 @@ def flexion_relaxation(model, sols, names):
         rows.append({"activity": name, "extensor_active_n": float(act[0, ext].sum()),
                      "extensor_passive_n": float(pas[0, ext].sum()),
                      "abdominal_active_n": float(act[0, abd].sum()), "converged": s.converged,
+                     **certificate(s),
                      "extensor_sl_mean_um": float(np.sum(w * se) / np.sum(w)), "extensor_sl_max_um": float(se.max()),
                      "extensor_pcsa_fraction_beyond_ssl": float(np.sum(w[se > model.props.ssl_um[ext]]) / np.sum(w))})
     return pd.DataFrame(rows)
@@ -566,6 +595,7 @@ def capacity_table(model, sols, names) -> pd.DataFrame:
         d = capacity_check(model, s.x, s.R, name, s.a)
         d.insert(1, "pose", "own solution")
         d.insert(2, "converged", s.converged)
+        d["reached"], d["certified"], d["kkt_residual"] = s.reached, s.certified, s.kkt_residual
         out.append(d)
         if s.converged:
             continue
@@ -575,6 +605,7 @@ def capacity_table(model, sols, names) -> pd.DataFrame:
                 d = capacity_check(model, so.x, so.R, name)
                 d.insert(1, "pose", f"{other} solution")
                 d.insert(2, "converged", s.converged)
+                d["reached"], d["certified"], d["kkt_residual"] = so.reached, so.certified, so.kkt_residual
                 out.append(d)
                 break
     return pd.concat(out, ignore_index=True)
@@ -587,6 +618,8 @@ def validation(model, sols, names, in_vivo: pd.DataFrame, area_m2=18e-4):
         d = model.segment_loads(s.x[None], s.R[None]).drop(columns="scenario")
         d.insert(1, "activity", name)
         d["converged"] = s.converged
+        for k, v in certificate(s).items():
+            d[k] = v
         seg.append(d)
     seg = pd.concat(seg, ignore_index=True)
     l45 = seg[seg["level"] == "L4-L5"].set_index("activity")
@@ -599,7 +632,8 @@ def validation(model, sols, names, in_vivo: pd.DataFrame, area_m2=18e-4):
         rows.append({"activity": name, "idp_sim_mpa": float(tot), "idp_force_mpa": float(fp),
                      "idp_moment_mpa": float(mp), "idp_in_vivo_mpa": float(r["idp_mpa"]),
                      "in_vivo_row": act.in_vivo_row, "source": r["source"], "kind": r["kind"],
-                     "converged": s.converged, "tracking_error_deg": s.tracking_error_deg, "note": act.note})
+                     "converged": s.converged, "tracking_error_deg": s.tracking_error_deg, **certificate(s),
+                     "note": act.note})
     val = pd.DataFrame(rows)
     ok = val[val["converged"]]
     metrics = {"n": int(len(ok)), "n_total": int(len(val)), "r2": None, "rmse_mpa": None,
@@ -659,7 +693,9 @@ def sensitivity_directions(df: pd.DataFrame) -> pd.DataFrame:
         rows.append({"parameter": r["parameter"], "value": r["value"], "ssl_um": r["ssl_um"],
                      "group_scope": r["group_scope"], "posture": r["posture"], "paper_change": r["paper_change"],
                      "paper_direction": want, "tolerance_pct": tol, "change_pct": ch, "reached": reached,
-                     "certified": bool(r["converged"]), "simulated_direction": got, "agrees": got == want})
+                     "certified": bool(r["certified"] if "certified" in r else r["converged"]),
+                     "kkt_residual": float(r["kkt_residual"]) if "kkt_residual" in r else np.nan,
+                     "simulated_direction": got, "agrees": got == want})
     return pd.DataFrame(rows)
 
 
@@ -672,21 +708,25 @@ def sensitivity_rows(parameter, ssl_um, values, scopes, postures) -> pd.DataFram
     return pd.DataFrame(rows)
 
 
-def run_sensitivity(model, solver, rows: pd.DataFrame, baseline: dict, area_m2=18e-4) -> pd.DataFrame:
-    """Solve every row (one batch), warm-started from the baseline solution of its posture."""
+def run_sensitivity(model, solver, rows: pd.DataFrame, baseline: dict, area_m2=18e-4, batch_size=16,
+                    label="sensitivity") -> pd.DataFrame:
+    """Solve every row (batches of ``batch_size``, progress logged), warm-started from the baseline solution
+    of its posture."""
     props, start, names = [], [], []
     for _, r in rows.iterrows():
         ssl = None if pd.isna(r["ssl_um"]) else float(r["ssl_um"])
         props.append(apply_parameter(model.props, model.ms, r["parameter"], r["value"], r["group_scope"], ssl))
         names.append(POSTURES[r["posture"]])
         start.append(baseline[r["posture"]])
-    sols = solve_postures(model, solver, names, props, start)
+    sols = solve_with_progress(model, solver, names, props, start, batch_size, label)
     out = rows.copy()
     seg = [model.segment_loads(s.x[None], s.R[None]).query("level == 'L4-L5'").iloc[0] for s in sols]
     tot, fp, mp = idp_parts([s["compressive_n"] for s in seg], [s["moment_nm"] for s in seg], area_m2)
     out["idp_mpa"], out["idp_force_mpa"], out["idp_moment_mpa"] = tot, fp, mp
     out["converged"] = [s.converged for s in sols]
     out["reached"] = [s.reached for s in sols]
+    out["certified"] = [s.certified for s in sols]
+    out["kkt_residual"] = [s.kkt_residual for s in sols]
     out["tracking_error_deg"] = [s.tracking_error_deg for s in sols]
     ext, abd = np.isin(model.ms.groups, EXTENSORS), np.isin(model.ms.groups, ABDOMINALS)
     forces = [model.muscle_forces(s.x[None], s.R[None], s.a, pr)[2:4] for s, pr in zip(sols, props)]
@@ -704,35 +744,91 @@ SOBOL_BOUNDS = {"ssl_um": (2.0, 3.6), "k_n_per_cm2": (10.0, 1000.0), "in_situ_sl
                 "spt_n_per_cm2": (5.0, 150.0), "pennation_deg": (0.0, 30.0)}
 
 
+def sobol_problem() -> dict:
+    """SALib problem: the five parameters, uniform on the paper's ranges (``SOBOL_BOUNDS``)."""
+    return {"num_vars": len(PARAMETERS), "names": list(PARAMETERS),
+            "bounds": [list(SOBOL_BOUNDS[p]) for p in PARAMETERS]}
+
+
+def sobol_samples(n_base: int, seed: int) -> np.ndarray:
+    """Saltelli sample (SALib ``sobol.sample``, no second order): ``n_base * (D + 2)`` rows, D = 5.
+    ``n_base`` must be a power of two (Sobol sequence balance)."""
+    from SALib.sample import sobol as sobol_sample
+    n_base = int(n_base)
+    if n_base < 1 or n_base & (n_base - 1):
+        raise ValueError(f"sobol n_base must be a power of two >= 1, got {n_base}")
+    return sobol_sample.sample(sobol_problem(), n_base, calc_second_order=False, seed=seed)
+
+
+def sobol_chunk_rows(n_samples: int, n_chunks: int, chunk: int) -> np.ndarray:
+    """Row indices of Sobol sample chunk ``chunk`` (0-based) of ``n_chunks`` (contiguous, sizes within one)."""
+    if not (0 <= chunk < n_chunks):
+        raise ValueError(f"sobol chunk must be in [0, {n_chunks}), got {chunk}")
+    return np.array_split(np.arange(n_samples), n_chunks)[chunk]
+
+
+def sobol_evaluate(model, solver, baseline: dict, X: np.ndarray, rows, posture: str, scope="ALL", area_m2=18e-4,
+                   batch_size=16, label="sobol") -> pd.DataFrame:
+    """Solve the Sobol samples ``X[rows]`` in ``posture`` (parameters applied to ``scope``, warm-started from
+    the baseline), one table row per sample: L4-L5 IDP, reached, certified, KKT residual."""
+    if posture not in POSTURES:
+        raise ValueError(f"unknown posture {posture!r}; expected one of {sorted(POSTURES)}")
+    rows = np.asarray(rows, int)
+    props = []
+    for x in X[rows]:
+        pr = model.props
+        for name, v in zip(PARAMETERS, x):
+            pr = apply_parameter(pr, model.ms, name, float(v), scope)
+        props.append(pr)
+    sols = solve_with_progress(model, solver, [POSTURES[posture]] * len(rows), props,
+                               [baseline[posture]] * len(rows), batch_size, label)
+    seg = [model.segment_loads(s.x[None], s.R[None]).query("level == 'L4-L5'").iloc[0] for s in sols]
+    y = idp_parts([s["compressive_n"] for s in seg], [s["moment_nm"] for s in seg], area_m2)[0]
+    out = pd.DataFrame({"posture": posture, "sample": rows, "scope": scope})
+    for k, name in enumerate(PARAMETERS):
+        out[name] = X[rows, k]
+    out["idp_mpa"] = np.asarray(y, float)
+    out["converged"] = [s.converged for s in sols]
+    for key in ("reached", "certified", "kkt_residual"):
+        out[key] = [certificate(s)[key] for s in sols]
+    return out
+
+
+def sobol_indices(samples: pd.DataFrame, n_base: int, seed: int) -> pd.DataFrame:
+    """First-order and total Sobol indices (SALib ``sobol.analyze``, bootstrap 95 % intervals) per posture
+    from the evaluated samples (all ``n_base * (D + 2)`` rows of each posture). Samples whose posture is not
+    reached are replaced by the posture's mean IDP over the reached ones and counted (``n_failed``); reached
+    samples without a certified optimum are kept and counted (``n_uncertified``)."""
+    from SALib.analyze import sobol as sobol_analyze
+    problem = sobol_problem()
+    n = int(n_base) * (len(PARAMETERS) + 2)
+    rows = []
+    for posture, d in samples.groupby("posture", sort=False):
+        d = d.sort_values("sample")
+        if list(d["sample"]) != list(range(n)):
+            raise ValueError(f"Sobol samples of {posture}: expected rows 0..{n - 1} (n_base {n_base}), "
+                             f"got {len(d)} rows")
+        ok = d["reached"].to_numpy(bool)
+        y = d["idp_mpa"].to_numpy(float)
+        y = np.where(ok, y, np.mean(y[ok]) if ok.any() else 0.0)
+        si = sobol_analyze.analyze(problem, y, calc_second_order=False, seed=seed)
+        kkt = d.loc[d["reached"].astype(bool), "kkt_residual"]
+        for k, name in enumerate(PARAMETERS):
+            rows.append({"posture": posture, "parameter": name, "S1": si["S1"][k], "S1_conf": si["S1_conf"][k],
+                         "ST": si["ST"][k], "ST_conf": si["ST_conf"][k], "n_base": int(n_base), "n_samples": n,
+                         "n_failed": int((~ok).sum()),
+                         "n_uncertified": int((d["reached"].astype(bool) & ~d["certified"].astype(bool)).sum()),
+                         "kkt_residual_max": float(kkt.max()) if len(kkt) else np.nan,
+                         "scope": d["scope"].iloc[0]})
+    return pd.DataFrame(rows)
+
+
 def sobol_study(model, solver, baseline: dict, n_base: int, seed: int, scope="ALL", postures=("standing", "flexion"),
                 area_m2=18e-4):
     """Variance-based (Sobol) indices of L4-L5 IDP to the five parameters (uniform on the paper's ranges,
-    applied to ``scope``), Saltelli sampling (SALib), per posture. Samples whose posture is not reached (no
-    equilibrium, or the thorax misses its target by more than 1 deg) are replaced by the posture's mean IDP
-    and counted (``n_failed``); reached samples whose optimality the SQP did not certify are kept and counted
-    (``n_uncertified``)."""
-    from SALib.analyze import sobol as sobol_analyze
-    from SALib.sample import sobol as sobol_sample
-    problem = {"num_vars": len(PARAMETERS), "names": list(PARAMETERS),
-               "bounds": [list(SOBOL_BOUNDS[p]) for p in PARAMETERS]}
-    X = sobol_sample.sample(problem, n_base, calc_second_order=False, seed=seed)
-    rows = []
-    for posture in postures:
-        props = []
-        for x in X:
-            pr = model.props
-            for name, v in zip(PARAMETERS, x):
-                pr = apply_parameter(pr, model.ms, name, float(v), scope)
-            props.append(pr)
-        sols = solve_postures(model, solver, [POSTURES[posture]] * len(X), props, [baseline[posture]] * len(X))
-        seg = [model.segment_loads(s.x[None], s.R[None]).query("level == 'L4-L5'").iloc[0] for s in sols]
-        y = idp_parts([s["compressive_n"] for s in seg], [s["moment_nm"] for s in seg], area_m2)[0]
-        ok = np.array([s.reached for s in sols])
-        y = np.where(ok, y, np.mean(y[ok]) if ok.any() else 0.0)
-        si = sobol_analyze.analyze(problem, y, calc_second_order=False, seed=seed)
-        for k, name in enumerate(PARAMETERS):
-            rows.append({"posture": posture, "parameter": name, "S1": si["S1"][k], "S1_conf": si["S1_conf"][k],
-                         "ST": si["ST"][k], "ST_conf": si["ST_conf"][k], "n_samples": len(X),
-                         "n_failed": int((~ok).sum()),
-                         "n_uncertified": int(sum(s.reached and not s.converged for s in sols)), "scope": scope})
-    return pd.DataFrame(rows)
+    applied to ``scope``), Saltelli sampling (SALib), per posture, in one process (the workflow runs the
+    samples in chunks: :func:`sobol_samples`, :func:`sobol_evaluate`, :func:`sobol_indices`)."""
+    X = sobol_samples(n_base, seed)
+    samples = pd.concat([sobol_evaluate(model, solver, baseline, X, np.arange(len(X)), p, scope, area_m2)
+                         for p in postures], ignore_index=True)
+    return sobol_indices(samples, n_base, seed)

@@ -17,6 +17,11 @@ from . import so3
 log = logging.getLogger(__name__)
 
 LENGTH_SCALE = 0.05  # m, converts moments to forces in the merit function
+#: Largest residual force [N] and moment [N*m] of a state reported as an equilibrium, whatever tolerance the
+#: caller asked for (the workflow schema bounds solver.tol_force_n / tol_moment_nm by the same values): a
+#: looser tolerance could otherwise report the unloaded start state as "converged" under a 10 N*m load.
+PHYSICAL_TOL_FORCE_N = 1e-3
+PHYSICAL_TOL_MOMENT_NM = 1e-4
 
 
 @dataclass
@@ -182,6 +187,13 @@ def solve(model, loads, x0=None, R0=None, fmask=1.0, cmask=1.0, params=None, loa
     """
     loads = np.asarray(loads, float)
     B = loads.shape[0]
+    if not (tol_force > 0 and tol_moment > 0):
+        raise ValueError(f"solver tolerances must be > 0, got tol_force={tol_force!r} N, tol_moment={tol_moment!r} N*m")
+    if tol_force > PHYSICAL_TOL_FORCE_N or tol_moment > PHYSICAL_TOL_MOMENT_NM:
+        log.warning("solver tolerances %.1e N, %.1e N*m are looser than the physical limit of an equilibrium "
+                    "(%.0e N, %.0e N*m): using the limit", tol_force, tol_moment, PHYSICAL_TOL_FORCE_N,
+                    PHYSICAL_TOL_MOMENT_NM)
+        tol_force, tol_moment = min(tol_force, PHYSICAL_TOL_FORCE_N), min(tol_moment, PHYSICAL_TOL_MOMENT_NM)
     if x0 is None:
         x0, R0 = model.reference_state(B)
     x0, R0 = np.asarray(x0, float), np.asarray(R0, float)
@@ -198,6 +210,7 @@ def solve(model, loads, x0=None, R0=None, fmask=1.0, cmask=1.0, params=None, loa
         x[sel], R[sel], conv[sel] = out[0][better], out[1][better], out[2][better]
         res_f[sel], res_m[sel], frac[sel] = out[3][better], out[4][better], out[6][better]
         iters[bad] += out[5]
+    conv = conv & (res_f <= PHYSICAL_TOL_FORCE_N) & (res_m <= PHYSICAL_TOL_MOMENT_NM)   # never a looser "converged"
     if not conv.all():
         log.warning("equilibrium not reached for %d of %d scenario(s) (max residual %.2e N, %.2e N*m); "
                     "flagged converged=False", int((~conv).sum()), B, res_f[~conv].max(), res_m[~conv].max())

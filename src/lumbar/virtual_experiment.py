@@ -167,25 +167,26 @@ def stepwise_reduction_table(geometry, charset, seed, n_specimens=8, variation=N
     if not np.isfinite(noise_sd_deg) or noise_sd_deg < 0:
         raise ValueError(f"noise_sd_deg must be finite and >= 0 deg, got {noise_sd_deg}")
     v = _variation(variation)
-    roms, convs = [], []
-    for k, rng in enumerate(specimen_rngs(int(seed), n_specimens)):
+    def one(rng):
         geo_k, cs_k = virtual_specimen(geometry, charset, rng, v, levels=[level])
         fsu = build_fsu(geo_k, cs_k, level, k_shear=k_shear)
         sim = simulate_stepwise_reduction(fsu, STAGES, MAIN_DIRECTIONS, moments_nm, effects=effects,
                                           max_iter=max_iter, tol=tol)
         rom = sim["rom_deg"].to_numpy(float) + rng.normal(0.0, noise_sd_deg, len(sim))
-        conv = sim["converged"].to_numpy(bool)
-        for i in np.flatnonzero(~conv):
-            r = sim.iloc[i]
-            log.warning("virtual specimen %d: no equilibrium at %s %s %g N*m; dropped from that row",
-                        k, r["stage"], r["direction"], r["moment_nm"])
-        neg = conv & (rom < 0)
+        return sim, rom, sim["converged"].to_numpy(bool)
+
+    sim, roms, redrawn, limit = _without_survivor_bias(one, int(seed), n_specimens, log)
+    for k in range(len(roms)):
+        neg = np.isfinite(roms[k]) & (roms[k] < 0)
         if neg.any():
             log.info("virtual specimen %d: %d noisy ROM value(s) below 0 deg set to 0", k, int(neg.sum()))
-            rom = np.where(neg, 0.0, rom)
-        roms.append(np.where(conv, rom, np.nan))
-        convs.append(conv)
+            roms[k] = np.where(neg, 0.0, roms[k])
+    for i in np.flatnonzero(limit):
+        r = sim.iloc[i]
+        log.warning("no equilibrium for most virtual specimens at %s %s %g N*m (a limit of the model, not of one "
+                    "specimen): row left out", r["stage"], r["direction"], r["moment_nm"])
     A = np.vstack(roms)
+    A[:, limit] = np.nan
     n = np.isfinite(A).sum(axis=0)
     keys = sim[["stage", "direction", "moment_nm"]].reset_index(drop=True)
     with np.errstate(all="ignore"):
@@ -196,7 +197,8 @@ def stepwise_reduction_table(geometry, charset, seed, n_specimens=8, variation=N
     src = (f"lumbar.virtual_experiment.stepwise_reduction_table(seed={int(seed)}, n_specimens={n_specimens}, "
            f"noise_sd_deg={noise_sd_deg:g}, variation={dataclasses.asdict(v)}"
            + (f", effects={dict(effects)}" if effects else "")
-           + f"); calibration model: geometry '{geometry.name}' {level} + characteristic set '{charset.name}'")
+           + f"); calibration model: geometry '{geometry.name}' {level} + characteristic set '{charset.name}'"
+           + (f"; {redrawn} specimen(s) without equilibrium re-drawn (seeded)" if redrawn else ""))
     out = pd.DataFrame({"stage": keys["stage"], "direction": keys["direction"], "moment_nm": keys["moment_nm"],
                         "rom_mean_deg": mean, "rom_min_deg": lo, "rom_max_deg": hi, "n_specimens": n,
                         "kind": "surrogate", "source": src})
@@ -207,8 +209,42 @@ def stepwise_reduction_table(geometry, charset, seed, n_specimens=8, variation=N
                     r["stage"], r["direction"], r["moment_nm"])
     reduced = int(((n < n_specimens) & ~empty).sum())
     if reduced:
-        log.warning("%d row(s) have fewer than %d specimens (non-converged specimens dropped)", reduced, n_specimens)
+        log.warning("%d row(s) have fewer than %d specimens (specimens without equilibrium after every re-draw; "
+                    "reported in n_specimens)", reduced, n_specimens)
     return out[~empty].reset_index(drop=True)
+
+
+def _without_survivor_bias(simulate_one, seed, n_specimens, log, max_redraws=None):
+    """Specimens for a surrogate table without survivor bias (issue 15).
+
+    ``simulate_one(rng) -> (sim, values, converged)``. A scenario where most of the first ``n_specimens`` lack an
+    equilibrium is a limit of the model (e.g. the disc-only flexion law's peak), not of one specimen: it is
+    returned in ``limit`` and left out of the table. A specimen without equilibrium in any other scenario is
+    replaced as a whole by the next specimen of a seeded reserve stream (``SeedSequence(seed).spawn``, after the
+    ``n_specimens`` of the table, so the first specimens are unchanged), so every row averages the same specimens
+    instead of the survivors of that row. Only when the reserve (``max_redraws``, default 2 n) runs out is a
+    specimen kept with its missing rows (then reported by a reduced ``n_specimens``). Returns
+    (sim, values list, number re-drawn, limit mask)."""
+    max_redraws = 2 * n_specimens if max_redraws is None else int(max_redraws)
+    rngs = specimen_rngs(seed, n_specimens + max_redraws)
+    first = [simulate_one(r) for r in rngs[:n_specimens]]
+    sim = first[0][0]
+    conv = np.vstack([c for _, _, c in first])
+    limit = conv.mean(0) < 0.5
+    vals, redrawn, nxt = [], 0, n_specimens
+    for k, (_, val, c) in enumerate(first):
+        while not (c | limit).all() and nxt < len(rngs):
+            bad = np.flatnonzero(~(c | limit))
+            log.warning("virtual specimen %d: no equilibrium in %d scenario(s) (first: %s); re-drawn as reserve "
+                        "specimen %d", k, len(bad), " ".join(map(str, sim.iloc[bad[0]].to_dict().values())), nxt)
+            _, val, c = simulate_one(rngs[nxt])
+            nxt += 1
+            redrawn += 1
+        if not (c | limit).all():
+            log.warning("virtual specimen %d: still no equilibrium in %d scenario(s) after the reserve ran out; "
+                        "reported as a reduced n_specimens in those rows", k, int((~(c | limit)).sum()))
+        vals.append(np.where(c, val, np.nan))
+    return sim, vals, redrawn, limit
 
 
 # ---------------------------------------------------------------- in-vitro IDP surrogate (issue 4)

@@ -1,7 +1,32 @@
 from glob import glob
 from pathlib import Path
 
+import yaml
 from snakemake.utils import validate
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """Snakemake's YAML loading keeps the last of two equal keys (a second `fsu:` replaces the first): re-read
+    every config file with a loader that rejects them (the same check as lumbar.config.load_config)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = {}
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            if key in seen:
+                raise WorkflowError(
+                    f"Error in config file {key_node.start_mark.name}, line {key_node.start_mark.line + 1}: "
+                    f"duplicate key {key!r} (first at line {seen[key] + 1}); each key may appear once per "
+                    "mapping: the later one would silently replace the earlier"
+                )
+            seen[key] = key_node.start_mark.line
+        return super().construct_mapping(node, deep=deep)
+
+
+for _cf in workflow.configfiles:
+    if Path(_cf).is_file() and str(_cf).endswith((".yaml", ".yml")):
+        with open(_cf) as _fh:
+            yaml.load(_fh, Loader=_UniqueKeyLoader)
 
 validate(config, schema="../schemas/config.schema.yaml")
 
@@ -36,6 +61,8 @@ def final_outputs():
         "results/figures/fig5_ligament_characteristics.png",
         "results/tables/table4_rom_synopsis.csv",
         "results/tables/table4_outlier_counts.csv",
+        # validation on real data (workflow/rules/validation.smk): the report opens with it
+        "results/tables/validation_real_data.csv",
         "results/tables/table4_vs_paper.csv",
         "results/figures/table4_grid.png",
         "results/figures/fig6_rom_stepwise_reduction.png",
@@ -76,8 +103,41 @@ def geometry_inputs(wildcards):
     that go with the myo-sim meshes (the meshes themselves come with the pinned myo-sim package).
     """
     if config["geometry"]["kind"] == "visible_human":
-        return [config["geometry"]["path"]]
+        # every file of the folder (not the folder: its mtime does not change when a file is edited in place)
+        files = sorted(str(p) for p in Path(config["geometry"]["path"]).rglob("*") if p.is_file())
+        return files or [config["geometry"]["path"]]
     return sorted(glob("data/landmarks/*.csv"))
+
+
+# ---- declared data files (issue 18): every table a rule reads is one of its input files, so that an in-place
+# edit re-runs exactly the rules that read it (a folder's mtime does not change when a file in it is rewritten).
+# The folder itself stays a named input only to tell the script where the tables are; ancient(): never a trigger.
+CHARACTERISTIC_TABLES = {
+    "softplus": ("disc.csv", "facet.csv", "ligament_prestrain.csv", "ligaments_softplus.csv"),
+    "rupp2015": ("disc.csv", "facet.csv", "ligaments_rupp2015.csv"),
+}
+
+
+def characteristic_tables(data_dir, sets=None):
+    """The tables lumbar.characteristics.load_characteristic_set reads from ``data_dir`` for ``sets``
+    (every *.csv of the folder when ``sets`` is None: calibrate copies them all, discovery may load any set)."""
+    d = Path(data_dir)
+    if sets is None:
+        return sorted(str(p) for p in d.glob("*.csv"))
+    names = {n for s in sets for n in CHARACTERISTIC_TABLES["rupp2015" if s == "rupp2015" else "softplus"]}
+    return [str(d / n) for n in sorted(names)]
+
+
+def characteristics_dir():
+    """characteristics.data_dir as the location input of a rule (ancient: its mtime is never a trigger)."""
+    return ancient(config["characteristics"]["data_dir"])
+
+
+def published_model_results(wildcards):
+    """paths.published_model_results as an input when the file exists (../shared is optional): adding it later
+    re-runs the rules that fill the paper columns (the set of input files changed)."""
+    p = config["paths"]["published_model_results"]
+    return [p] if Path(p).is_file() else []
 
 
 # ---- stepwise reduction (issue 3)
@@ -100,12 +160,20 @@ def stepwise_reduction_characteristics(wildcards):
     """The calibrated set comes from the calibration; the literature sets from the data directory."""
     if wildcards.set == "calibrated":
         return "results/calibration/characteristics/disc.csv"
-    return config["characteristics"]["data_dir"]
+    return characteristics_dir()
+
+
+def stepwise_reduction_tables(wildcards):
+    """The characteristic tables rule stepwise_reduction_sim reads for its set (see characteristic_tables)."""
+    if wildcards.set == "calibrated":
+        return characteristic_tables("results/calibration/characteristics", ["calibrated"])
+    return characteristic_tables(config["characteristics"]["data_dir"], [wildcards.set])
 
 
 # ---- paper-style report (issue 7, workflow/rules/report.smk)
 REPORT_OPTIONAL = [
     "results/calibration/calibration_summary.csv",
+    "results/calibration/calibration_real_fit.csv",
     "results/muscle_model/in_vivo_metrics.json",
     "results/tables/muscle_model_segment_loads.csv",
     "results/tables/in_vivo_validation.csv",
@@ -119,9 +187,10 @@ REPORT_OPTIONAL = [
     "results/discrepancy/benchmark.csv",
     "results/discrepancy/benchmark_summary.json",
     "results/figures/discrepancy_benchmark.png",
+    "results/discrepancy/real_data_summary.csv",
 ] + [
     f"results/discrepancy/{case}/{name}"
-    for case in ("default", "in_vivo", "va_artefact")
+    for case in ("default", "in_vivo", "va_artefact", "intact_rom")
     for name in (
         "discovery.json",
         "disagreement_map.png",
@@ -164,14 +233,21 @@ def l2s1_characteristics(wildcards):
     data_dir = config["characteristics"]["data_dir"]
     cal = config["l2s1"]["calibrated_characteristics"]
     if wildcards.set != "calibrated" or not cal:
-        return data_dir
+        return ancient(data_dir)
     cal_dir = Path(cal)
     produced = any(r.name == "calibrate" for r in workflow.rules) and cal_dir == Path(
         "results", "calibration", "characteristics"
     )
     if produced:
         return str(cal_dir.joinpath("disc.csv"))
-    return cal if cal_dir.is_dir() else data_dir
+    return ancient(cal) if cal_dir.is_dir() else ancient(data_dir)
+
+
+def l2s1_tables(wildcards):
+    """The characteristic tables rule l2s1_idp reads for its set (the folder l2s1_characteristics names)."""
+    d = l2s1_characteristics(wildcards)
+    d = Path(d).parent if str(d).endswith(".csv") else Path(d)
+    return characteristic_tables(d, [wildcards.set])
 
 
 # ---- discrepancy discovery (issue 6, workflow/rules/discover.smk)
@@ -240,7 +316,9 @@ def discovery_final_outputs():
     """Discovery outputs of the default target; the in-vivo run only when the muscle model's tables are
     produced by a rule of this workflow or present (the rule discovery_in_vivo declares them anyway).
     """
-    cases = ["default", "va_artefact"]
+    cases = ["default", "va_artefact"] + (
+        ["intact_rom"] if config["discovery"]["intact_rom"] else []
+    )
     muscle = (
         "results/tables/in_vivo_validation.csv",
         config["discovery"]["in_vivo_segment_loads"],
@@ -252,6 +330,7 @@ def discovery_final_outputs():
         cases.append("in_vivo")
     out = [f"results/discrepancy/{c}/{f}" for c in cases for f in DISCOVERY_FILES]
     return out + [
+        "results/discrepancy/real_data_summary.csv",
         "results/discrepancy/benchmark.csv",
         "results/discrepancy/benchmark_summary.json",
         "results/figures/discrepancy_benchmark.png",

@@ -3,10 +3,20 @@
 # (test fixtures) split into one job per hidden effect (+ one for the null datasets).
 
 
+def discovery_real_data_runs(wildcards):
+    """discovery.json of every run on real measurements: the vertebral-arch artefact, the intact ROM
+    (discovery.intact_rom) and the in-vivo validation when the muscle model's tables are built or present."""
+    cases = ["va_artefact"] + (["intact_rom"] if config["discovery"]["intact_rom"] else [])
+    if "results/discrepancy/in_vivo/discovery.json" in discovery_final_outputs():
+        cases.append("in_vivo")
+    return [f"results/discrepancy/{c}/discovery.json" for c in cases]
+
+
 rule discovery_idp_model:
     input:
         geometry_inputs,
-        characteristics=config["characteristics"]["data_dir"],
+        characteristics=characteristics_dir(),
+        characteristic_tables=characteristic_tables(config["characteristics"]["data_dir"]),
         cables=config["l2s1"]["cables"],
     output:
         "results/discrepancy/model/idp_invitro_model.csv",
@@ -26,7 +36,8 @@ rule discovery_default:
     input:
         geometry_inputs,
         measured=stepwise_reduction_experiment,
-        characteristics=config["characteristics"]["data_dir"],
+        characteristics=characteristics_dir(),
+        characteristic_tables=characteristic_tables(config["characteristics"]["data_dir"]),
     output:
         **discovery_case_outputs("default"),
     log:
@@ -45,13 +56,55 @@ rule discovery_va_artefact:
     input:
         geometry_inputs,
         measured=config["discovery"]["va_artefact"],
-        characteristics=config["characteristics"]["data_dir"],
+        characteristics=characteristics_dir(),
+        characteristic_tables=characteristic_tables(config["characteristics"]["data_dir"]),
     output:
         **discovery_case_outputs("va_artefact"),
     log:
         "logs/discovery_va_artefact.log",
     benchmark:
         "results/benchmarks/discovery_va_artefact.tsv"
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        cfg=discovery_config,
+    script:
+        "../scripts/discover.py"
+
+
+# real data (issue 15): the published intact L4-L5 ROM (discovery.intact_rom)
+rule discovery_intact_rom:
+    input:
+        geometry_inputs,
+        measured=config["discovery"]["intact_rom"] or [],
+        characteristics=characteristics_dir(),
+        characteristic_tables=characteristic_tables(config["characteristics"]["data_dir"]),
+    output:
+        **discovery_case_outputs("intact_rom"),
+    log:
+        "logs/discovery_intact_rom.log",
+    benchmark:
+        "results/benchmarks/discovery_intact_rom.tsv"
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        cfg=discovery_config,
+    script:
+        "../scripts/discover.py"
+
+
+# every discovery on real measurements in one table (the report's "What the model is missing, on real data")
+rule discovery_real_data_summary:
+    input:
+        runs=discovery_real_data_runs,
+    output:
+        report(
+            "results/discrepancy/real_data_summary.csv",
+            caption="../report/discovery_real_data_summary.rst",
+            category="Discrepancy",
+        ),
+    log:
+        "logs/discovery_real_data_summary.log",
     conda:
         "../envs/lumbar.yaml"
     params:
@@ -82,7 +135,8 @@ rule discovery_in_vivo:
 rule discovery_benchmark_job:
     input:
         geometry_inputs,
-        characteristics=config["characteristics"]["data_dir"],
+        characteristics=characteristics_dir(),
+        characteristic_tables=characteristic_tables(config["characteristics"]["data_dir"]),
         idp_model=discovery_benchmark_idp_model,
     output:
         table="results/discrepancy/benchmark/{job}.csv",

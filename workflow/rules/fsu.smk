@@ -1,7 +1,15 @@
 rule fsu_rom:
     input:
         geometry_inputs,
-        characteristics=config["characteristics"]["data_dir"],
+        characteristics=characteristics_dir(),
+        characteristic_tables=characteristic_tables(
+            config["characteristics"]["data_dir"], config["characteristics"]["sets"]
+        ),
+        calibrated=characteristic_tables(
+            "results/calibration/characteristics", ["calibrated"]
+        )
+        if "calibrated" in config["characteristics"]["sets"]
+        else [],
     output:
         report(
             "results/tables/fsu_rom_intact.csv",

@@ -6,6 +6,7 @@ rule l2s1_idp:
     input:
         geometry_inputs,
         characteristics=l2s1_characteristics,
+        characteristic_tables=l2s1_tables,
         cables=config["l2s1"]["cables"],
     output:
         "results/l2s1/idp_{set}.csv",
@@ -30,6 +31,7 @@ rule table5:
     input:
         sims=expand("results/l2s1/idp_{set}.csv", set=config["l2s1"]["sets"]),
         reference=l2s1_idp_reference,
+        published=published_model_results,
     output:
         synopsis=report(
             "results/tables/table5_idp_synopsis.csv",

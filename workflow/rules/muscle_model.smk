@@ -1,6 +1,8 @@
 # Muscle-driven L1-S1 model (paper 2, issue 5): validation against in-vivo L4-L5 IDP (Table 1, Fig. 3,
 # flexion-relaxation), the one-at-a-time sensitivity sweep (Figs. 5-11; one job per Paramspace chunk)
-# and a variance-based (Sobol) sensitivity study. Library: lumbar.muscle_model, lumbar.muscles.
+# and a variance-based (Sobol) sensitivity study (muscle_sobol_chunk per posture and sample chunk, so that
+# --cores 2 keeps both cores busy; muscle_sobol computes the indices). Long jobs log progress lines
+# (scenarios done / total, elapsed, remaining). Library: lumbar.muscle_model, lumbar.muscles.
 import pandas as pd
 from snakemake.utils import Paramspace
 
@@ -33,6 +35,15 @@ rule muscle_validation:
     input:
         in_vivo=config["muscle_model"]["in_vivo_table"],
         landmarks=geometry_inputs,
+        # read by lumbar.muscle_model from the repository's data/ (its defaults), not from config paths
+        data=characteristic_tables(
+            "data/characteristics", [config["muscle_model"]["characteristics"]]
+        )
+        + [
+            "data/muscles/muscle_groups.csv",
+            "data/anthropometry/upper_body_segments.csv",
+        ],
+        published=published_model_results,
     output:
         segment_loads=report(
             "results/tables/muscle_model_segment_loads.csv",
@@ -128,9 +139,34 @@ rule muscle_sensitivity_table:
         "../scripts/muscle_model.py"
 
 
-rule muscle_sobol:
+rule muscle_sobol_chunk:
     input:
         baseline="results/muscle_model/baseline.npz",
+    output:
+        "results/muscle_model/sobol/{posture}_{chunk}.csv",
+    log:
+        "logs/muscle_sobol_chunk/{posture}_{chunk}.log",
+    benchmark:
+        "results/benchmarks/muscle_sobol_chunk/{posture}_{chunk}.tsv"
+    wildcard_constraints:
+        posture="standing|flexion",
+        chunk=r"\d+",
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        muscle_model=config["muscle_model"],
+        seed=config["seed"],
+    script:
+        "../scripts/muscle_model.py"
+
+
+rule muscle_sobol:
+    input:
+        chunks=expand(
+            "results/muscle_model/sobol/{posture}_{chunk}.csv",
+            posture=config["muscle_model"]["sensitivity"]["postures"],
+            chunk=range(config["muscle_model"]["sobol"]["chunks"]),
+        ),
     output:
         table=report(
             "results/tables/sobol_indices.csv",
@@ -144,8 +180,6 @@ rule muscle_sobol:
         ),
     log:
         "logs/muscle_sobol.log",
-    benchmark:
-        "results/benchmarks/muscle_sobol.tsv"
     conda:
         "../envs/lumbar.yaml"
     params:

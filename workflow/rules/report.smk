@@ -9,6 +9,7 @@ rule paper_report:
         derived=stepwise_reduction_derived(None),
         data=sorted(glob("data/**/*.csv", recursive=True)),
         captions=sorted(glob("workflow/report/*.rst")),
+        published=published_model_results,
     output:
         html=report(
             "results/report/paper.html",

@@ -2,6 +2,7 @@ rule stepwise_reduction_sim:
     input:
         geometry_inputs,
         characteristics=stepwise_reduction_characteristics,
+        characteristic_tables=stepwise_reduction_tables,
     output:
         "results/stepwise_reduction/rom_{set}.csv",
     log:
@@ -29,6 +30,8 @@ rule table4:
         ),
         experiment=stepwise_reduction_experiment,
         derived=stepwise_reduction_derived,
+        real_targets=config["stepwise_reduction"]["real_targets"],
+        published=published_model_results,
     output:
         report(
             "results/tables/table4_rom_synopsis.csv",

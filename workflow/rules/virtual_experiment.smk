@@ -1,9 +1,16 @@
 rule stepwise_reduction_surrogate:
     input:
         geometry_inputs,
-        characteristics=config["characteristics"]["data_dir"],
+        characteristics=characteristics_dir(),
+        characteristic_tables=characteristic_tables(
+            config["characteristics"]["data_dir"],
+            [config["stepwise_reduction"]["generator_set"]],
+        ),
+        real_targets=config["stepwise_reduction"]["real_targets"],
     output:
-        "results/experiments/stepwise_reduction_surrogate.csv",
+        table="results/experiments/stepwise_reduction_surrogate.csv",
+        generator_fit="results/experiments/stepwise_reduction_generator_fit.csv",
+        generator_targets="results/experiments/stepwise_reduction_generator_targets.csv",
     log:
         "logs/stepwise_reduction_surrogate.log",
     benchmark:
@@ -23,7 +30,10 @@ rule stepwise_reduction_surrogate:
 rule idp_surrogate:
     input:
         geometry_inputs,
-        characteristics=config["characteristics"]["data_dir"],
+        characteristics=characteristics_dir(),
+        characteristic_tables=characteristic_tables(
+            config["characteristics"]["data_dir"], [config["l2s1"]["generator_set"]]
+        ),
         cables=config["l2s1"]["cables"],
     output:
         "results/experiments/idp_wilke1996_surrogate.csv",

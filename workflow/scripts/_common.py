@@ -50,7 +50,7 @@ def stand_in(rules: dict, doc: str = "", argv=None):
         rule=args.rule,
         config=config,
         input=_named(spec.get("input", [])),
-        output=_Named(args.output or spec["output"]),
+        output=_Named(args.output) if args.output else _named(spec["output"]),
         params=SimpleNamespace(**spec.get("params", {})),
         log=_Named([args.log] if args.log else []),
         wildcards=SimpleNamespace(),
@@ -77,6 +77,15 @@ def setup_logging(smk) -> logging.Logger:
 
     sys.excepthook = log_uncaught
     return log
+
+
+def as_list(item):
+    """Snakemake input entry (str, list or Namedlist) as a list of paths."""
+    if item is None:
+        return []
+    if isinstance(item, (str, bytes)) or hasattr(item, "__fspath__"):
+        return [str(item)]
+    return [str(x) for x in item]
 
 
 def first(item):

@@ -25,9 +25,11 @@ def _experiment(c):
 RULES = {
     "calibrate": lambda c: dict(
         input=dict(experiment=_experiment(c), derived=c["stepwise_reduction"]["disc_only_derived"] or [],
+                   real_targets=c["stepwise_reduction"]["real_targets"],
                    characteristics=c["characteristics"]["data_dir"]),
         output=dict(characteristics=[f"{CAL}/characteristics/{n}" for n in CHAR_FILES],
                     summary=f"{CAL}/calibration_summary.csv", rom_fit=f"{CAL}/calibration_rom_fit.csv",
+                    real_fit=f"{CAL}/calibration_real_fit.csv",
                     disc_points=f"{CAL}/fig4_points.csv", ligament_points=f"{CAL}/fig5_points.csv",
                     table1="results/tables/table1_disc_calibrated.csv",
                     table2="results/tables/table2_facet_surfaces.csv",
@@ -67,20 +69,34 @@ if snakemake.rule == "calibrate":
     exp = read_experiment_table(snakemake.input.experiment)
     derived = read_experiment_table(_common.first(snakemake.input.derived)) \
         if _common.first(snakemake.input.derived) else None
-    ref = reference_table(exp, derived)
+    real = [read_experiment_table(p) for p in _common.as_list(snakemake.input.real_targets)]
+    real = pd.concat(real, ignore_index=True) if real else None
+    ref = reference_table(exp, derived, real)
     data_kind = "surrogate" if (ref["kind"] == "surrogate").any() else "measured"
     log.info("calibrating on %s (%d rows; kinds %s)", snakemake.input.experiment, len(ref),
              dict(ref["kind"].value_counts()))
     geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
     paper = load_characteristic_set("calibrated", data_dir=snakemake.input.characteristics)
     res = cal.calibrate(geo, ref, initial=paper, level=f["level"], k_shear=f.get("disc_shear_stiffness_n_per_m"),
-                        tolerance_deg=sr["outlier_tolerance_deg"], data_kind=data_kind, max_iter=s["max_iter"])
+                        tolerance_deg=sr["outlier_tolerance_deg"], data_kind=data_kind, max_iter=s["max_iter"],
+                        surrogate_weight=sr["surrogate_weight"], family=sr["calibration_family"],
+                        real_targets=real if data_kind == "surrogate" else None)
     log.info("calibration wall time %.1f s", res.wall_time_s)
     out_dir = Path(snakemake.output.characteristics[0]).parent
     cal.write_characteristics(res, snakemake.input.characteristics, out_dir,
                               reference_source=f"{snakemake.input.experiment} ({data_kind})")
     load_characteristic_set("calibrated", data_dir=out_dir)   # round trip through the validated loader
     res.summary.assign(data_kind=data_kind).pipe(write_table_atomic, snakemake.output.summary)
+    rf = res.info.get("real_fit")
+    (rf if rf is not None else pd.DataFrame(columns=["parameter", "start", "value", "unit", "identifiable",
+                                                     "at_bound"])).pipe(write_table_atomic, snakemake.output.real_fit)
+    for r in res.summary.itertuples():
+        if getattr(r, "at_bound", False):
+            log.warning("calibration step %s (%s): parameter(s) %s end at a bound", r.step, r.structure,
+                        r.at_bound_parameters)
+        if not getattr(r, "identifiable", True):
+            log.warning("calibration step %s (%s): not identifiable from its stage; kept at the published value",
+                        r.step, r.structure)
     res.rom_fit.assign(data_kind=data_kind).pipe(write_table_atomic, snakemake.output.rom_fit)
     res.disc_points.assign(data_kind=data_kind).pipe(write_table_atomic, snakemake.output.disc_points)
     res.ligament_points.assign(data_kind=data_kind).pipe(write_table_atomic, snakemake.output.ligament_points)

@@ -1,5 +1,6 @@
-"""Discrepancy stage (issue 6): rules discovery_idp_model, discovery_default, discovery_va_artefact,
-discovery_in_vivo, discovery_benchmark_job (one hidden effect, or "null"), discovery_benchmark.
+"""Discrepancy stage (issues 6, 15): rules discovery_idp_model, discovery_default, discovery_va_artefact,
+discovery_intact_rom, discovery_in_vivo, discovery_real_data_summary, discovery_benchmark_job (one hidden effect,
+or "null"), discovery_benchmark.
 
 By hand: python workflow/scripts/discover.py discovery_va_artefact --configfile config/test/config.yaml \
     --output /tmp/va/discovery.json /tmp/va/disagreement_map.png /tmp/va/ranking.png \
@@ -33,6 +34,10 @@ RULES = {
     "discovery_default": _case("default", lambda c: c["stepwise_reduction"]["measured_table"]
                                or "results/experiments/stepwise_reduction_surrogate.csv"),
     "discovery_va_artefact": _case("va_artefact", lambda c: c["discovery"]["va_artefact"]),
+    "discovery_intact_rom": _case("intact_rom", lambda c: c["discovery"]["intact_rom"]),
+    "discovery_real_data_summary": lambda c: dict(
+        input=dict(runs=[f"results/discrepancy/{k}/discovery.json" for k in ("intact_rom", "va_artefact")]),
+        output=["results/discrepancy/real_data_summary.csv"], params=dict(cfg=_cfg(c))),
     "discovery_in_vivo": _case("in_vivo", lambda c: "results/tables/in_vivo_validation.csv",
                                segment_loads=lambda c: c["discovery"]["in_vivo_segment_loads"]),
     "discovery_benchmark_job": lambda c: dict(
@@ -71,7 +76,7 @@ if rule == "discovery_idp_model":
     write_table_atomic(sim, snakemake.output[0], float_format="%.9g")
     log.info("nominal L2-S1 model (set %s): %d scenarios, %d converged", cfg["discovery"]["characteristic_set"],
              len(sim), int(sim["converged"].sum()))
-elif rule in ("discovery_default", "discovery_va_artefact", "discovery_in_vivo"):
+elif rule in ("discovery_default", "discovery_va_artefact", "discovery_in_vivo", "discovery_intact_rom"):
     if rule == "discovery_in_vivo":
         cfg["discovery"]["in_vivo_segment_loads"] = str(snakemake.input.segment_loads)
     out_dir = Path(snakemake.output[0]).parent
@@ -81,6 +86,10 @@ elif rule in ("discovery_default", "discovery_va_artefact", "discovery_in_vivo")
     for p in snakemake.output:
         if not Path(p).is_file():
             raise RuntimeError(f"{rule}: expected output {p} was not written (outputs go to {out_dir})")
+elif rule == "discovery_real_data_summary":
+    table = discover.real_data_summary([Path(p) for p in snakemake.input.runs])
+    write_table_atomic(table, snakemake.output[0], float_format="%.6g")
+    log.info("real-data summary: %d dataset(s); named: %s", len(table), table["named_effect"].tolist())
 elif rule == "discovery_benchmark_job":
     job = Path(snakemake.output[0]).stem
     cases = discover.benchmark_cases(cfg)
@@ -95,14 +104,15 @@ elif rule == "discovery_benchmark":
     bench = pd.concat([pd.read_csv(p) for p in snakemake.input.jobs], ignore_index=True)
     bench = bench.sort_values("case", kind="stable").reset_index(drop=True)
     summary = discover.summarise_benchmark(bench, discover.benchmark_settings(cfg)["generator"])
-    cols = ["case", "experiment", "hidden_effect", "magnitude", "named_effect", "correct", "param_true", "param_est",
-            "gap_before", "gap_after", "confidence", "fixture"]
+    cols = ["case", "experiment", "hidden_effect", "magnitude_label", "magnitude", "named_effect", "correct",
+            "p_value", "best_candidate", "param_true", "param_est", "at_bound", "gap_before", "gap_after",
+            "confidence", "fixture"]
     write_table_atomic(bench[cols], snakemake.output[0], float_format="%.6g")
     write_json_atomic(summary, snakemake.output[1], allow_nan=True)
     discover.plot_benchmark(bench, summary, snakemake.output[2])
-    log.info("benchmark: accuracy %.2f, null specificity %.2f, parameters within 20%% %.2f, median gap reduction "
-             "%.2f, all targets met: %s", summary["naming_accuracy"], summary["null_specificity"],
-             summary["param_within_20pct"], summary["median_gap_reduction"], summary["all_pass"])
+    log.info("benchmark: %d nulls, false-positive rate %.3f (95%% CI %s), power at the larger magnitude %s, all "
+             "targets met: %s", summary["n_null"], summary["false_positive_rate"], summary["false_positive_rate_95ci"],
+             summary["power_at_larger_magnitude"], summary["all_pass"])
 else:
     raise ValueError(f"unknown rule {rule!r}")
 log.info("%s done in %.1f s", rule, time.perf_counter() - t0)

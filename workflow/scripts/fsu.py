@@ -23,7 +23,7 @@ if "snakemake" not in globals():
 
 log = _common.setup_logging(snakemake)
 
-from lumbar.characteristics import load_characteristic_set  # noqa: E402
+from lumbar.characteristics import resolve_characteristic_set  # noqa: E402
 from lumbar.fsu import build_fsu, range_of_motion  # noqa: E402
 from lumbar.geometry import load_geometry  # noqa: E402
 from lumbar.io import write_table_atomic  # noqa: E402
@@ -32,7 +32,9 @@ g, f, s = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solv
 geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
 tables = []
 for name in snakemake.params.sets:
-    cs = load_characteristic_set(name, data_dir=snakemake.input.characteristics)
+    cal = _common.as_list(getattr(snakemake.input, "calibrated", []))
+    cs = resolve_characteristic_set(name, data_dir=snakemake.input.characteristics,
+                                    calibrated_dir=Path(cal[0]).parent if cal else None)
     fsu = build_fsu(geo, cs, f["level"], facet_stiffness=f["facet_stiffness_n_per_m"],
                     k_shear=f.get("disc_shear_stiffness_n_per_m"))
     df = range_of_motion(fsu, f["moments_nm"], f["directions"], stages=["intact"], load_steps=s["load_steps"],

@@ -1,5 +1,8 @@
 """Muscle-driven model stage (paper 2, issue 5): rules muscle_validation, muscle_sensitivity (one
-Paramspace chunk), muscle_sensitivity_table and muscle_sobol.
+Paramspace chunk), muscle_sensitivity_table, muscle_sobol_chunk (one posture, one chunk of the Saltelli
+samples) and muscle_sobol (indices and figure). The long jobs log progress lines through the library's
+logger (lumbar.muscle_model: scenarios done / total, elapsed, estimated remaining), which setup_logging sends
+to the rule's log and the console.
 
 By hand: python workflow/scripts/muscle_model.py muscle_validation --configfile config/test/config.yaml
     (outputs as in workflow/rules/muscle_model.smk; --output to redirect)
@@ -38,8 +41,12 @@ RULES = {
         + [f"results/figures/muscle_sensitivity_{p}.png" for p in FIGURE_PARAMETERS]
         + ["results/tables/sensitivity_directions.csv"],
         params=dict(muscle_model=c["muscle_model"])),
+    "muscle_sobol_chunk": lambda c: dict(
+        input=dict(baseline=BASELINE), output=[f"{OUT}/sobol/standing_0.csv"],
+        params=dict(muscle_model=c["muscle_model"], seed=c["seed"], chunk={"posture": "standing", "chunk": "0"})),
     "muscle_sobol": lambda c: dict(
-        input=dict(baseline=BASELINE), output=["results/tables/sobol_indices.csv", "results/figures/muscle_sobol.png"],
+        input=dict(chunks=sorted(str(f) for f in Path(OUT, "sobol").glob("*.csv"))),
+        output=["results/tables/sobol_indices.csv", "results/figures/muscle_sobol.png"],
         params=dict(muscle_model=c["muscle_model"], seed=c["seed"])),
 }
 
@@ -84,6 +91,52 @@ def _load_baseline(path):
     return out
 
 
+UNITS = {"ssl_um": "SSL [um]", "k_n_per_cm2": "K [N/cm2]", "in_situ_sl_um": "in-situ SL [um]",
+         "spt_n_per_cm2": "SpT [N/cm2]", "pennation_deg": "pennation [deg]"}
+
+
+def _sobol_figure(df, path):
+    """S1 and ST with bootstrap 95 % intervals per posture. The y-range is set by the indices (not by the
+    intervals) within [-0.5, 1.5]; a whisker or bar beyond it is clipped and marked with a triangle at the edge
+    (a bar also with its value)."""
+    posts = list(dict.fromkeys(df["posture"]))
+    fig, axes = plt.subplots(1, len(posts), figsize=(4.3 * len(posts), 4.0), squeeze=False, sharey=True,
+                             layout="constrained")
+    vals = np.r_[df["S1"], df["ST"]]
+    lo = max(-0.5, min(-0.05, float(np.nanmin(vals)) - 0.05))
+    hi = min(1.5, max(1.05, float(np.nanmax(vals)) + 0.05))
+    for ax, post in zip(axes[0], posts):
+        d = df[df["posture"] == post]
+        xs = np.arange(len(d))
+        for off, key, lab, col in ((-0.2, "S1", "first-order index S1", "#4c72b0"),
+                                   (0.2, "ST", "total index ST", "#dd8452")):
+            v, c = d[key].to_numpy(float), d[f"{key}_conf"].to_numpy(float)
+            vc = np.clip(v, lo, hi)
+            ax.bar(xs + off, vc, 0.4, color=col, label=lab)
+            ax.errorbar(xs + off, vc, yerr=[np.clip(vc - np.maximum(v - c, lo), 0, None),
+                                            np.clip(np.minimum(v + c, hi) - vc, 0, None)],
+                        fmt="none", ecolor="k", lw=0.8, capsize=2)
+            for x, vv, cc in zip(xs + off, v, c):
+                if vv + cc > hi:
+                    ax.plot(x, hi, "k^", ms=5, clip_on=False)
+                if vv - cc < lo:
+                    ax.plot(x, lo, "kv", ms=5, clip_on=False)
+                if not lo <= vv <= hi:
+                    ax.annotate(f"{vv:.2g}", (x, hi if vv > hi else lo), xytext=(0, -10 if vv > hi else 4),
+                                textcoords="offset points", ha="center", fontsize=6)
+        ax.axhline(0, color="0.5", lw=0.6)
+        ax.set_ylim(lo, hi)
+        ax.set_xticks(xs, [UNITS.get(q, q) for q in d["parameter"]], rotation=35, ha="right", fontsize=7)
+        r = d.iloc[0]
+        ax.set_title(f"{post}: N = {int(r['n_base'])} ({int(r['n_samples'])} solves)\n{int(r['n_failed'])} not "
+                     f"reached, {int(r['n_uncertified'])} reached but not certified", fontsize=8)
+    axes[0, 0].set_ylabel("Sobol index of L4-L5 IDP [-]")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=2, fontsize=7,
+               title="whiskers: bootstrap 95 % interval; triangle: clipped at the axis limit", title_fontsize=7)
+    _save(fig, path)
+
+
 rule = snakemake.rule
 p = snakemake.params.muscle_model
 if rule == "muscle_validation":
@@ -100,9 +153,9 @@ if rule == "muscle_validation":
     log.info("%d activities solved in %.1f s; converged: %s", len(names), time.perf_counter() - t0,
              {n: s.converged for n, s in zip(names, sols)})
     for n, s in zip(names, sols):
-        log.info("%s: converged=%s residual %.1e N %.1e N*m tracking error %.3f deg, %d iterations %s", n,
-                 s.converged, s.residual_force_n, s.residual_moment_nm, s.tracking_error_deg, s.iterations,
-                 s.message)
+        log.info("%s: converged=%s reached=%s certified=%s KKT residual %.1e, residual %.1e N %.1e N*m, tracking "
+                 "error %.3f deg, %d iterations %s", n, s.converged, s.reached, s.certified, s.kkt_residual,
+                 s.residual_force_n, s.residual_moment_nm, s.tracking_error_deg, s.iterations, s.message)
     seg, val, metrics = mm.validation(model, sols, names, mm.read_in_vivo(snakemake.input.in_vivo), p["disc_area_m2"])
     keep = [n for n in names if n in p["activities"]]
     seg = seg[seg["activity"].isin(keep)]
@@ -123,7 +176,8 @@ if rule == "muscle_validation":
                   "toe of the passive curve; 334 N over the extensors' PCSA would need SL ~3.5 um in all of them "
                   "(25 % beyond SSL 2.8). Not tuned; README, Muscle-driven model.")
     write_table_atomic(seg[["level", "activity", "compressive_n", "shear_n", "moment_nm", "converged",
-                            "lateral_moment_nm", "axial_moment_nm"]], snakemake.output[0])
+                            "lateral_moment_nm", "axial_moment_nm", "reached", "certified", "kkt_residual"]],
+                       snakemake.output[0])
     write_table_atomic(val2, snakemake.output[1])
     Path(snakemake.output[2]).parent.mkdir(parents=True, exist_ok=True)
     Path(snakemake.output[2]).write_text(json.dumps(metrics, indent=2, sort_keys=True) + "\n")
@@ -139,9 +193,10 @@ if rule == "muscle_validation":
     starred = False
     for k, ok in enumerate(val2["converged"]):
         if not ok:
-            ax.plot(xs[k] - 0.2, val2["idp_sim_mpa"].iloc[k] + 0.05, "r*", ms=12,
+            ax.plot(xs[k] - 0.2, val2["idp_sim_mpa"].iloc[k] + 0.05, "r*", ms=12, clip_on=False,
                     label=None if starred else "not converged (excluded from R2)")
             starred = True
+    ax.set_ylim(0, 1.2 * max(val2["idp_sim_mpa"].max(), val2["idp_in_vivo_mpa"].max()) + 0.1)
     ax.set_xticks(xs, [a.replace("_", "\n") for a in val2["activity"]], fontsize=8)
     ax.set_ylabel("L4-L5 IDP [MPa]")
     r2 = metrics["r2"]
@@ -181,16 +236,19 @@ elif rule == "muscle_sensitivity":
     model = _model(p)
     solver = mm.make_solver(model, p["solver"])
     t0 = time.perf_counter()
-    out = mm.run_sensitivity(model, solver, rows, _load_baseline(snakemake.input.baseline), p["disc_area_m2"])
-    log.info("chunk %s (ssl %s): %d scenarios in %.1f s, %d not converged", param, ssl, len(out),
-             time.perf_counter() - t0, int((~out["converged"]).sum()))
+    log.info("chunk %s (ssl %s): %d scenarios", param, ssl, len(rows))
+    out = mm.run_sensitivity(model, solver, rows, _load_baseline(snakemake.input.baseline), p["disc_area_m2"],
+                             label=f"sensitivity {param} (ssl {ssl})")
+    log.info("chunk %s (ssl %s): %d scenarios in %.1f s, %d not reached, %d reached but not certified "
+             "(max KKT residual %.1e)", param, ssl, len(out), time.perf_counter() - t0, int((~out["reached"]).sum()),
+             int((out["reached"] & ~out["certified"]).sum()), out["kkt_residual"].max())
     write_table_atomic(out, snakemake.output[0])
 elif rule == "muscle_sensitivity_table":
     df = pd.concat([pd.read_csv(f) for f in snakemake.input.chunks], ignore_index=True)
     base = pd.read_csv(snakemake.input.baseline_table).set_index("activity")
     cols = ["parameter", "value", "ssl_um", "group_scope", "posture", "idp_mpa", "idp_force_mpa", "idp_moment_mpa",
-            "converged", "reached", "tracking_error_deg", "extensor_active_n", "extensor_passive_n", "abdominal_active_n",
-            "paper_change"]
+            "converged", "reached", "certified", "kkt_residual", "tracking_error_deg", "extensor_active_n",
+            "extensor_passive_n", "abdominal_active_n", "paper_change"]
     df = df[cols].copy()
     df["baseline_idp_mpa"] = [base.loc[mm.POSTURES[q], "idp_sim_mpa"] if mm.POSTURES[q] in base.index else np.nan
                               for q in df["posture"]]
@@ -201,19 +259,25 @@ elif rule == "muscle_sensitivity_table":
     log.info("paper statements reproduced in direction: %d of %d (%d reached postures with uncertified optimum)",
              int(dirs["agrees"].sum()), len(dirs), int((dirs["reached"] & ~dirs["certified"]).sum()))
     scopes = list(p["sensitivity"]["scopes"])
+    posts = list(p["sensitivity"]["postures"])
     for k, param in enumerate(FIGURE_PARAMETERS):
         d = df[df["parameter"] == param]
         ssls = [x for x in d["ssl_um"].fillna(-1).unique()]
-        fig, axes = plt.subplots(len(ssls) * len(p["sensitivity"]["postures"]), 1, squeeze=False,
-                                 figsize=(8, 2.6 * len(ssls) * len(p["sensitivity"]["postures"])))
+        unit = UNITS[param].split("[")[-1].rstrip("]")
+        nrow = max(len(ssls) * len(posts), 1)
+        fig, axes = plt.subplots(nrow, 1, squeeze=False, figsize=(8.5, 0.6 + 2.5 * nrow), layout="constrained")
+        fig.suptitle(f"L4-L5 IDP vs {UNITS[param]} per muscle-group scope. Bars: solid = compressive-force part, "
+                     "hatched = sagittal-moment part;\ndashed line: baseline; red star: posture not reached; "
+                     "open circle: reached, optimum not certified (KKT)", fontsize=8)
         r = 0
         for sv in ssls:
-            for post in p["sensitivity"]["postures"]:
+            for post in posts:
                 ax = axes[r, 0]
                 r += 1
                 dd = d[(d["ssl_um"].fillna(-1) == sv) & (d["posture"] == post)]
                 vals = sorted(dd["value"].unique())
                 width = 0.8 / max(len(vals), 1)
+                top = 0.0
                 for j, v in enumerate(vals):
                     for si, sc in enumerate(scopes):
                         row = dd[(dd["value"] == v) & (dd["group_scope"] == sc)]
@@ -222,47 +286,57 @@ elif rule == "muscle_sensitivity_table":
                         row = row.iloc[0]
                         xpos = si + (j - (len(vals) - 1) / 2) * width
                         ax.bar(xpos, row["idp_force_mpa"], width * 0.9, color=plt.cm.viridis(j / max(len(vals) - 1, 1)),
-                               label=f"{v:g}" if si == 0 else None)
+                               label=f"{v:g} {unit}" if si == 0 else None)
                         ax.bar(xpos, row["idp_moment_mpa"], width * 0.9, bottom=row["idp_force_mpa"], color="none",
                                edgecolor="k", hatch="//", lw=0.4)
+                        y = max(row["idp_mpa"], 0.0)
+                        top = max(top, y)
                         if not row["reached"]:
-                            ax.plot(xpos, max(row["idp_mpa"], 0) + 0.05, "r*", ms=9)
-                        elif not row["converged"]:
-                            ax.plot(xpos, max(row["idp_mpa"], 0) + 0.05, "o", ms=5, mfc="none", mec="0.4")
+                            ax.plot(xpos, y + 0.05, "r*", ms=9, clip_on=False)
+                        elif not row.get("certified", row["converged"]):
+                            ax.plot(xpos, y + 0.05, "o", ms=5, mfc="none", mec="0.4", clip_on=False)
                 b = dd["baseline_idp_mpa"].iloc[0] if len(dd) else np.nan
                 if np.isfinite(b):
                     ax.axhline(b, color="k", lw=1, ls="--", label="baseline")
+                    top = max(top, b)
+                ax.set_ylim(0, 1.15 * top + 0.12)
                 ax.set_xticks(range(len(scopes)), scopes)
+                ax.set_xlabel("muscle groups with the changed parameter", fontsize=7)
                 ax.set_ylabel("L4-L5 IDP [MPa]")
-                ttl = f"{param} ({post}" + (f", SSL {sv:g} um)" if sv != -1 else ")")
-                ax.set_title(ttl + "; solid: force part, hatched: moment part; red star: not reached; "
-                             "open circle: reached, optimum not certified", fontsize=8)
-                ax.legend(fontsize=6, ncol=7, loc="upper left")
-        fig.tight_layout()
+                ax.set_title(f"{post}" + (f", SSL fixed at {sv:g} um" if sv != -1 else ""), fontsize=9, loc="left")
+                ax.legend(fontsize=7, title=UNITS[param], title_fontsize=7, loc="upper left",
+                          bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
         _save(fig, snakemake.output[1 + k])
-elif rule == "muscle_sobol":
+elif rule == "muscle_sobol_chunk":
     import time
 
+    wc = getattr(snakemake, "wildcards", None)
+    chunk = dict(posture=wc.posture, chunk=wc.chunk) if wc is not None and hasattr(wc, "posture") \
+        else snakemake.params.chunk
+    posture, k = chunk["posture"], int(chunk["chunk"])
+    sb = p["sobol"]
+    X = mm.sobol_samples(sb["n_base"], snakemake.params.seed)
+    rows = mm.sobol_chunk_rows(len(X), sb.get("chunks", 1), k)
     model = _model(p)
     solver = mm.make_solver(model, p["solver"])
     t0 = time.perf_counter()
-    df = mm.sobol_study(model, solver, _load_baseline(snakemake.input.baseline), p["sobol"]["n_base"],
-                        snakemake.params.seed, p["sobol"]["scope"], tuple(p["sensitivity"]["postures"]),
-                        p["disc_area_m2"])
-    log.info("Sobol: %d samples per posture in %.1f s; failed: %s", int(df["n_samples"].iloc[0]),
-             time.perf_counter() - t0, df.groupby("posture")["n_failed"].first().to_dict())
+    log.info("Sobol %s, chunk %d of %d: samples %d-%d of %d (n_base %d)", posture, k + 1, sb.get("chunks", 1),
+             rows[0], rows[-1], len(X), sb["n_base"])
+    out = mm.sobol_evaluate(model, solver, _load_baseline(snakemake.input.baseline), X, rows, posture, sb["scope"],
+                            p["disc_area_m2"], label=f"sobol {posture} chunk {k + 1}/{sb.get('chunks', 1)}")
+    log.info("Sobol %s chunk %d: %d samples in %.1f s, %d not reached, %d reached but not certified", posture, k,
+             len(out), time.perf_counter() - t0, int((~out["reached"]).sum()),
+             int((out["reached"] & ~out["certified"]).sum()))
+    write_table_atomic(out, snakemake.output[0])
+elif rule == "muscle_sobol":
+    samples = pd.concat([pd.read_csv(f) for f in snakemake.input.chunks], ignore_index=True)
+    df = mm.sobol_indices(samples, p["sobol"]["n_base"], snakemake.params.seed)
+    for post, d in df.groupby("posture", sort=False):
+        top = d.loc[d["S1"].idxmax()]
+        log.info("Sobol %s: N = %d, top first-order index %s S1 = %.3f +- %.3f (95 %% bootstrap half-width), "
+                 "sum S1 = %.2f; %d not reached, %d not certified", post, int(top["n_base"]), top["parameter"],
+                 top["S1"], top["S1_conf"], d["S1"].sum(), int(top["n_failed"]), int(top["n_uncertified"]))
     write_table_atomic(df, snakemake.output[0])
-    fig, axes = plt.subplots(1, df["posture"].nunique(), figsize=(8, 3.2), squeeze=False)
-    for ax, (post, d) in zip(axes[0], df.groupby("posture", sort=False)):
-        xs = np.arange(len(d))
-        ax.bar(xs - 0.2, d["S1"], 0.4, yerr=d["S1_conf"], label="first order S1")
-        ax.bar(xs + 0.2, d["ST"], 0.4, yerr=d["ST_conf"], label="total ST")
-        ax.set_xticks(xs, d["parameter"], rotation=30, fontsize=7)
-        ax.set_title(f"{post}: N = {int(d['n_samples'].iloc[0])} samples, {int(d['n_failed'].iloc[0])} not reached, "
-                     f"{int(d['n_uncertified'].iloc[0])} optimum not certified",
-                     fontsize=8)
-        ax.legend(fontsize=7)
-    fig.tight_layout()
-    _save(fig, snakemake.output[1])
+    _sobol_figure(df, snakemake.output[1])
 else:  # pragma: no cover
     raise ValueError(f"unknown rule {rule}")

@@ -56,7 +56,8 @@ if snakemake.rule == "stepwise_reduction_sim":
     data_dir = data_dir.parent if data_dir.is_file() else data_dir
     geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
     cs = load_characteristic_set(set_name, data_dir=data_dir)
-    fsu = build_fsu(geo, cs, f["level"], k_shear=f.get("disc_shear_stiffness_n_per_m"))
+    fsu = build_fsu(geo, cs, f["level"], facet_stiffness=f.get("facet_stiffness_n_per_m"),
+                    k_shear=f.get("disc_shear_stiffness_n_per_m"))
     sim = sr_mod.simulate_stepwise_reduction(fsu, moments_nm=sr["moments_nm"], max_iter=s["max_iter"],
                                              tol=min(s["tol_force_n"], s["tol_moment_nm"]), load_steps=s["load_steps"])
     sim.insert(0, "set", set_name)
@@ -68,7 +69,8 @@ elif snakemake.rule == "table4":
     exp = sr_mod.read_experiment_table(snakemake.input.experiment)
     derived = sr_mod.read_experiment_table(_common.first(snakemake.input.derived)) \
         if _common.first(snakemake.input.derived) else None
-    ref = sr_mod.reference_table(exp, derived)
+    real = [sr_mod.read_experiment_table(p) for p in _common.as_list(getattr(snakemake.input, "real_targets", []))]
+    ref = sr_mod.reference_table(exp, derived, pd.concat(real, ignore_index=True) if real else None)
     parts = []
     for p in snakemake.input.sims:
         sim = pd.read_csv(p)

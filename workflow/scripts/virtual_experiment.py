@@ -14,7 +14,9 @@ _spec.loader.exec_module(_common)
 RULES = {
     "stepwise_reduction_surrogate": lambda c: dict(
         input=dict(characteristics=c["characteristics"]["data_dir"]),
-        output=["results/experiments/stepwise_reduction_surrogate.csv"],
+        output=dict(table="results/experiments/stepwise_reduction_surrogate.csv",
+                    generator_fit="results/experiments/stepwise_reduction_generator_fit.csv",
+                    generator_targets="results/experiments/stepwise_reduction_generator_targets.csv"),
         params=dict(geometry=c["geometry"], fsu=c["fsu"], solver=c["solver"], sr=c["stepwise_reduction"],
                     seed=c["seed"])),
 }
@@ -32,6 +34,30 @@ from lumbar.virtual_experiment import stepwise_reduction_table  # noqa: E402
 g, f, s, sr = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solver, snakemake.params.sr
 geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
 cs = load_characteristic_set(sr["generator_set"], data_dir=snakemake.input.characteristics)
+if sr.get("anchor_generator") and sr.get("real_targets"):
+    import pandas as pd  # noqa: E402
+
+    from lumbar.calibration import fit_real_targets  # noqa: E402
+    from lumbar.stepwise_reduction import read_experiment_table  # noqa: E402
+
+    targets = pd.concat([read_experiment_table(p) for p in sr["real_targets"]], ignore_index=True)
+    fit = fit_real_targets(geo, cs, targets, level=f["level"], k_shear=f.get("disc_shear_stiffness_n_per_m"),
+                           max_iter=s["max_iter"])
+    cs = fit.charset
+    out = fit.parameters.assign(role="generator anchoring (force scales of the generator set)")
+    tg = fit.targets.rename(columns={"rom_mean_deg": "value_measured", "rom_sim_deg": "value_sim"})
+    write_table_atomic(out, snakemake.output.generator_fit)
+    write_table_atomic(tg, snakemake.output.generator_targets)
+    log.info("generator anchored on %s: %s; rel. errors %s", sr["real_targets"],
+             "; ".join(f"{r.parameter}={r.value:.4g}{' (AT BOUND)' if r.at_bound else ''}"
+                       for r in fit.parameters.itertuples()), [round(v, 3) for v in fit.targets["rel_error"]])
+else:
+    import pandas as pd  # noqa: E402
+
+    write_table_atomic(pd.DataFrame(columns=["parameter", "start", "value", "unit", "identifiable", "at_bound"]),
+                       snakemake.output.generator_fit)
+    write_table_atomic(pd.DataFrame(columns=["stage", "direction", "moment_nm", "value_measured", "value_sim"]),
+                       snakemake.output.generator_targets)
 effects = {k: v for k, v in sr["effects"].items() if v is not None}
 log.info("SURROGATE stepwise-reduction table: %d virtual specimens, seed %d, noise %.3g deg, set %s, effects %s",
          sr["n_specimens"], snakemake.params.seed, sr["noise_sd_deg"], cs.name, effects or "none")
@@ -41,5 +67,5 @@ df = stepwise_reduction_table(geo, cs, snakemake.params.seed, n_specimens=sr["n_
                               if "disc_tension_n_per_m" in effects else None,
                               moments_nm=sr["moments_nm"], level=f["level"],
                               k_shear=f.get("disc_shear_stiffness_n_per_m"), max_iter=s["max_iter"])
-write_table_atomic(df, snakemake.output[0])
-log.info("wrote %s (%d rows, kind=surrogate)", snakemake.output[0], len(df))
+write_table_atomic(df, snakemake.output.table)
+log.info("wrote %s (%d rows, kind=surrogate)", snakemake.output.table, len(df))

@@ -71,8 +71,16 @@ class FacetSurface:
         return self.origin + np.stack([U, V, W], axis=-1) @ self.axes
 
 
-def fit_surface(superior, inferior, medial_hint=None) -> FacetSurface:
+CONTACT_RULES = ("mean_surface", "touching")
+
+
+def fit_surface(superior, inferior, medial_hint=None, contact="mean_surface") -> FacetSurface:
     """Fit Eq. 4 to the nine landmarks of each articular process and average the two fits.
+
+    ``contact``: "mean_surface" (the paper's rule: the joint surface is the coefficient mean of the two
+    fits) or "touching" (the mean surface shifted along w so that the upper-process landmark nearest to it
+    lies on it: gap 0 at rest, no landmark penetrating; for landmarks on the two bone faces of a
+    cartilage-filled joint, see ``lumbar.geometry.core.FacetLandmarks``).
 
     ``superior``: (n, 3) landmarks on the lower vertebra's superior articular process;
     ``inferior``: (n, 3) on the upper vertebra's inferior articular process (reference frame).
@@ -104,8 +112,16 @@ def fit_surface(superior, inferior, medial_hint=None) -> FacetSurface:
         coefs.append(c)
         rms.append(np.sqrt(np.mean((A @ c - q[:, 2]) ** 2)))
     q_all = (allp - origin) @ axes.T
+    coef = 0.5 * (coefs[0] + coefs[1])
+    if contact == "touching":
+        qi = (I - origin) @ axes.T
+        gap = qi[:, 2] - _basis(qi[:, 0], qi[:, 1]) @ coef
+        coef = coef.copy()
+        coef[4] += float(gap.min())
+    elif contact != "mean_surface":
+        raise ValueError(f"facet contact rule {contact!r}; expected one of {CONTACT_RULES}")
     return FacetSurface(
-        origin=origin, axes=axes, coef=0.5 * (coefs[0] + coefs[1]),
+        origin=origin, axes=axes, coef=coef,
         coef_superior=coefs[0], coef_inferior=coefs[1],
         u_range=(q_all[:, 0].min(), q_all[:, 0].max()),
         v_range=(q_all[:, 1].min(), q_all[:, 1].max()),

@@ -23,19 +23,42 @@ def _levels_and_vertebrae(levels):
     return levels, verts
 
 
-def load_geometry(kind: str = "default", path=None, levels=None) -> SpineGeometry:
+def embedded_visible_human_path():
+    """The Visible Human geometry embedded in the repository (data/geometry/visible_human_lss, BSD-3).
+
+    Found from ``$LUMBAR_DATA_DIR`` (the repository ``data`` directory), else relative to this package
+    (editable install / source tree), else ``./data``.
+    """
+    import os  # noqa: PLC0415
+    from pathlib import Path  # noqa: PLC0415
+    cands = []
+    if os.environ.get("LUMBAR_DATA_DIR"):
+        cands.append(Path(os.environ["LUMBAR_DATA_DIR"]) / "geometry" / "visible_human_lss")
+    cands.append(Path(__file__).resolve().parents[3] / "data" / "geometry" / "visible_human_lss")
+    cands.append(Path.cwd() / "data" / "geometry" / "visible_human_lss")
+    for c in cands:
+        if (c / "meshes").is_dir():
+            return c
+    raise GeometryError(f"embedded Visible Human geometry not found; tried {[str(c) for c in cands]} "
+                        "(set LUMBAR_DATA_DIR to the repository 'data' directory, or pass path=)")
+
+
+def load_geometry(kind: str = "visible_human", path=None, levels=None) -> SpineGeometry:
     """Load a spine geometry in the project frame (x anterior, y left, z superior; metres).
 
-    kind: "default" / "myo_sim" (embedded myo-sim meshes + data/landmarks/myo_sim_landmarks.csv; ``path``
-    optionally overrides the landmark CSV) or "visible_human" (``path`` = the visible_human_lss folder).
-    levels: None (all of "L1-L2".."L5-S1") or an iterable of level names; only their vertebrae are loaded.
+    kind: "visible_human" (the default of the passive models: the Visible Human Male L1-S1 set; ``path`` =
+    a visible_human_lss folder, default the embedded copy ``data/geometry/visible_human_lss``) or
+    "myo_sim" (myo-sim meshes + data/landmarks/myo_sim_landmarks.csv; ``path`` optionally overrides the
+    landmark CSV; the muscle model's geometry). "default" is the former name of "myo_sim" and still
+    accepted. levels: None (all of "L1-L2".."L5-S1") or an iterable of level names; only their vertebrae
+    are loaded.
     """
     k = str(kind).lower()
     if k in ("default", "myo_sim", "myo-sim"):
         return _checked(load_myo_sim(landmarks_csv=path, levels=levels))
     if k in ("visible_human", "visible-human", "vh"):
         if path is None:
-            raise GeometryError("kind='visible_human' needs path= the visible_human_lss folder")
+            path = embedded_visible_human_path()
         from .visible_human import load_visible_human  # noqa: PLC0415
         return _checked(load_visible_human(path, levels=levels))
     if k == "synthetic":

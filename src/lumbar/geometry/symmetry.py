@@ -79,8 +79,8 @@ def _level(lev: Level) -> Level:
         L, R = lev.facets["left"], lev.facets["right"]
         sl, sr, _ = _average_pair(L.superior, R.superior)
         il, ir, _ = _average_pair(L.inferior, R.inferior)
-        out.facets = {"left": FacetLandmarks(superior=sl, inferior=il),
-                      "right": FacetLandmarks(superior=sr, inferior=ir)}
+        out.facets = {"left": FacetLandmarks(superior=sl, inferior=il, contact=L.contact),
+                      "right": FacetLandmarks(superior=sr, inferior=ir, contact=R.contact)}
     ligs = {g.name: g for g in lev.ligaments}
     new = {}
     for a, b in PAIRED_LIGAMENTS:

@@ -38,6 +38,7 @@ NAME_MAP = {"LF": "FL"}
 AS_NAMES = ("CL_R", "CL_L", "LF", "ISL", "SSL", "ITL_R", "ITL_L")
 MP_NAMES = ("ALL", "PLL")
 NP_AXIS_RADIUS = 0.003
+MAX_COORD_M = 2.0   # m: a node or fibre point further from the origin is in the wrong unit (the set lies within 0.2 m)
 
 
 def _numbers(text: str):
@@ -57,6 +58,12 @@ def _read_nodes_cached(path: str, mtime: int) -> np.ndarray:
                 raise GeometryError(f"{path}: line {ln}: expected 'index x y z' numbers, got {line.strip()!r}")
             if len(vals) != 4:
                 raise GeometryError(f"{path}: line {ln}: expected 4 numbers 'index x y z', got {len(vals)}")
+            if not np.all(np.isfinite(vals)):
+                raise GeometryError(f"{path}: line {ln}: non-finite coordinate in {line.strip()!r}; expected finite "
+                                    "'index x y z' numbers (metres)")
+            if max(abs(v) for v in vals[1:]) > MAX_COORD_M:
+                raise GeometryError(f"{path}: line {ln}: coordinate {max(vals[1:], key=abs):g} is beyond "
+                                    f"{MAX_COORD_M:g} m (millimetres?); expected 'index x y z' in metres")
             rows.append(vals[1:])
     if not rows:
         raise GeometryError(f"{path}: no nodes (expected lines 'index x y z')")
@@ -111,6 +118,13 @@ def _read_lig_cached(path: str, mtime: int, kind: str) -> tuple:
             if len(vals) != 3 * npts:
                 raise GeometryError(f"{path}: line {ln} ({name} fibre {j + 1}): expected {3 * npts} numbers "
                                     f"({npts} points x, y, z in metres), got {len(vals)}")
+            if not np.all(np.isfinite(vals)):
+                raise GeometryError(f"{path}: line {ln} ({name} fibre {j + 1}): non-finite coordinate in "
+                                    f"{line!r}; expected finite x, y, z numbers (metres)")
+            if max(abs(v) for v in vals) > MAX_COORD_M:
+                raise GeometryError(f"{path}: line {ln} ({name} fibre {j + 1}): coordinate "
+                                    f"{max(vals, key=abs):g} is beyond {MAX_COORD_M:g} m (millimetres?); "
+                                    "expected x, y, z in metres")
             rows.append(np.array(vals).reshape(npts, 3))
         k += 1
         out.append((name, np.array(rows)))
@@ -167,6 +181,29 @@ def _grid_on_nodes(nodes: np.ndarray) -> np.ndarray:
             used.add(i)
             pts.append(nodes[i])
     return np.array(pts)
+
+
+def _split_joint_layer(nodes: np.ndarray, tree_upper, tree_lower):
+    """Split the nodes of one facet-joint cartilage layer into (upper face, lower face).
+
+    The layer spans the joint: two node sheets about 1.8 mm apart at L4-L5 (the lumbar facet joint space is
+    1.5-1.9 mm, data/anatomy/). The nodes are split by the sign of their offset along the layer's
+    least-variance axis (the joint normal). Lumbar anatomy: the lower vertebra's superior articular process
+    lies lateral to the upper vertebra's inferior articular process, so the medial sheet (smaller mean |y|)
+    is the upper vertebra's face. (For every level of the Visible Human set this is also the sheet lying
+    deeper inside the upper vertebra's mesh; the unsigned distance to the meshes cannot tell the sheets
+    apart: both are 0.3-2 mm from each mesh.) Splitting node by node by the nearer mesh, the former rule,
+    mixed the two sheets and put landmarks of the upper process below the joint surface.
+    """
+    cc, nn = A.plane_fit(nodes)
+    t = (nodes - cc) @ nn
+    on_a, on_b = nodes[t > 0], nodes[t <= 0]
+    if len(on_a) < 9 or len(on_b) < 9:
+        raise GeometryError(f"facet cartilage layer with {len(nodes)} nodes does not split into two sheets of "
+                            ">= 9 nodes along its normal (got {len(on_a)} and {len(on_b)})")
+    if np.abs(on_a[:, 1]).mean() < np.abs(on_b[:, 1]).mean():
+        return on_a, on_b
+    return on_b, on_a
 
 
 def load_visible_human(path, levels=None) -> SpineGeometry:
@@ -232,18 +269,8 @@ def load_visible_human(path, levels=None) -> SpineGeometry:
         facets = {}
         for s, side in (("L", "left"), ("R", "right")):
             nodes = read_nodes(folder / "facet_fe" / f"{pre}_FAC{s}_{U}.node")
-            du, dl = trees[U].query(nodes)[0], trees[L].query(nodes)[0]
-            on_u, on_l = nodes[du <= dl], nodes[dl < du]
-            if len(on_u) < 9 or len(on_l) < 9:
-                # one layer only: split the layer by its thickness direction (upper side = nearer U)
-                cc, nn = A.plane_fit(nodes)
-                t = (nodes - cc) @ nn
-                on_a, on_b = nodes[t > 0], nodes[t <= 0]
-                if trees[U].query(on_a)[0].mean() < trees[U].query(on_b)[0].mean():
-                    on_u, on_l = on_a, on_b
-                else:
-                    on_u, on_l = on_b, on_a
-            facets[side] = FacetLandmarks(superior=_grid_on_nodes(on_l), inferior=_grid_on_nodes(on_u))
+            on_u, on_l = _split_joint_layer(nodes, trees[U], trees[L])
+            facets[side] = FacetLandmarks(superior=_grid_on_nodes(on_l), inferior=_grid_on_nodes(on_u), contact="touching")
         geo_levels[lv] = Level(lv, U, L, c, n, csa, height, facets, ligs)
     vertebrae = {v: Vertebra(v, meshes[v], A.hull_centroid(bodies[v].vertices)) for v in verts}
     return SpineGeometry(name="visible_human", source=f"Visible Human Male lumbosacral spine (Remus et al. 2021, "

@@ -6,17 +6,22 @@ with xC the intersection of the two end tangents and c = 0.1 + 0.8*curviness), e
 outside its domain with the end slopes. Values and first derivatives are analytic: x(u), y(u) are
 quintic polynomials, u is found from x by safeguarded Newton, and dy/dx = y'(u)/x'(u).
 
-Curves and their parameters (OpenSim defaults, cited in tests/test_muscles.py):
-* active force-length (ActiveForceLengthCurve): lce0 = 0.47-0.0259 = 0.4441, lce1 = 0.6259, lce2 = 1,
-  lce3 = 1.8123, shallow ascending slope 0.8616, minimum value 0.1, curviness 1;
+Curves and their parameters (OpenSim 4.6 defaults; tests/test_muscles.py checks every curve against values
+evaluated by OpenSim 4.6 itself, tests/data/opensim_millard_curves.csv, to ~1e-13):
+* active force-length (ActiveForceLengthCurve): min_norm_active_fiber_length 0.47-0.0259 = 0.4441,
+  transition_norm_fiber_length 0.73, optimum 1, max_norm_active_fiber_length 1.8123, shallow ascending slope
+  0.8616, minimum value 0.1, curviness 1 (shoulder half-width 0.05, ascending-limb mid slope 1.25 y1/(x1-x0)).
+  (Until 2026-11: transition 0.6259, shoulder 0.0259 and mid slope y1/(x1-x0-0.0259), the older
+  construction, up to 0.13 off OpenSim 4.6: 0.579 vs 0.451 at lce 0.6, 0.902 vs 0.957 at 1.1.)
 * passive (fibre) force-length (FiberForceLengthCurve / createFiberForceLengthCurve, OpenSim 4 defaults):
   zero below strain e0 = 0, a toe segment to strain min(0.1/kiso, 0.1 e1) = 0.035 with stiffness at low
   force klow = 0.2, then 1 at strain e1 = 0.7 with stiffness kiso = 2/0.7, curviness 0.75. Tangent moduli
   with K = 1 MPa: 0.23, 1.07, 2.30, 2.86 MPa at 10, 30, 50, 70 % strain, beside the paper's baseline
   0.26, 1.01, 2.45, 2.86 (Sect. 2.5; checked in the tests). (Until 2026-11-23 the toe segment was missing:
   a single corner from (1, 0, slope 0) gave 0.08 MPa at 10 % strain and 3-30x less force below 10 %.)
-* force-velocity (createFiberForceVelocityCurve, for completeness; the static model does not use it):
-  fmaxE 1.4, slopes 0 at -vmax, 5 at isometric, 0 at +vmax, curviness 0.6 (concentric) / 0.9 (eccentric).
+* force-velocity (ForceVelocityCurve, for completeness; the static model does not use it): fmaxE 1.4,
+  slopes 0 at -vmax, 0.25 near -vmax (-0.9), 5 at isometric, 0.15 near +vmax (0.9), 0 at +vmax, curviness
+  0.6 (concentric) / 0.9 (eccentric). (Until 2026-11 without the near-vmax points, up to 0.09 off.)
 """
 from __future__ import annotations
 
@@ -59,6 +64,7 @@ class SmoothSegmentedCurve:
     name: str
     px: np.ndarray      # (nseg, 6)
     py: np.ndarray      # (nseg, 6)
+    ends: tuple | None = None   # (y_lo, y_hi, slope_lo, slope_hi) of the linear extrapolation, as OpenSim's
 
     def __post_init__(self):
         self.px = np.atleast_2d(np.asarray(self.px, float))
@@ -66,9 +72,12 @@ class SmoothSegmentedCurve:
         self.cx = self.px @ _B.T          # polynomial coefficients, powers u^5..u^0
         self.cy = self.py @ _B.T
         self.x_lo, self.x_hi = self.px[0, 0], self.px[-1, -1]
-        self.y_lo, self.y_hi = self.py[0, 0], self.py[-1, -1]
-        self.s_lo = self._slope_end(0, 0.0)
-        self.s_hi = self._slope_end(-1, 1.0)
+        if self.ends is None:
+            self.y_lo, self.y_hi = self.py[0, 0], self.py[-1, -1]
+            self.s_lo = self._slope_end(0, 0.0)
+            self.s_hi = self._slope_end(-1, 1.0)
+        else:
+            self.y_lo, self.y_hi, self.s_lo, self.s_hi = map(float, self.ends)
 
     def _slope_end(self, seg, u):
         dx = np.polyval(np.polyder(self.cx[seg]), u)
@@ -128,31 +137,45 @@ def _dpoly(c, u):
     return out
 
 
-def active_force_length_curve(x0=0.4441, x1=0.6259, x2=1.0, x3=1.8123, ylow=0.1, dydx=0.8616,
+def active_force_length_curve(x0=0.47 - 0.0259, x1=0.73, x2=1.0, x3=1.8123, ylow=0.1, dydx=0.8616,
                               curviness=1.0) -> SmoothSegmentedCurve:
-    """Normalised active force-length curve (createFiberActiveForceLengthCurve)."""
-    if not (0 <= x0 < x1 < x2 < x3):
+    """Normalised active force-length curve, OpenSim 4.6 ``ActiveForceLengthCurve()`` defaults.
+
+    ``x0`` min_norm_active_fiber_length, ``x1`` transition_norm_fiber_length, ``x2`` optimal length (1),
+    ``x3`` max_norm_active_fiber_length, ``ylow`` minimum_value, ``dydx`` shallow_ascending_slope; five
+    corner segments joined at (Millard 2013 / createFiberActiveForceLengthCurve, OpenSim 4):
+
+    * ascending limb midpoint ``x01 = (x0+x1)/2``, ``y01 = y1/2`` with slope ``1.25 y1/(x1-x0)``, where
+      ``y1 = 1 - dydx (xs - x1)`` and the shoulder ``xs = x2 - 0.05 x2``;
+    * shallow plateau midpoint ``x1s = (x1+xs)/2``, ``y1s = (1+y1)/2`` with slope ``dydx``;
+    * plateau (x2, 1, slope 0);
+    * descending limb midpoint ``x23 = (1.05 x2 + x3)/2``, ``y23 = 1/2`` with slope ``-1/(x3 - 1.1 x2)``;
+    * both ends at ``ylow`` with zero slope (and constant ``ylow`` outside [x0, x3]).
+    """
+    root_eps = np.sqrt(np.finfo(float).eps)
+    if not (x0 >= 0 and x1 > x0 + root_eps and x2 > x1 + root_eps and x3 > x2 + root_eps):
         raise ValueError("need 0 <= lce0 < lce1 < lce2 < lce3")
-    if not 0 <= dydx < 1.0 / (x2 - x1):
-        raise ValueError("shallow ascending slope out of range")
-    xd = 0.0259 * x2
+    if not ylow >= 0:
+        raise ValueError(f"minimum value must be >= 0, got {ylow}")
+    if not 0 <= dydx < (1 - ylow) / (x2 - x1):
+        raise ValueError("shallow ascending slope out of range [0, (1-ylow)/(lce2-lce1))")
+    xd = 0.05 * x2
     xs = x2 - xd
-    y0, dydx0 = 0.0, 0.0
+    y0 = 0.0
     y1 = 1 - dydx * (xs - x1)
-    dydx01 = (y1 - y0) / (x1 - (x0 + xd))
-    x01 = x0 + xd + 0.5 * (x1 - (x0 + xd))
-    y01 = y0 + 0.5 * (y1 - y0)
-    x1s = x1 + 0.5 * (xs - x1)
-    y1s = y1 + 0.5 * (1 - y1)
+    dydx01 = 1.25 * (y1 - y0) / (x1 - x0)
+    x01, y01 = x0 + 0.5 * (x1 - x0), y0 + 0.5 * (y1 - y0)
+    x1s, y1s = x1 + 0.5 * (xs - x1), y1 + 0.5 * (1 - y1)
     y2, dydx2, y3, dydx3 = 1.0, 0.0, 0.0, 0.0
-    x23 = (x2 + xd) + 0.5 * ((x3 - xd) - (x2 + xd))
+    x23 = (x2 + xd) + 0.5 * (x3 - (x2 + xd))
     y23 = y2 + 0.5 * (y3 - y2)
     dydx23 = (y3 - y2) / ((x3 - xd) - (x2 + xd))
-    segs = [(x0, ylow, dydx0, x01, y01, dydx01), (x01, y01, dydx01, x1s, y1s, dydx),
+    segs = [(x0, ylow, 0.0, x01, y01, dydx01), (x01, y01, dydx01, x1s, y1s, dydx),
             (x1s, y1s, dydx, x2, y2, dydx2), (x2, y2, dydx2, x23, y23, dydx23),
             (x23, y23, dydx23, x3, ylow, dydx3)]
     pts = [corner_control_points(*s, curviness) for s in segs]
-    return SmoothSegmentedCurve("active_force_length", [p[0] for p in pts], [p[1] for p in pts])
+    return SmoothSegmentedCurve("active_force_length", [p[0] for p in pts], [p[1] for p in pts],
+                                ends=(ylow, ylow, 0.0, 0.0))
 
 
 def passive_force_length_curve(e0=0.0, e1=0.7, klow=0.2, kiso=2.0 / 0.7, curviness=0.75) -> SmoothSegmentedCurve:
@@ -171,15 +194,33 @@ def passive_force_length_curve(e0=0.0, e1=0.7, klow=0.2, kiso=2.0 / 0.7, curvine
     xlow, ylow = x0 + dx, klow * 0.5 * dx
     p0 = corner_control_points(x0, 0.0, 0.0, xlow, ylow, klow, curviness)
     p1 = corner_control_points(xlow, ylow, klow, xiso, 1.0, kiso, curviness)
-    return SmoothSegmentedCurve("passive_force_length", [p0[0], p1[0]], [p0[1], p1[1]])
+    return SmoothSegmentedCurve("passive_force_length", [p0[0], p1[0]], [p0[1], p1[1]], ends=(0.0, 1.0, 0.0, kiso))
 
 
-def force_velocity_curve(fmax_e=1.4, dydx_c=0.0, dydx_iso=5.0, dydx_e=0.0, curv_c=0.6,
-                         curv_e=0.9) -> SmoothSegmentedCurve:
-    """Normalised force-velocity curve (createFiberForceVelocityCurve), x = v / vmax in [-1, 1]."""
-    pc = corner_control_points(-1.0, 0.0, dydx_c, 0.0, 1.0, dydx_iso, curv_c)
-    pe = corner_control_points(0.0, 1.0, dydx_iso, 1.0, fmax_e, dydx_e, curv_e)
-    return SmoothSegmentedCurve("force_velocity", [pc[0], pe[0]], [pc[1], pe[1]])
+def force_velocity_curve(fmax_e=1.4, dydx_c=0.0, dydx_near_c=0.25, dydx_iso=5.0, dydx_e=0.0, dydx_near_e=0.15,
+                         curv_c=0.6, curv_e=0.9) -> SmoothSegmentedCurve:
+    """Normalised force-velocity curve, OpenSim 4.6 ``ForceVelocityCurve()`` defaults; x = v / vmax in [-1, 1].
+
+    Four corner segments (createFiberForceVelocityCurve): (-1, 0, dydx_c) -> (-0.9, y_nc, dydx_near_c) ->
+    (0, 1, dydx_iso) -> (0.9, y_ne, dydx_near_e) -> (1, fmax_e, dydx_e), with the near-vmax values from the
+    mean of the two slopes, ``y_nc = 0.1 (dydx_near_c + dydx_c)/2`` and ``y_ne = fmax_e - 0.1 (dydx_near_e +
+    dydx_e)/2``; linear outside [-1, 1] with the end slopes. (The static model does not use it.)"""
+    if not fmax_e > 1:
+        raise ValueError(f"fmax_e must be > 1, got {fmax_e}")
+    if not (0 <= dydx_c < 1 and dydx_c < dydx_near_c <= 1):
+        raise ValueError("need 0 <= dydx_c < dydx_near_c <= 1")
+    if not dydx_iso > 1:
+        raise ValueError(f"dydx_iso must be > 1, got {dydx_iso}")
+    if not (0 <= dydx_e < fmax_e - 1 and dydx_e <= dydx_near_e < fmax_e - 1):
+        raise ValueError("need 0 <= dydx_e <= dydx_near_e < fmax_e - 1")
+    xnc, xne = -0.9, 0.9
+    ync = 0.5 * dydx_near_c * (xnc + 1) + 0.5 * dydx_c * (xnc + 1)
+    yne = fmax_e + 0.5 * dydx_near_e * (xne - 1) + 0.5 * dydx_e * (xne - 1)
+    segs = [(-1.0, 0.0, dydx_c, xnc, ync, dydx_near_c, curv_c), (xnc, ync, dydx_near_c, 0.0, 1.0, dydx_iso, curv_c),
+            (0.0, 1.0, dydx_iso, xne, yne, dydx_near_e, curv_e), (xne, yne, dydx_near_e, 1.0, fmax_e, dydx_e, curv_e)]
+    pts = [corner_control_points(*s) for s in segs]
+    return SmoothSegmentedCurve("force_velocity", [p[0] for p in pts], [p[1] for p in pts],
+                                ends=(0.0, fmax_e, dydx_c, dydx_e))
 
 
 ACTIVE_FL = active_force_length_curve()
