@@ -48,7 +48,7 @@ SLOW_ELSEWHERE = {
 def pytest_collection_modifyitems(config, items):
     for item in items:
         fixtures = set(getattr(item, "fixturenames", ()))
-        if DAG_FIXTURES & fixtures or item.name.endswith("_snakemake"):      # runs Snakemake
+        if (DAG_FIXTURES | {"smk_tree"}) & fixtures:                  # runs Snakemake (smk_tree: test_bad_inputs)
             item.add_marker(pytest.mark.workflow)
         slow = SLOW_ELSEWHERE.get(item.path.name)
         if slow and (slow["fixtures"] & fixtures or item.originalname in slow["names"]):

@@ -10,6 +10,7 @@ import re
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -72,6 +73,20 @@ def test_dag_every_final_output_exists_and_is_not_empty(dag_workdir):
     assert not missing and not empty, f"missing: {missing}; empty: {empty}"
     leftovers = [str(p) for p in (dag_workdir / "results").rglob("*.tmp")]
     assert leftovers == [], "temporary files of atomic writes left behind"
+    # one value per stage's headline table, not only the files: the intact ROM of every set converged and
+    # rises with the moment (pure-moment ROM of a passive unit), within 0-20 deg (lumbar L4-L5, 7.5 N*m)
+    import pandas as pd
+    rom = pd.read_csv(dag_workdir / "results/tables/fsu_rom_intact.csv")
+    assert rom["converged"].all() and len(rom) > 0
+    for (st, d), g in rom.groupby(["set", "direction"]):
+        r = g.sort_values("moment_nm")["rom_deg"].to_numpy()
+        assert (np.diff(r) > 0).all() and 0 < r[0] and r[-1] < 20, (st, d, r)
+    # Table 5 counts are the synopsis's outlier flags; Table 4 likewise
+    for syn, counts, col in (("table4_rom_synopsis", "table4_outlier_counts", "n_outliers"),
+                             ("table5_idp_synopsis", "table5_outlier_counts", "outliers")):
+        sy = pd.read_csv(dag_workdir / f"results/tables/{syn}.csv")
+        co = pd.read_csv(dag_workdir / f"results/tables/{counts}.csv").set_index("set")[col]
+        assert co.to_dict() == sy.groupby("set")["outlier"].sum().to_dict(), syn
 
 
 def test_dag_reproducible_byte_identical(dag_workdir, dag_second_workdir):

@@ -1,5 +1,6 @@
 """Surrogate stepwise-reduction tables from virtual specimens (lumbar.virtual_experiment)."""
 import logging
+import re
 
 import numpy as np
 import pytest
@@ -84,4 +85,5 @@ def test_non_converged_specimen_dropped_and_logged(geometry, cs, caplog):
                                      moments_nm=(10.5, 1.0), noise_sd_deg=0.0)
     # the published flexion law peaks at 10.19 N*m: no disc-only equilibrium at 10.5 N*m
     assert not ((t["stage"] == "wo_all") & (t["direction"] == "flexion") & (t["moment_nm"] == 10.5)).any()
-    assert "no equilibrium at wo_all flexion 10.5" in caplog.text
+    # the row is left out and a log line names the scenario (wording: lumbar.virtual_experiment)
+    assert re.search(r"equilibrium at wo_all flexion 10\.5", caplog.text), caplog.text

@@ -175,6 +175,30 @@ def _myo_centroids():
     return {v: np.asarray(g.vertebrae[v].centroid, float) for v in FREE}
 
 
+@functools.lru_cache(maxsize=1)
+def _myo_meshes():
+    from .geometry import load_geometry
+    g = load_geometry("myo_sim", levels=list(LEVELS))
+    return {v: g.vertebrae[v].mesh for v in FREE}
+
+
+def register_vertebra(source_mesh, target_mesh, source_centroid, target_centroid, n_points=1500):
+    """Similarity transform (4x4: rotation, uniform scale, translation) taking the myo-sim vertebra onto the
+    target geometry's vertebra: ICP (trimesh.registration.icp, scale allowed, no reflection) from every k-th
+    source vertex, started at the translation of the body centroids. Returns (matrix, rms [m]).
+    Deterministic (no random sampling)."""
+    import trimesh  # noqa: PLC0415
+    v = np.asarray(source_mesh.vertices)
+    pts = v[:: max(1, len(v) // n_points)]
+    T0 = np.eye(4)
+    T0[:3, 3] = np.asarray(target_centroid, float) - np.asarray(source_centroid, float)
+    M, _, _ = trimesh.registration.icp(pts, target_mesh, initial=T0, threshold=1e-9, max_iterations=40,
+                                       reflection=False, scale=True)
+    moved = pts @ M[:3, :3].T + M[:3, 3]
+    d = trimesh.proximity.closest_point(target_mesh, moved)[1]
+    return M, float(np.sqrt(np.mean(d ** 2)))
+
+
 def mirror_cables(cables: pd.DataFrame, about_y=0.0) -> pd.DataFrame:
     """Cables with every left cable replaced by the mirror image (y -> 2*about_y - y) of its right one."""
     out = cables.copy()
@@ -214,11 +238,15 @@ class L2S1:
 
 
 def build_l2s1(geometry, charset, cables: pd.DataFrame | None = None, facet_stiffness=None, k_shear=None,
-               cable_length_m=CABLE_LENGTH_M, contact_eps=5e-5, slack_width_pct=0.5) -> L2S1:
+               cable_length_m=CABLE_LENGTH_M, contact_eps=5e-5, slack_width_pct=0.5,
+               registration="icp") -> L2S1:
     """L2-S1 model of ``geometry`` with ``charset`` at every level and the derived cables.
 
-    Cable attachments are taken relative to the vertebra's centroid: ``a = c_geo + (a_myo - c_myo)``,
-    so the same Christophy-derived points follow a perturbed or a Visible Human geometry.
+    Cable attachments and lines of action are defined on the myo-sim vertebrae (Christophy fascicles).
+    On another geometry they are carried over by registering the myo-sim vertebra onto the geometry's one
+    (``register_vertebra``: ICP with rotation, uniform scale and translation, started at the centroid
+    translation); ``registration="translation"`` keeps the former rule ``a = c_geo + (a_myo - c_myo)``.
+    The table gains ``registration``, ``registration_scale`` and ``registration_rms_mm`` columns.
     """
     miss = [lv for lv in LEVELS if lv not in geometry.levels]
     if miss:
@@ -236,11 +264,33 @@ def build_l2s1(geometry, charset, cables: pd.DataFrame | None = None, facet_stif
         sides += [(lv, x) for x in s]
     cab = cables.copy()
     groups = {}
+    reg = {}
+    if registration not in ("icp", "translation"):
+        raise ValueError(f"registration {registration!r}; expected 'icp' or 'translation'")
+    for v in sorted(set(cab["vertebra"])):
+        if registration == "icp" and geometry.name != "myo_sim":
+            r0 = cab[cab["vertebra"] == v].iloc[0]
+            M, rms = register_vertebra(_myo_meshes()[v], geometry.vertebrae[v].mesh,
+                                       (r0.centroid_x_m, r0.centroid_y_m, r0.centroid_z_m),
+                                       geometry.vertebrae[v].centroid)
+            reg[v] = (M, rms, "icp")
+        else:
+            reg[v] = (None, float("nan"), "translation" if geometry.name != "myo_sim" else "identity (myo_sim)")
     for i, r in cab.iterrows():
         c_geo = np.asarray(geometry.vertebrae[r["vertebra"]].centroid, float)
-        a = c_geo + np.array([r.attach_x_m - r.centroid_x_m, r.attach_y_m - r.centroid_y_m,
-                              r.attach_z_m - r.centroid_z_m])
+        M, rms, how = reg[r["vertebra"]]
+        a_myo = np.array([r.attach_x_m, r.attach_y_m, r.attach_z_m])
         u = np.array([r.dir_x, r.dir_y, r.dir_z])
+        if M is None:
+            a = c_geo + (a_myo - np.array([r.centroid_x_m, r.centroid_y_m, r.centroid_z_m]))
+            scale = 1.0
+        else:
+            a = M[:3, :3] @ a_myo + M[:3, 3]
+            scale = float(np.cbrt(np.linalg.det(M[:3, :3])))
+            u = M[:3, :3] @ u
+            u = u / np.linalg.norm(u)
+        cab.loc[i, ["registration", "registration_scale", "registration_rms_mm"]] = [how, scale, rms * 1e3]
+        cab.loc[i, ["model_dir_x", "model_dir_y", "model_dir_z"]] = u
         cab.loc[i, ["model_x_m", "model_y_m", "model_z_m"]] = a
         gid = m.add_fibre_group(f"{r.muscle_setup}_{r.side}", "cable", "cable", m.body_index(r["vertebra"]),
                                 GROUND, a[None], (a + cable_length_m * u)[None], 0.0, "cable",

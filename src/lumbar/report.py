@@ -374,9 +374,15 @@ class _Builder:
             return
         df = _read_csv(self.path(rel))
         parts = []
-        for who, sel in (("calibrated L4-L5 unit", df["set"] == "calibrated"),
+        role = df["role"] if "role" in df.columns else pd.Series("", index=df.index)
+        for who, sel in (("independent of every fit, calibrated L4-L5 unit", (df["set"] == "calibrated")
+                          & (role == "independent")),
                          ("muscle model (in-vivo IDP)", df["set"] == "muscle model"),
-                         ("geometry (anatomy)", df["set"] == "geometry")):
+                         ("geometry (anatomy)", df["set"] == "geometry"),
+                         ("calibration targets met by the calibrated unit", (df["set"] == "calibrated")
+                          & (role == "calibration target")),
+                         ("the paper's Table 3 set as published, on this geometry",
+                          df["set"] == "paper_table3_as_published")):
             d = df[sel]
             if len(d):
                 w = d["within"].astype(str).str.lower().isin(["true", "1"])

@@ -23,7 +23,10 @@ from .fsu import build_fsu
 from .solve import solve
 
 COLUMNS = ("quantity", "condition", "unit", "sim", "measured", "measured_low", "measured_high", "kind",
-           "source", "within", "tolerance_rule", "set", "note")
+           "source", "within", "tolerance_rule", "set", "role", "note")
+#: role of a row: "calibration target" = the calibration fitted this value (agreement is expected; the
+#: row shows how well the fit met it); "independent" = not used by any fit of this model
+TARGET, INDEPENDENT = "calibration target", "independent"
 REL_TOLERANCE = 0.25
 
 
@@ -37,10 +40,11 @@ def _within(sim, measured, lo, hi, rel=REL_TOLERANCE, abs_tol=None):
     return bool(abs(sim - measured) <= rel * abs(measured)), f"measured +- {rel * 100:g} % (no range published)"
 
 
-def rom_rows(synopsis: pd.DataFrame, tolerance_deg: float = 0.5) -> list[dict]:
-    """ROM rows of a Table 4 synopsis whose reference is real (kind != surrogate)."""
+def rom_rows(synopsis: pd.DataFrame, tolerance_deg: float = 0.5, kinds=("derived_from_published_fit",)) -> list[dict]:
+    """ROM rows of a Table 4 synopsis whose reference is real and of one of ``kinds`` (the derived
+    disc-only rows by default; the measured intact rows come from :func:`measured_rom_rows`)."""
     rows = []
-    real = synopsis[synopsis["data_kind"] != "surrogate"]
+    real = synopsis[synopsis["data_kind"].isin(kinds)]
     for r in real.itertuples(index=False):
         lo = float(r.rom_min_deg) if pd.notna(r.rom_min_deg) else np.nan
         hi = float(r.rom_max_deg) if pd.notna(r.rom_max_deg) else np.nan
@@ -52,7 +56,30 @@ def rom_rows(synopsis: pd.DataFrame, tolerance_deg: float = 0.5) -> list[dict]:
         rows.append({"quantity": "L4-L5 ROM", "condition": f"{r.stage} {r.direction} {r.moment_nm:g} N*m",
                      "unit": "deg", "sim": float(r.rom_sim_deg), "measured": float(r.rom_mean_deg),
                      "measured_low": lo, "measured_high": hi, "kind": r.data_kind, "source": src,
-                     "within": ok, "tolerance_rule": rule, "set": r.set, "note": ""})
+                     "within": ok, "tolerance_rule": rule, "set": r.set, "role": TARGET,
+                     "note": "the disc law is fitted to these rows (Eq. 3 on w/o ALL)"})
+    return rows
+
+
+def measured_rom_rows(geometry, charset, table: pd.DataFrame, set_name="calibrated", level="L4-L5",
+                      role=TARGET, tol=1e-7) -> list[dict]:
+    """ROM of ``charset`` at the scenarios of a measured table (e.g. Yamamoto et al. 1989, intact, 10 N*m),
+    solved afresh from the reference configuration (not warm-started), one row each."""
+    from .fsu import range_of_motion  # noqa: PLC0415
+    fsu = build_fsu(geometry, charset, level)
+    rows = []
+    for stage, grp in table.groupby("stage", sort=False):
+        for r in grp.itertuples(index=False):
+            df = range_of_motion(fsu, [float(r.moment_nm)], [r.direction], [stage], tol=tol)
+            sim = float(df["rom_deg"].iloc[0])
+            lo = float(r.rom_min_deg) if pd.notna(r.rom_min_deg) else np.nan
+            hi = float(r.rom_max_deg) if pd.notna(r.rom_max_deg) else np.nan
+            ok, rule = _within(sim, float(r.rom_mean_deg), lo, hi)
+            rows.append({"quantity": "L4-L5 ROM", "condition": f"{stage} {r.direction} {r.moment_nm:g} N*m",
+                         "unit": "deg", "sim": sim, "measured": float(r.rom_mean_deg), "measured_low": lo,
+                         "measured_high": hi, "kind": r.kind, "source": r.source, "within": ok,
+                         "tolerance_rule": rule, "set": set_name, "role": role,
+                         "note": "fitted in the calibration's real-target step" if role == TARGET else ""})
     return rows
 
 
@@ -77,7 +104,7 @@ def va_artefact_rows(geometry, charset, artefact: pd.DataFrame, set_name="calibr
     return [{"quantity": "L4-L5 lordosis change at 0 N*m", "condition": "w/o CL -> w/o VA", "unit": "deg",
              "sim": sim, "measured": meas, "measured_low": np.nan, "measured_high": np.nan,
              "kind": str(a.loc["wo_va", "kind"]), "source": str(a.loc["wo_va", "source"]), "within": ok,
-             "tolerance_rule": rule, "set": set_name,
+             "tolerance_rule": rule, "set": set_name, "role": INDEPENDENT,
              "note": "paper 1 Sect. 4.2 attributes the measured change to the sawing of the arches (artefact)"}]
 
 
@@ -90,7 +117,8 @@ def in_vivo_rows(validation: pd.DataFrame) -> list[dict]:
         rows.append({"quantity": "L4-L5 IDP in vivo", "condition": r.activity, "unit": "MPa", "sim": sim,
                      "measured": float(r.idp_in_vivo_mpa), "measured_low": np.nan, "measured_high": np.nan,
                      "kind": r.kind, "source": r.source, "within": ok, "tolerance_rule": rule,
-                     "set": "muscle model", "note": "" if bool(r.converged) else "posture not converged"})
+                     "set": "muscle model", "role": INDEPENDENT,
+                     "note": "" if bool(r.converged) else "posture not converged"})
     return rows
 
 
@@ -117,7 +145,7 @@ def anatomy_rows(geometry, anatomy: pd.DataFrame, level="L4-L5") -> list[dict]:
         rows.append({"quantity": r.quantity.replace("_", " "), "condition": f"{r.level} ({geometry.name})",
                      "unit": r.unit, "sim": sim, "measured": float(r.value), "measured_low": lo,
                      "measured_high": hi, "kind": r.kind, "source": r.source, "within": ok,
-                     "tolerance_rule": rule, "set": "geometry", "note": how})
+                     "tolerance_rule": rule, "set": "geometry", "role": INDEPENDENT, "note": how})
     return rows
 
 

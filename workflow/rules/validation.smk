@@ -2,6 +2,7 @@ rule validation_real_data:
     input:
         geometry_inputs,
         synopsis="results/tables/table4_rom_synopsis.csv",
+        real_targets=config["stepwise_reduction"]["real_targets"],
         calibrated=CALIBRATION_CHARACTERISTICS,
         va_artefact=config["discovery"]["va_artefact"],
         anatomy="data/anatomy/l4l5_magnitudes_original_text.csv",

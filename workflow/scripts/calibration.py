@@ -80,6 +80,7 @@ if snakemake.rule == "calibrate":
     res = cal.calibrate(geo, ref, initial=paper, level=f["level"], k_shear=f.get("disc_shear_stiffness_n_per_m"),
                         tolerance_deg=sr["outlier_tolerance_deg"], data_kind=data_kind, max_iter=s["max_iter"],
                         surrogate_weight=sr["surrogate_weight"], family=sr["calibration_family"],
+                        final_surrogate_weight=sr["final_surrogate_weight"],
                         real_targets=real if data_kind == "surrogate" else None)
     log.info("calibration wall time %.1f s", res.wall_time_s)
     out_dir = Path(snakemake.output.characteristics[0]).parent
