@@ -147,46 +147,71 @@ def run_dag(workdir: Path, *extra) -> subprocess.CompletedProcess:
     return r
 
 
-_SECOND_DAG = {}   # the reproducibility run, started beside the first when that test is collected
+# The session's DAG runs start in the background as soon as collection is finished (pytest_collection_finish),
+# not when the first DAG test asks for them: the library tests then run on the pytest process beside the two
+# Snakemake runs, which fill both cores (the DAG has long serial chains), instead of leaving a core idle.
+_DAG_RUNS = {}      # "first" / "second" -> dict(path, proc, log, t0, rc)
+
+
+def _start_dag(name: str, dest: Path):
+    copy_repo(dest)
+    log = open(dest / "dag_run.out", "w")
+    proc = subprocess.Popen([sys.executable, "-m", "snakemake", "--cores", "2", "--configfile", TEST_CONFIG],
+                            cwd=dest, stdout=log, stderr=subprocess.STDOUT, text=True)
+    _DAG_RUNS[name] = dict(path=dest, proc=proc, log=log, t0=time.perf_counter(), rc=None)
+
+
+def pytest_collection_finish(session):
+    items = session.items
+    if session.config.option.collectonly or not any(DAG_FIXTURES & set(getattr(i, "fixturenames", ()))
+                                                    for i in items):
+        return
+    factory = session.config._tmp_path_factory
+    _start_dag("first", factory.mktemp("dag") / "repo")
+    if any(i.name == "test_dag_reproducible_byte_identical" for i in items):
+        _start_dag("second", factory.mktemp("dag2") / "repo")
+
+
+def pytest_sessionfinish(session, exitstatus):
+    for run in _DAG_RUNS.values():     # e.g. -x stopped the session: do not leave a Snakemake run behind
+        if run["proc"].poll() is None:
+            run["proc"].terminate()
+            run["proc"].wait(timeout=60)
+        if not run["log"].closed:
+            run["log"].close()
+
+
+def _wait_dag(name: str) -> Path:
+    """Wait for the background run ``name``; fail the test with Snakemake's output and the logs if it failed."""
+    run = _DAG_RUNS[name]
+    if run["rc"] is None:
+        run["rc"] = run["proc"].wait(timeout=1500)
+        run["log"].close()
+        out = (run["path"] / "dag_run.out").read_text()
+        (run["path"] / "dag_run.out").write_text(f"# <= {time.perf_counter() - run['t0']:.1f} s\n" + out)
+    if run["rc"] != 0:
+        _dag_failed(run["path"], run["rc"], (run["path"] / "dag_run.out").read_text())
+    return run["path"]
 
 
 @pytest.fixture(scope="session")
-def dag_workdir(tmp_path_factory, request) -> Path:
+def dag_workdir(tmp_path_factory) -> Path:
     """Path of a copy of the repository in which ``snakemake --cores 2 --configfile config/test/config.yaml``
     (the whole default target ``all``) has run successfully. Read-only for tests: copy what you modify.
-
-    When tests/test_dag.py's reproducibility test is collected, its second run (another fresh copy) starts
-    at the same time, so the two runs fill each other's idle core (the DAG has long serial chains)."""
-    work = copy_repo(tmp_path_factory.mktemp("dag") / "repo")
-    if any(item.name == "test_dag_reproducible_byte_identical" for item in request.session.items):
-        second = copy_repo(tmp_path_factory.mktemp("dag2") / "repo")
-        log = open(second / "dag_run.out", "w")
-        proc = subprocess.Popen([sys.executable, "-m", "snakemake", "--cores", "2", "--configfile", TEST_CONFIG],
-                                cwd=second, stdout=log, stderr=subprocess.STDOUT, text=True)
-        _SECOND_DAG.update(path=second, proc=proc, log=log, t0=time.perf_counter())
-
-        def stop_second():          # e.g. the first run failed: do not leave the second one running
-            if proc.poll() is None:
-                proc.terminate()
-                proc.wait(timeout=60)
-            log.close()
-        request.addfinalizer(stop_second)
-    run_dag(work)
-    return work
+    Started in the background right after collection (see ``pytest_collection_finish``)."""
+    if "first" not in _DAG_RUNS:          # not started at collection (should not happen): run it now
+        work = copy_repo(tmp_path_factory.mktemp("dag") / "repo")
+        run_dag(work)
+        return work
+    return _wait_dag("first")
 
 
 @pytest.fixture(scope="session")
 def dag_second_workdir(dag_workdir, tmp_path_factory) -> Path:
-    """A second, independent run of the same DAG in another fresh copy (for the reproducibility test)."""
-    if not _SECOND_DAG:
+    """A second, independent run of the same DAG in another fresh copy (for the reproducibility test),
+    started at the same time as the first."""
+    if "second" not in _DAG_RUNS:
         second = copy_repo(tmp_path_factory.mktemp("dag2") / "repo")
         run_dag(second)
         return second
-    proc, second = _SECOND_DAG["proc"], _SECOND_DAG["path"]
-    try:
-        rc = proc.wait(timeout=1500)
-    finally:
-        _SECOND_DAG["log"].close()
-    if rc != 0:
-        _dag_failed(second, rc, (second / "dag_run.out").read_text())
-    return second
+    return _wait_dag("second")

@@ -118,6 +118,12 @@ class _UniqueKeyLoader(yaml.SafeLoader):
         return super().construct_mapping(node, deep=deep)
 
 
+def check_unique_keys(path) -> None:
+    """Raise ConfigError naming the file and line when a YAML config file repeats a key in one mapping
+    (used by the workflow on every --configfile, whose own loader keeps the last key silently)."""
+    _read(path)
+
+
 def _read(path_or_dict) -> dict:
     if isinstance(path_or_dict, Mapping):
         return copy.deepcopy(dict(path_or_dict))

@@ -223,12 +223,11 @@ def _rom_sigma(df, s):
 
 
 @functools.lru_cache(maxsize=4)
-def _fsu_variants(geometry_kind, geometry_path, level, set_name, data_dir, facet_k, k_shear):
-    from .characteristics import load_characteristic_set
+def _fsu_variants(geometry_kind, geometry_path, level, set_name, data_dir, facet_k, k_shear, calibrated_dir=None):
     from .fsu import build_fsu
     from .geometry import load_geometry
     geo = load_geometry(geometry_kind, path=geometry_path if geometry_kind == "visible_human" else None, levels=[level])
-    cs = load_characteristic_set(set_name, data_dir=data_dir)
+    cs = _charset(set_name, data_dir, calibrated_dir)
     return fx.FsuVariants(build_fsu(geo, cs, level, facet_stiffness=facet_k, k_shear=k_shear))
 
 
@@ -237,7 +236,15 @@ def fsu_variants_from_config(config):
     s = discovery_settings(config)
     return _fsu_variants(g.get("kind", "default"), g.get("path"), f.get("level", "L4-L5"), s["characteristic_set"],
                          (config.get("characteristics") or {}).get("data_dir"), f.get("facet_stiffness_n_per_m"),
-                         f.get("disc_shear_stiffness_n_per_m"))
+                         f.get("disc_shear_stiffness_n_per_m"),
+                         (config.get("characteristics") or {}).get("calibrated_dir"))
+
+
+def _charset(name, data_dir, calibrated_dir):
+    """The one resolver (lumbar.characteristics.resolve_characteristic_set): "calibrated" from the workflow's
+    calibration output when it exists, else the published tables."""
+    from .characteristics import resolve_characteristic_set
+    return resolve_characteristic_set(name, data_dir=data_dir, calibrated_dir=calibrated_dir)
 
 
 def _grouped_folds(labels, k):
@@ -333,7 +340,6 @@ def idp_model_table(config):
 
 
 def solve_idp_model(config):
-    from .characteristics import load_characteristic_set
     from .geometry import load_geometry
     from .l2s1 import LEVELS, derive_cables, run_set
     s = discovery_settings(config)
@@ -341,7 +347,7 @@ def solve_idp_model(config):
     geo = load_geometry(g.get("kind", "default"), path=g.get("path") if g.get("kind") == "visible_human" else None,
                         levels=list(LEVELS))
     data_dir = (config.get("characteristics") or {}).get("data_dir")
-    cs = load_characteristic_set(s["characteristic_set"], data_dir=data_dir)
+    cs = _charset(s["characteristic_set"], data_dir, (config.get("characteristics") or {}).get("calibrated_dir"))
     sim, _ = run_set(geo, cs, derive_cables(l2.get("cables")), idp_formula=l2.get("idp_formula", "paper1"),
                      k_shear=(config.get("fsu") or {}).get("disc_shear_stiffness_n_per_m"),
                      moment_nm=l2.get("moment_nm", 3.75))
@@ -1224,7 +1230,6 @@ def make_hidden_effect_dataset(config, experiment, effect, magnitude, seed, idp_
 
 def _virtual_specimen_rom(config, b, effect, magnitude, seed):
     """ROM fixture with full specimen variation (geometry, ligaments, disc, facets): slower, harder nulls."""
-    from .characteristics import load_characteristic_set
     from .fsu import STAGES
     from .geometry import load_geometry
     from .virtual_experiment import stepwise_reduction_table
@@ -1232,8 +1237,8 @@ def _virtual_specimen_rom(config, b, effect, magnitude, seed):
     level = f.get("level", "L4-L5")
     geo = load_geometry(g.get("kind", "default"), path=g.get("path") if g.get("kind") == "visible_human" else None,
                         levels=[level])
-    cs = load_characteristic_set(discovery_settings(config)["characteristic_set"],
-                                 data_dir=(config.get("characteristics") or {}).get("data_dir"))
+    cs = _charset(discovery_settings(config)["characteristic_set"], (config.get("characteristics") or {}).get("data_dir"),
+                  (config.get("characteristics") or {}).get("calibrated_dir"))
     df = stepwise_reduction_table(geo, cs, int(seed), n_specimens=int(b["n_specimens"]), noise_sd_deg=b["noise_sd_deg"],
                                   effects=None if effect == "none" else {effect: float(magnitude)},
                                   moments_nm=tuple(b["moments_nm"]), level=level,

@@ -226,7 +226,7 @@ class FsuVariants:
             R0[:, 0] = so3.exp(np.asarray(off, float))
         return x0, R0
 
-    def simulate(self, scen: pd.DataFrame, values: dict, max_iter=50, tol=1e-8):
+    def simulate(self, scen: pd.DataFrame, values: dict, max_iter=50, tol=1e-7):
         scen = scen.reset_index(drop=True)
         stages = list(dict.fromkeys(scen["stage"]))
         fm, cm, params, G = self.masks_params(stages, values)
@@ -247,7 +247,7 @@ class FsuVariants:
         phi0 = so3.log(r0.R[:, 0]).reshape(G, S, 3)
         return np.where(conv, rom, np.nan), conv, phi0, stages
 
-    def neutral_lordosis(self, stages, values: dict, max_iter=50, tol=1e-8):
+    def neutral_lordosis(self, stages, values: dict, max_iter=50, tol=1e-7):
         """Lordotic angle change [deg] at 0 N*m per stage (G, S): -(sagittal rotation) from the reference."""
         fm, cm, params, G = self.masks_params(stages, values)
         r0 = solve(self.model, np.zeros((fm.shape[0], self.model.nb, 6)), *self._start(params, fm.shape[0]),
@@ -257,7 +257,7 @@ class FsuVariants:
 
 
 def simulate_stepwise_reduction(fsu, stages=STAGES, directions=MAIN_DIRECTIONS, moments_nm=(1.0, 2.5, 5.0, 7.5, 10.0),
-                                effects=None, max_iter=50, tol=1e-8) -> pd.DataFrame:
+                                effects=None, max_iter=50, tol=1e-7) -> pd.DataFrame:
     """Like ``lumbar.stepwise_reduction.simulate_stepwise_reduction`` with solver effects of this module."""
     from .stepwise_reduction import scenario_grid
     scen = scenario_grid(stages, directions, moments_nm)

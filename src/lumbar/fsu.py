@@ -161,7 +161,7 @@ MAX_VALID_ROTATION_DEG = 20.0
 
 
 def range_of_motion(fsu: FSU, moments_nm=(1, 2.5, 5, 7.5, 10), directions=MAIN_DIRECTIONS,
-                    stages=("intact",), load_steps=1, max_iter=50, tol=1e-8) -> pd.DataFrame:
+                    stages=("intact",), load_steps=1, max_iter=50, tol=1e-7) -> pd.DataFrame:
     """ROM table (one row per stage x direction x moment), solved as one batch.
 
     ``valid`` is False where a converged state lies outside the validity of the force laws: the disc centre

@@ -239,13 +239,15 @@ class L2S1:
 
 def build_l2s1(geometry, charset, cables: pd.DataFrame | None = None, facet_stiffness=None, k_shear=None,
                cable_length_m=CABLE_LENGTH_M, contact_eps=5e-5, slack_width_pct=0.5,
-               registration="icp") -> L2S1:
+               registration="auto") -> L2S1:
     """L2-S1 model of ``geometry`` with ``charset`` at every level and the derived cables.
 
     Cable attachments and lines of action are defined on the myo-sim vertebrae (Christophy fascicles).
     On another geometry they are carried over by registering the myo-sim vertebra onto the geometry's one
     (``register_vertebra``: ICP with rotation, uniform scale and translation, started at the centroid
-    translation); ``registration="translation"`` keeps the former rule ``a = c_geo + (a_myo - c_myo)``.
+    translation); ``registration="translation"`` keeps the former rule ``a = c_geo + (a_myo - c_myo)``;
+    "auto" (default) = ICP for Visible Human geometries (and their virtual specimens), translation otherwise
+    (identity on myo-sim itself; synthetic test chains have no anatomical meshes to register).
     The table gains ``registration``, ``registration_scale`` and ``registration_rms_mm`` columns.
     """
     miss = [lv for lv in LEVELS if lv not in geometry.levels]
@@ -265,8 +267,10 @@ def build_l2s1(geometry, charset, cables: pd.DataFrame | None = None, facet_stif
     cab = cables.copy()
     groups = {}
     reg = {}
-    if registration not in ("icp", "translation"):
-        raise ValueError(f"registration {registration!r}; expected 'icp' or 'translation'")
+    if registration not in ("auto", "icp", "translation"):
+        raise ValueError(f"registration {registration!r}; expected 'auto', 'icp' or 'translation'")
+    if registration == "auto":
+        registration = "icp" if str(geometry.name).startswith("visible_human") else "translation"
     for v in sorted(set(cab["vertebra"])):
         if registration == "icp" and geometry.name != "myo_sim":
             r0 = cab[cab["vertebra"] == v].iloc[0]
@@ -381,7 +385,7 @@ def internal_loads(sol: Solution, level=IDP_LEVEL) -> pd.DataFrame:
 
 
 def run_set(geometry, charset, cables=None, idp_formula="paper1", idp_kwargs=None, facet_stiffness=None,
-            k_shear=None, load_steps=1, max_iter=50, tol=1e-8, moment_nm=MOMENT_NM):
+            k_shear=None, load_steps=1, max_iter=50, tol=1e-7, moment_nm=MOMENT_NM):
     """Build, solve the 49 scenarios, and return (internal-loads table with idp_mpa, Solution)."""
     from .idp import FORMULAS, idp_from_disc
     if idp_formula not in FORMULAS:

@@ -160,7 +160,7 @@ class StageSolver:
 
 
 def simulate_stepwise_reduction(fsu, stages=STAGES, directions=MAIN_DIRECTIONS, moments_nm=MOMENTS_NM,
-                                effects=None, max_iter=50, tol=1e-8, load_steps=1) -> pd.DataFrame:
+                                effects=None, max_iter=50, tol=1e-7, load_steps=1) -> pd.DataFrame:
     """ROM of every (stage, direction, moment) scenario: stage, direction, moment_nm, rom_deg, converged,
     residual_force_n, residual_moment_nm (max residual of the loaded solve; the effects path may omit them).
 

@@ -140,7 +140,7 @@ def _variation(variation) -> SpecimenVariation:
 
 def stepwise_reduction_table(geometry, charset, seed, n_specimens=8, variation=None, noise_sd_deg=0.3,
                              effects=None, moments_nm=(1.0, 2.5, 5.0, 7.5, 10.0), level="L4-L5",
-                             k_shear=None, max_iter=50, tol=1e-8):
+                             k_shear=None, max_iter=50, tol=1e-7):
     """Surrogate stepwise-reduction ROM table (Heuer et al. 2007 layout) from ``n_specimens`` virtual specimens.
 
     Each specimen = ``virtual_specimen(geometry, charset, rng)`` with ``rng`` from
@@ -256,7 +256,7 @@ def _fx_idp_per_newton(geometry, idp_formula, area_m2=18e-4):
 
 
 def idp_table(geometry, charset, seed, n_specimens=7, variation=None, noise_sd_mpa=0.02, effects=None,
-              cables=None, idp_formula="paper1", k_shear=None, max_iter=50, tol=1e-8):
+              cables=None, idp_formula="paper1", k_shear=None, max_iter=50, tol=1e-7):
     """Surrogate L4-L5 IDP table (Wilke et al. 1996 layout: 7 muscle set-ups x 7 load cases, L2-S1).
 
     Each specimen = ``virtual_specimen(geometry, charset, rng)`` (all four levels L2-L3..L5-S1 perturbed)

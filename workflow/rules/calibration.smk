@@ -18,7 +18,9 @@ rule calibrate:
         derived=stepwise_reduction_derived,
         real_targets=config["stepwise_reduction"]["real_targets"],
         characteristics=characteristics_dir(),
-        characteristic_tables=characteristic_tables(config["characteristics"]["data_dir"]),
+        characteristic_tables=characteristic_tables(
+            config["characteristics"]["data_dir"]
+        ),
     output:
         characteristics=CALIBRATION_CHARACTERISTICS,
         summary="results/calibration/calibration_summary.csv",

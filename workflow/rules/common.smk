@@ -1,32 +1,17 @@
 from glob import glob
 from pathlib import Path
 
-import yaml
+from lumbar.config import ConfigError, check_unique_keys
 from snakemake.utils import validate
 
-
-class _UniqueKeyLoader(yaml.SafeLoader):
-    """Snakemake's YAML loading keeps the last of two equal keys (a second `fsu:` replaces the first): re-read
-    every config file with a loader that rejects them (the same check as lumbar.config.load_config)."""
-
-    def construct_mapping(self, node, deep=False):
-        seen = {}
-        for key_node, _ in node.value:
-            key = self.construct_object(key_node, deep=deep)
-            if key in seen:
-                raise WorkflowError(
-                    f"Error in config file {key_node.start_mark.name}, line {key_node.start_mark.line + 1}: "
-                    f"duplicate key {key!r} (first at line {seen[key] + 1}); each key may appear once per "
-                    "mapping: the later one would silently replace the earlier"
-                )
-            seen[key] = key_node.start_mark.line
-        return super().construct_mapping(node, deep=deep)
-
-
+# Snakemake's YAML loading keeps the last of two equal keys (a second `fsu:` replaces the first): every config
+# file is re-read with a loader that rejects them (lumbar.config.check_unique_keys names file and line).
 for _cf in workflow.configfiles:
     if Path(_cf).is_file() and str(_cf).endswith((".yaml", ".yml")):
-        with open(_cf) as _fh:
-            yaml.load(_fh, Loader=_UniqueKeyLoader)
+        try:
+            check_unique_keys(_cf)
+        except ConfigError as _e:
+            raise WorkflowError(f"Error in config file {_cf}: {_e}") from None
 
 validate(config, schema="../schemas/config.schema.yaml")
 
@@ -104,7 +89,9 @@ def geometry_inputs(wildcards):
     """
     if config["geometry"]["kind"] == "visible_human":
         # every file of the folder (not the folder: its mtime does not change when a file is edited in place)
-        files = sorted(str(p) for p in Path(config["geometry"]["path"]).rglob("*") if p.is_file())
+        files = sorted(
+            str(p) for p in Path(config["geometry"]["path"]).rglob("*") if p.is_file()
+        )
         return files or [config["geometry"]["path"]]
     return sorted(glob("data/landmarks/*.csv"))
 
@@ -113,23 +100,44 @@ def geometry_inputs(wildcards):
 # edit re-runs exactly the rules that read it (a folder's mtime does not change when a file in it is rewritten).
 # The folder itself stays a named input only to tell the script where the tables are; ancient(): never a trigger.
 CHARACTERISTIC_TABLES = {
-    "softplus": ("disc.csv", "facet.csv", "ligament_prestrain.csv", "ligaments_softplus.csv"),
+    "softplus": (
+        "disc.csv",
+        "facet.csv",
+        "ligament_prestrain.csv",
+        "ligaments_softplus.csv",
+    ),
     "rupp2015": ("disc.csv", "facet.csv", "ligaments_rupp2015.csv"),
 }
 
 
 def characteristic_tables(data_dir, sets=None):
     """The tables lumbar.characteristics.load_characteristic_set reads from ``data_dir`` for ``sets``
-    (every *.csv of the folder when ``sets`` is None: calibrate copies them all, discovery may load any set)."""
+    (every *.csv of the folder when ``sets`` is None: calibrate copies them all, discovery may load any set).
+    """
     d = Path(data_dir)
     if sets is None:
         return sorted(str(p) for p in d.glob("*.csv"))
-    names = {n for s in sets for n in CHARACTERISTIC_TABLES["rupp2015" if s == "rupp2015" else "softplus"]}
+    names = {
+        n
+        for s in sets
+        for n in CHARACTERISTIC_TABLES["rupp2015" if s == "rupp2015" else "softplus"]
+    }
     return [str(d / n) for n in sorted(names)]
 
 
+def discovery_calibrated_tables():
+    """The calibration output that discovery reads when discovery.characteristic_set is "calibrated"
+    (characteristics.calibrated_dir; lumbar.characteristics.resolve_characteristic_set).
+    """
+    if config["discovery"]["characteristic_set"] != "calibrated":
+        return []
+    return characteristic_tables(
+        config["characteristics"]["calibrated_dir"], ["calibrated"]
+    )
+
+
 def characteristics_dir():
-    """characteristics.data_dir as the location input of a rule (ancient: its mtime is never a trigger)."""
+    """characteristics.data_dir as the location input of a rule (ancient, so its mtime is never a trigger)."""
     return ancient(config["characteristics"]["data_dir"])
 
 
@@ -166,7 +174,9 @@ def stepwise_reduction_characteristics(wildcards):
 def stepwise_reduction_tables(wildcards):
     """The characteristic tables rule stepwise_reduction_sim reads for its set (see characteristic_tables)."""
     if wildcards.set == "calibrated":
-        return characteristic_tables("results/calibration/characteristics", ["calibrated"])
+        return characteristic_tables(
+            "results/calibration/characteristics", ["calibrated"]
+        )
     return characteristic_tables(config["characteristics"]["data_dir"], [wildcards.set])
 
 
@@ -335,3 +345,15 @@ def discovery_final_outputs():
         "results/discrepancy/benchmark_summary.json",
         "results/figures/discrepancy_benchmark.png",
     ]
+
+
+def discovery_real_data_runs(wildcards):
+    """discovery.json of every run on real measurements: the vertebral-arch artefact, the intact ROM
+    (discovery.intact_rom) and the in-vivo validation when the muscle model's tables are built or present.
+    """
+    cases = ["va_artefact"] + (
+        ["intact_rom"] if config["discovery"]["intact_rom"] else []
+    )
+    if "results/discrepancy/in_vivo/discovery.json" in discovery_final_outputs():
+        cases.append("in_vivo")
+    return [f"results/discrepancy/{c}/discovery.json" for c in cases]

@@ -3,20 +3,14 @@
 # (test fixtures) split into one job per hidden effect (+ one for the null datasets).
 
 
-def discovery_real_data_runs(wildcards):
-    """discovery.json of every run on real measurements: the vertebral-arch artefact, the intact ROM
-    (discovery.intact_rom) and the in-vivo validation when the muscle model's tables are built or present."""
-    cases = ["va_artefact"] + (["intact_rom"] if config["discovery"]["intact_rom"] else [])
-    if "results/discrepancy/in_vivo/discovery.json" in discovery_final_outputs():
-        cases.append("in_vivo")
-    return [f"results/discrepancy/{c}/discovery.json" for c in cases]
-
-
 rule discovery_idp_model:
     input:
         geometry_inputs,
         characteristics=characteristics_dir(),
-        characteristic_tables=characteristic_tables(config["characteristics"]["data_dir"]),
+        characteristic_tables=characteristic_tables(
+            config["characteristics"]["data_dir"]
+        ),
+        calibrated=discovery_calibrated_tables(),
         cables=config["l2s1"]["cables"],
     output:
         "results/discrepancy/model/idp_invitro_model.csv",
@@ -37,7 +31,10 @@ rule discovery_default:
         geometry_inputs,
         measured=stepwise_reduction_experiment,
         characteristics=characteristics_dir(),
-        characteristic_tables=characteristic_tables(config["characteristics"]["data_dir"]),
+        characteristic_tables=characteristic_tables(
+            config["characteristics"]["data_dir"]
+        ),
+        calibrated=discovery_calibrated_tables(),
     output:
         **discovery_case_outputs("default"),
     log:
@@ -57,7 +54,10 @@ rule discovery_va_artefact:
         geometry_inputs,
         measured=config["discovery"]["va_artefact"],
         characteristics=characteristics_dir(),
-        characteristic_tables=characteristic_tables(config["characteristics"]["data_dir"]),
+        characteristic_tables=characteristic_tables(
+            config["characteristics"]["data_dir"]
+        ),
+        calibrated=discovery_calibrated_tables(),
     output:
         **discovery_case_outputs("va_artefact"),
     log:
@@ -78,7 +78,10 @@ rule discovery_intact_rom:
         geometry_inputs,
         measured=config["discovery"]["intact_rom"] or [],
         characteristics=characteristics_dir(),
-        characteristic_tables=characteristic_tables(config["characteristics"]["data_dir"]),
+        characteristic_tables=characteristic_tables(
+            config["characteristics"]["data_dir"]
+        ),
+        calibrated=discovery_calibrated_tables(),
     output:
         **discovery_case_outputs("intact_rom"),
     log:
@@ -136,7 +139,10 @@ rule discovery_benchmark_job:
     input:
         geometry_inputs,
         characteristics=characteristics_dir(),
-        characteristic_tables=characteristic_tables(config["characteristics"]["data_dir"]),
+        characteristic_tables=characteristic_tables(
+            config["characteristics"]["data_dir"]
+        ),
+        calibrated=discovery_calibrated_tables(),
         idp_model=discovery_benchmark_idp_model,
     output:
         table="results/discrepancy/benchmark/{job}.csv",

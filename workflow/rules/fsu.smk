@@ -5,11 +5,13 @@ rule fsu_rom:
         characteristic_tables=characteristic_tables(
             config["characteristics"]["data_dir"], config["characteristics"]["sets"]
         ),
-        calibrated=characteristic_tables(
-            "results/calibration/characteristics", ["calibrated"]
-        )
-        if "calibrated" in config["characteristics"]["sets"]
-        else [],
+        calibrated=(
+            characteristic_tables(
+                "results/calibration/characteristics", ["calibrated"]
+            )
+            if "calibrated" in config["characteristics"]["sets"]
+            else []
+        ),
     output:
         report(
             "results/tables/fsu_rom_intact.csv",

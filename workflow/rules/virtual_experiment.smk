@@ -34,6 +34,15 @@ rule idp_surrogate:
         characteristic_tables=characteristic_tables(
             config["characteristics"]["data_dir"], [config["l2s1"]["generator_set"]]
         ),
+        # generator_set "calibrated" = the workflow's calibration output (one resolver for every stage)
+        calibrated=(
+            characteristic_tables(
+                config["l2s1"]["calibrated_characteristics"], ["calibrated"]
+            )
+            if config["l2s1"]["generator_set"] == "calibrated"
+            and config["l2s1"]["calibrated_characteristics"]
+            else []
+        ),
         cables=config["l2s1"]["cables"],
     output:
         "results/experiments/idp_wilke1996_surrogate.csv",

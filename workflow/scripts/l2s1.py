@@ -51,7 +51,7 @@ if "snakemake" not in globals():
 log = _common.setup_logging(snakemake)
 
 from lumbar import l2s1  # noqa: E402
-from lumbar.characteristics import load_characteristic_set  # noqa: E402
+from lumbar.characteristics import load_characteristic_set, resolve_characteristic_set  # noqa: E402
 from lumbar.geometry import load_geometry  # noqa: E402
 from lumbar.io import write_table_atomic  # noqa: E402
 
@@ -70,7 +70,11 @@ if rule == "idp_surrogate":
     from lumbar.virtual_experiment import idp_table
 
     p = snakemake.params.l2s1
-    cs = load_characteristic_set(p["generator_set"], data_dir=snakemake.input.characteristics)
+    cal = _common.as_list(getattr(snakemake.input, "calibrated", []))
+    cs = resolve_characteristic_set(p["generator_set"], data_dir=snakemake.input.characteristics,
+                                    calibrated_dir=Path(cal[0]).parent if cal else None)
+    log.info("generator set %s from %s", p["generator_set"],
+             Path(cal[0]).parent if cal and p["generator_set"] == "calibrated" else snakemake.input.characteristics)
     geo = _geometry(snakemake.params.geometry)
     df = idp_table(geo, cs, snakemake.params.seed, n_specimens=p["n_specimens"], variation=p["variation"],
                    noise_sd_mpa=p["noise_sd_mpa"], cables=l2s1.derive_cables(snakemake.input.cables),
