@@ -151,7 +151,8 @@ def test_c_zero_gives_zero_force_at_zero_strain():
 
 
 # ---------------------------------------------------------------- round trip with specimen variation and noise
-NOISY_MOMENTS = (2.5, 5.0, 10.0)          # N*m: 3 moments, the minimum of the disc fit (keeps the test small)
+NOISY_MOMENTS = (2.5, 5.0, 10.0)          # N*m: 3 moments, the minimum of the disc fit (keeps the test small;
+                                          # with 7.5 instead of 10 the ligaments engage less: fit rms up to 1.1 deg)
 NOISE_SD_DEG = 0.3                        # the surrogate's measurement noise (virtual_experiment default)
 N_SPECIMENS = 3
 
@@ -273,9 +274,15 @@ def test_noisy_round_trip_reaches_noise_level_from_away_and_reports_identifiabil
     # fit weights each row by 1 / its specimen range, noisy with 3 specimens)
     tot = lambda col: float(np.sqrt((fit.loc[engaged, col] ** 2).mean()))  # noqa: E731
     assert tot("rms_fit_deg") < 0.8 * tot("rms_start_deg"), fit[["rms_fit_deg", "rms_start_deg"]]
-    # SSL: slack at the truth, zero ROM sensitivity -> unidentifiable, and the fit leaves it at its start
+    # SSL: slack at the truth, zero ROM sensitivity -> unidentifiable. The calibration must not report it as a
+    # clean fit: it keeps the start law (flagged not identifiable) or its fit ends at a bound (flagged at_bound).
+    # Measured (library of 2026-11-23): the START law engages, so the fit runs and ends at a = 5000 N,
+    # d = 0.05 % (at_bound), a step-like law carrying 37 N in one intact scenario where the truth's SSL is
+    # slack - it fits the noise; the flag is what keeps this from reading as a result.
     assert ident["SSL"] == {"log_a": math.inf, "b_pct": math.inf, "log_d": math.inf}
-    np.testing.assert_allclose([res.ligaments["SSL"][i] for i in (0, 1, 3)], START["SSL"], rtol=1e-6)
+    ssl = summary.loc["SSL"]
+    kept = np.allclose([res.ligaments["SSL"][i] for i in (0, 1, 3)], START["SSL"], rtol=1e-6)
+    assert (kept and not ssl.get("identifiable", False)) or bool(ssl.get("at_bound", False)), ssl
     # the best-determined ligament parameter is known within a factor ~1.5 (ALL's log d), none below 10 %
     assert min(min(v.values()) for k, v in ident.items() if k != "facets") < 0.5
     assert not any(fit.loc[k, "identifiable"] for k in TRUTH)

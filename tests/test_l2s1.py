@@ -45,6 +45,7 @@ def test_cables_derived_from_christophy_fascicles(cables):
     assert c.loc[("iliocostalis_longissimus", "left"), "attach_y_m"] > 0.015   # lateral (transverse process)
 
 
+@pytest.mark.slow          # all six sets x 49 scenarios on the default geometry (~7 s)
 def test_all_294_solves_converge_or_are_flagged(all_sets):
     n = 0
     for s, (df, sol) in all_sets.items():
@@ -56,6 +57,7 @@ def test_all_294_solves_converge_or_are_flagged(all_sets):
     assert n == 294, f"{294 - n} scenario(s) flagged as not converged"
 
 
+@pytest.mark.slow          # all six sets x 49 scenarios on the default geometry (~7 s)
 def test_every_free_vertebra_in_force_and_moment_balance(all_sets):
     for s, (df, sol) in all_sets.items():
         rf, rm = l2s1.equilibrium_residual(sol)

@@ -164,6 +164,19 @@ def _widths(rows, tolerance_deg):
     return np.maximum(w, 0.05)
 
 
+def _real_fit_step(fit, step, structure, targets) -> dict:
+    """One calibration_summary row for a :func:`fit_real_targets` step."""
+    err = fit.targets["rom_sim_deg"] - fit.targets["rom_mean_deg"]
+    bound = fit.parameters[fit.parameters["at_bound"]]["parameter"].tolist()
+    return {"step": step, "structure": structure, "stage": ",".join(sorted(set(targets["stage"]))),
+            "n_scenarios": len(targets),
+            "parameters": "; ".join(f"{r.parameter}={r.value:.4g} {r.unit}" for r in fit.parameters.itertuples()),
+            "rms_residual": float(np.sqrt(np.nanmean(err ** 2))), "residual_unit": "deg",
+            "n_not_converged": int((~fit.targets["converged"]).sum()), "n_evaluations": fit.n_evaluations,
+            "identifiable": bool(fit.parameters["identifiable"].any()), "at_bound": bool(bound),
+            "at_bound_parameters": ";".join(bound)}
+
+
 def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_shear=None,
               tolerance_deg=0.5, data_kind="surrogate", max_iter=50, tol=1e-7, max_nfev=60,
               start=None, concave=CONCAVE_CANDIDATES, surrogate_weight=1.0,
@@ -211,15 +224,7 @@ def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_
                               **(real_fit_kw or {}))
         base = a0.charset
         info["anchor"] = a0.parameters
-        bound0 = a0.parameters[a0.parameters["at_bound"]]["parameter"].tolist()
-        err0 = a0.targets["rom_sim_deg"] - a0.targets["rom_mean_deg"]
-        steps.append({"step": 0, "structure": "start_set_on_real_targets", "stage": ",".join(
-                          sorted(set(real_targets["stage"]))), "n_scenarios": len(real_targets),
-                      "parameters": "; ".join(f"{r.parameter}={r.value:.4g} {r.unit}" for r in a0.parameters.itertuples()),
-                      "rms_residual": float(np.sqrt(np.nanmean(err0 ** 2))), "residual_unit": "deg",
-                      "n_not_converged": int((~a0.targets["converged"]).sum()), "n_evaluations": a0.n_evaluations,
-                      "identifiable": bool(a0.parameters["identifiable"].any()), "at_bound": bool(bound0),
-                      "at_bound_parameters": ";".join(bound0)})
+        steps.append(_real_fit_step(a0, 0, "start_set_on_real_targets", real_targets))
     # ---- step 1: disc
     rows = _stage_rows(reference, DISC_STAGE)
     torque = dict(base.disc.torque)
@@ -420,15 +425,7 @@ def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_
             fitted[kind_l] = (law.a, law.b, law.c, law.d)
         info["real_fit"] = rf.parameters
         info["real_fit_targets"] = rf.targets
-        err = rf.targets["rom_sim_deg"] - rf.targets["rom_mean_deg"]
-        bound = rf.parameters[rf.parameters["at_bound"]]["parameter"].tolist()
-        steps.append({"step": max(int(st["step"]) for st in steps) + 1, "structure": "real_targets", "stage": ",".join(
-                          sorted(set(real_targets["stage"]))), "n_scenarios": len(real_targets),
-                      "parameters": "; ".join(f"{r.parameter}={r.value:.4g} {r.unit}" for r in rf.parameters.itertuples()),
-                      "rms_residual": float(np.sqrt(np.nanmean(err ** 2))), "residual_unit": "deg",
-                      "n_not_converged": int((~rf.targets["converged"]).sum()), "n_evaluations": rf.n_evaluations,
-                      "identifiable": bool(rf.parameters["identifiable"].any()), "at_bound": bool(bound),
-                      "at_bound_parameters": ";".join(bound)})
+        steps.append(_real_fit_step(rf, max(int(st["step"]) for st in steps) + 1, "real_targets", real_targets))
     surf_rows = []
     lev = geometry.levels[level]
     for side in ("left", "right"):

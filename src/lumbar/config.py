@@ -119,9 +119,14 @@ class _UniqueKeyLoader(yaml.SafeLoader):
 
 
 def check_unique_keys(path) -> None:
-    """Raise ConfigError naming the file and line when a YAML config file repeats a key in one mapping
-    (used by the workflow on every --configfile, whose own loader keeps the last key silently)."""
-    _read(path)
+    """Raise ConfigError "line L: duplicate key 'k' (first at line F); ..." when a YAML config file repeats a
+    key in one mapping (used by the workflow on every --configfile, whose own loader keeps the last key)."""
+    with open(path) as fh:
+        try:
+            yaml.load(fh, Loader=_UniqueKeyLoader)
+        except yaml.constructor.ConstructorError as exc:
+            mark = exc.problem_mark
+            raise ConfigError([("<file>", f"line {mark.line + 1}: {exc.problem}")]) from None
 
 
 def _read(path_or_dict) -> dict:

@@ -1389,7 +1389,8 @@ def plot_benchmark(bench: pd.DataFrame, summary: dict, path):
     for i, e in enumerate(effs):
         ps = sorted([p for p in pw if p["effect"] == e], key=lambda p: p["magnitude"])
         mags = [p["magnitude"] / max(q["magnitude"] for q in ps) for p in ps]
-        axes[2].plot(mags, [100 * p["median_param_rel_error"] for p in ps], "o-", label=e, color=f"C{i}")
+        err = [np.nan if p["median_param_rel_error"] is None else 100 * p["median_param_rel_error"] for p in ps]
+        axes[2].plot(mags, err, "o-", label=e, color=f"C{i}")     # None: no correct detection at that magnitude
     axes[2].axhline(20, color="k", ls="--", lw=0.8)
     axes[2].set_xlabel("magnitude / larger benchmark magnitude [-]")
     axes[2].set_ylabel("median |parameter error| of detections [%]")

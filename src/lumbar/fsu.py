@@ -8,7 +8,7 @@ about the loading axis relative to the stage's 0 N*m equilibrium.
 
 Command line::
 
-    python -m lumbar.fsu --moment 10 --direction all --geometry default
+    python -m lumbar.fsu --moment 10 --direction all --geometry visible_human
 """
 from __future__ import annotations
 
@@ -234,7 +234,9 @@ def main(argv=None) -> int:
     p.add_argument("--moment", type=float, nargs="+", default=[10.0], help="pure moment(s) [N*m]")
     p.add_argument("--direction", default="all",
                    help="all | comma list of " + ", ".join(sorted(DIRECTIONS)))
-    p.add_argument("--geometry", default="default", help="default | visible_human | synthetic")
+    p.add_argument("--geometry", default="visible_human",
+                   help="visible_human (default: the embedded Visible Human set, as the workflow) | myo_sim | "
+                        "synthetic")
     p.add_argument("--geometry-dir", default=None,
                    help="folder of the Visible Human set (--geometry visible_human; default: the configuration's "
                         "geometry.path)")
