@@ -209,10 +209,11 @@ def test_l2s1_rules_run(dag_workdir):
     np.testing.assert_allclose(ok["idp_sim_mpa"] * 1e6, 1.68 * ok["disc_axial_force_n"] / csa_m2, rtol=1e-4)
     np.testing.assert_allclose(np.diff(ok["idp_sim_mpa"] * 1e6), 1.68 * np.diff(ok["disc_axial_force_n"]) / csa_m2,
                                rtol=1e-3, atol=10.0)
-    # and the cables press the disc: all five pairs (200 N of cable tension) raise the neutral IDP
+    # and the cables press the disc: all five pairs (10 x 40 N of cable tension) raise the neutral IDP, by less
+    # than if all their axial pull went through the disc (1.68 * 400 N / CSA: facets and ligaments share it)
     neutral = ok[ok["load_case"] == "neutral"].set_index(["set", "muscle_setup"])["idp_sim_mpa"]
     for s in ("calibrated", "rupp2015"):
-        assert neutral[(s, "all")] > neutral[(s, "none")] + 0.05, s
+        assert neutral[(s, "none")] < neutral[(s, "all")] < neutral[(s, "none")] + 1.68 * 400.0 / csa_m2 / 1e6, s
     from PIL import Image
     for f in targets[3:]:
         assert float(np.asarray(Image.open(tmp_path / f).convert("RGB"), float).std()) > 5.0, f

@@ -98,27 +98,21 @@ def l2s1_paper2():
 def test_paper2_idp_is_the_hand_formula_of_the_reported_loads(l2s1_paper2):
     """Every row of the L2-S1 table (synthetic chain, rupp2015 set, idp_formula paper2): the reported IDP is
     0.85 F / (18 cm^2 * 0.66) + 0.036 MPa/(N*m) M (M >= 0) or + 0.018 MPa/(N*m) |M| (M < 0) of the reported
-    disc axial force and sagittal moment, so the moment term never lowers the IDP."""
+    disc axial force and FSU sagittal moment, so the moment term never lowers the IDP."""
     df = l2s1_paper2
     assert df["converged"].all()
-    M = df["disc_moment_sagittal_nm"].to_numpy()
+    M = df["fsu_moment_sagittal_nm"].to_numpy()
     axial = 0.85 * df["disc_axial_force_n"].to_numpy() / (18e-4 * 0.66)
     hand = axial + np.where(M >= 0, 0.036e6 * M, -0.018e6 * M)
     np.testing.assert_allclose(df["idp_mpa"].to_numpy() * 1e6, hand, rtol=1e-9)
     assert (df["idp_mpa"].to_numpy() * 1e6 >= axial - 1e-6).all()
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "library defect (lumbar.l2s1.run_set -> idp_paper2): the moment term takes the disc's own Eq. 3 torque "
-    "(disc_moment_sagittal_nm), not the sagittal moment applied to the FSU (paper 2, Sect. 2.4: 'the magnitudes "
-    "of the flexion and extension moments applied to the FSU'). Measured, synthetic L2-S1, rupp2015, no cables: "
-    "the prestressed ligaments hold L4-L5 at -2.9 deg with the disc carrying -1.33 N*m (extension) at neutral; "
-    "under +3.75 N*m flexion on L2 the unit flexes by 0.9 deg but the disc still carries -0.88 N*m, so the "
-    "flexion case gets the extension branch (+0.016 MPa) instead of +0.036 * 3.75 = +0.135 MPa (calibrated set: "
-    "0.57 deg flexion, disc torque -0.015 N*m: the published flexion law is negative below 1.75 deg)"))
 def test_paper2_moment_term_sign_end_to_end(l2s1_paper2):
     """Paper-2 IDP end to end, L2-S1 without cables: a pure +3.75 N*m flexion moment on L2 is transmitted
-    unchanged through every level (statics of a pure moment), so the L4-L5 FSU bears M_flexion = 3.75 N*m and
+    unchanged through every level (statics of a pure moment), so the L4-L5 FSU bears M_flexion = 3.75 N*m
+    (lumbar.l2s1.fsu_sagittal_moment: the whole unit, not the disc's own torque, which the prestressed
+    ligaments leave at -0.88 N*m in this case) and
     the moment term is + 0.036 MPa/(N*m) * 3.75 = +0.135 MPa; extension: + 0.018 * 3.75 = +0.0675 MPa. The
     unit flexes in flexion and extends in extension (relative to its neutral, prestressed posture)."""
     df = l2s1_paper2

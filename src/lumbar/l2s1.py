@@ -352,6 +352,40 @@ def equilibrium_residual(sol: Solution):
     return np.abs(Q[..., :3]).max(axis=(1, 2)), np.abs(Q[..., 3:]).max(axis=(1, 2))
 
 
+def fsu_sagittal_moment(sol: Solution, level=IDP_LEVEL) -> np.ndarray:
+    """Sagittal moment [N*m] (+ = flexion) borne by the whole functional unit at ``level`` (disc, facets and
+    ligaments together, as paper 2's 6-DOF spring), per scenario.
+
+    Statics of the part above the level: the unit carries the external loads on the bodies above it (the
+    applied pure moment on L2 and the cable forces), taken about the level's disc centre and projected on
+    the disc's lateral axis (the flexion axis, moving with the lower vertebra). There is no gravity in the
+    in-vitro L2-S1 test. Not the disc's own Eq. 3 torque: prestressed ligaments and facets share the moment.
+    """
+    sp, m = sol.spine, sol.spine.model
+    d = next(dd for dd in m.discs if dd.name == level)
+    up, lo = level.split("-")
+    above = [m.body_index(v) for v in FREE[: FREE.index(up) + 1]]
+    lower = m.body_index(lo) if lo in m.body_names else None
+    B = sol.x.shape[0]
+    if lower is not None:
+        R_lo = sol.R[:, lower]
+        c = sol.x[:, lower] + np.einsum("bij,j->bi", R_lo, d.centre - m.c[lower])
+        axis = np.einsum("bij,j->bi", R_lo, d.frame[1])
+    else:
+        c = np.broadcast_to(d.centre, (B, 3))
+        axis = np.broadcast_to(d.frame[1], (B, 3))
+    M = np.zeros((B, 3))
+    for b in above:                                        # applied loads (force at the body's reference point)
+        F, T = sol.loads[:, b, :3], sol.loads[:, b, 3:]
+        M += T + np.cross(sol.x[:, b] - c, F)
+    length, strain, T, dT, dvec, dn, pa, pb = m.fibre_state(sol.x, sol.R, sol.fmask)
+    cab = np.isin(m.f_a, above) & np.array([sp.group_kind[g] == "cable" for g in m.f_group])
+    if cab.any():
+        F = -(T[:, cab] / dn[:, cab])[..., None] * dvec[:, cab]   # force on the body (towards the ground point)
+        M += np.cross(pa[:, cab] - c[:, None, :], F).sum(axis=1)
+    return np.einsum("bi,bi->b", M, axis)
+
+
 def internal_loads(sol: Solution, level=IDP_LEVEL) -> pd.DataFrame:
     """Per scenario: disc loads, facet forces and ligament group forces at ``level``; cable forces."""
     sp, m = sol.spine, sol.spine.model
@@ -368,6 +402,8 @@ def internal_loads(sol: Solution, level=IDP_LEVEL) -> pd.DataFrame:
         # loaded in flexion / right lateral bending / left axial rotation)
         "disc_moment_lateral_nm": -T[:, 0], "disc_moment_sagittal_nm": -T[:, 1], "disc_moment_axial_nm": -T[:, 2],
         "disc_flexion_deg": np.degrees(dl["phi"][:, di, 1]),
+        # moment borne by the whole unit (disc + facets + ligaments), paper 2's FSU moment
+        "fsu_moment_sagittal_nm": fsu_sagittal_moment(sol, level),
     })
     for sid, (lv, side) in enumerate(sp.surface_side):
         if lv == level:
@@ -395,7 +431,7 @@ def run_set(geometry, charset, cables=None, idp_formula="paper1", idp_kwargs=Non
                           tol_moment=tol)
     df = internal_loads(sol)
     csa = geometry.levels[IDP_LEVEL].disc_csa
-    idp = idp_from_disc(df["disc_axial_force_n"].to_numpy(), df["disc_moment_sagittal_nm"].to_numpy(),
+    idp = idp_from_disc(df["disc_axial_force_n"].to_numpy(), df["fsu_moment_sagittal_nm"].to_numpy(),
                         formula=idp_formula, csa_m2=csa, **(idp_kwargs or {}))
     df.insert(3, "idp_mpa", np.where(sol.converged, idp / 1e6, np.nan))
     if not sol.converged.all():

@@ -11,7 +11,9 @@ for _cf in workflow.configfiles:
         try:
             check_unique_keys(_cf)
         except ConfigError as _e:
-            raise WorkflowError(f"Error in config file {_cf}, {_e.errors[0][1]}") from None
+            raise WorkflowError(
+                f"Error in config file {_cf}, {_e.errors[0][1]}"
+            ) from None
 
 validate(config, schema="../schemas/config.schema.yaml")
 
