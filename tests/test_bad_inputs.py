@@ -693,26 +693,22 @@ def _replace_line(path: Path, i: int, fn):
     path.write_text("".join(lines))
 
 
-def test_reject_nan_disc_node_names_file_and_line(tmp_path):
-    """Was: numpy 'SVD did not converge' with no file."""
+@pytest.mark.parametrize("rel, old, new, parts", [
+    # was: numpy 'SVD did not converge' with no file
+    ("disc_fe/L45_NP.node", "0.00140958", "nan",
+     ["line 3: non-finite coordinate", "expected finite 'index x y z' numbers (metres)"]),
+    # was: "'x' must be finite" with no file name
+    ("ligaments/L45_Ligs_AS.lig", "-0.023729", "NaN",
+     ["line 3 (L45_CL_R fibre 1): non-finite coordinate", "expected finite x, y, z"]),
+], ids=["disc_node", "lig_fibre"])
+def test_reject_nan_coordinate_names_file_and_line(tmp_path, rel, old, new, parts):
     from lumbar.geometry import GeometryError, load_geometry
     d = _vh_copy(tmp_path)
-    f = d / "disc_fe" / "L45_NP.node"
-    _replace_line(f, 2, lambda s: s.replace("0.00140958", "nan"))
+    f = d / rel
+    _replace_line(f, 2, lambda s: s.replace(old, new))
     with pytest.raises(GeometryError) as e:
         load_geometry("visible_human", path=d, levels=["L4-L5"])
-    assert_message(e.value, f"{f}: line 3: non-finite coordinate", "expected finite 'index x y z' numbers (metres)")
-
-
-def test_reject_nan_in_lig_file_names_file_and_line(tmp_path):
-    """Was: "'x' must be finite" with no file name."""
-    from lumbar.geometry import GeometryError, load_geometry
-    d = _vh_copy(tmp_path)
-    f = d / "ligaments" / "L45_Ligs_AS.lig"
-    _replace_line(f, 2, lambda s: s.replace("-0.023729", "NaN"))
-    with pytest.raises(GeometryError) as e:
-        load_geometry("visible_human", path=d, levels=["L4-L5"])
-    assert_message(e.value, f"{f}: line 3 (L45_CL_R fibre 1): non-finite coordinate", "expected finite x, y, z")
+    assert_message(e.value, f"{f}: {parts[0]}", *parts[1:])
 
 
 def test_reject_disc_nodes_in_millimetres_blames_the_node_file(tmp_path):
