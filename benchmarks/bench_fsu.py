@@ -51,10 +51,10 @@ def main(argv=None):
     p.add_argument("--repeat", type=int, default=3)
     a = p.parse_args(argv)
     if a.geometry == "synthetic":
-        from lumbar.geometry.synthetic import symmetric_fsu
+        from lumbar.geometry.synthetic import symmetric_fsu  # noqa: PLC0415 - only the chosen geometry's loader
         geo = symmetric_fsu()
     else:
-        from lumbar.geometry import load_geometry
+        from lumbar.geometry import load_geometry  # noqa: PLC0415 - only the chosen geometry's loader
         geo = load_geometry(a.geometry)
     fsu = build_fsu(geo, load_characteristic_set("calibrated"))
     m = fsu.model

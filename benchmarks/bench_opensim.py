@@ -55,6 +55,7 @@ from lumbar import so3  # noqa: E402
 from lumbar.characteristics import load_characteristic_set  # noqa: E402
 from lumbar.fsu import (DIRECTIONS, MAIN_DIRECTIONS, build_fsu, disc_frame, moment_loads,  # noqa: E402
                         range_of_motion, removed_structures)
+from lumbar.geometry import load_geometry  # noqa: E402
 from lumbar.solve import solve  # noqa: E402
 
 MOMENTS_NM = (2.5, 10.0)
@@ -70,8 +71,8 @@ L4_INERTIA_KGM2 = 1e-4
 def import_opensim():
     """(module, None) or (None, reason)."""
     try:
-        import opensim
-    except Exception as e:  # ImportError, or a broken binary wheel
+        import opensim  # noqa: PLC0415 - optional engine; its absence is reported, not fatal
+    except Exception as e:  # noqa: BLE001 - ImportError, or a broken binary wheel
         return None, f"opensim not importable: {type(e).__name__}: {e}"
     opensim.Logger.setLevelString("warn")   # the Manager logs every integrate() call at "info"
     opensim.Logger.removeFileSink()         # no opensim.log in the working directory
@@ -79,7 +80,6 @@ def import_opensim():
 
 
 def load_case(level="L4-L5"):
-    from lumbar.geometry import load_geometry
     geo = load_geometry("default", levels=[level])
     cs = load_characteristic_set("calibrated")
     return geo, cs

@@ -219,7 +219,7 @@ def test_bad_measured_rom_table_rejected_by_calibrate(tmp_path, monkeypatch):
     cfg = config_file(tmp_path, stepwise_reduction={"measured_table": str(path)})
     out = tmp_path / "out"
     out.mkdir()
-    outs = [out / f"o{i}.csv" for i in range(15)]
+    outs = [out / f"o{i}.csv" for i in range(14)]          # rule calibrate's 14 outputs, in its order
     exc = run_rule("calibration", "calibrate", cfg, outs, monkeypatch)
     assert_message(exc, f"{path}, row 6, column 'stage'", "got 'wo_xyz'", "expected one of")
     assert_no_result(outs)
@@ -509,7 +509,7 @@ def test_reject_ligament_insertion_off_its_vertebra():
     g, _ = _myo_l4()
     import dataclasses
     lev = g.levels["L4-L5"]
-    i = next(k for k, l in enumerate(lev.ligaments) if l.name == "SSL")
+    i = next(k for k, lig in enumerate(lev.ligaments) if lig.name == "SSL")
     upper = np.array(lev.ligaments[i].upper, copy=True)
     upper[0] += [0.0, 0.0, 0.03]
     lev.ligaments[i] = dataclasses.replace(lev.ligaments[i], upper=upper)
@@ -906,7 +906,7 @@ def test_read_only_output_folder_is_a_clear_error(tmp_path):
 def test_measured_rom_table_sharing_no_scenario_with_config_is_an_error(tmp_path, monkeypatch):
     """Was: accepted, Table 4 with no assessed scenario."""
     path, _ = _measured(tmp_path, lambda df: None)        # moments 1 .. 10 N*m
-    cfg = config_file(tmp_path, stepwise_reduction={"measured_table": str(path), "moments_nm": [3, 4, 6]})
+    config_file(tmp_path, stepwise_reduction={"measured_table": str(path), "moments_nm": [3, 4, 6]})
     sims = tmp_path / "sims"
     sims.mkdir()
     from lumbar import stepwise_reduction as sr

@@ -61,7 +61,7 @@ def test_calibrated_ssl_slack_until_about_20_percent():
 
 def test_calibrated_prestrains_and_absent_itl():
     cs = load_characteristic_set("calibrated")
-    assert {k: l.prestrain_pct for k, l in cs.ligaments.items()} == {
+    assert {k: lig.prestrain_pct for k, lig in cs.ligaments.items()} == {
         "ALL": 8, "PLL": 10, "FL": 10, "CL": 10, "ISL": 4, "SSL": -6}
     assert "ITL" not in cs.ligaments and "ITL" in cs.absent
     alt = cs.alternatives["SSL"]

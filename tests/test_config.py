@@ -245,7 +245,7 @@ def _invalid_cases():
 def test_reject_invalid_config_names_key_and_allowed_values(cfg, where, texts):
     """load_config names the key path and the allowed values/bound; snakemake's validate rejects it too."""
     msg = _error(cfg)
-    line = next((l for l in msg.splitlines() if l.strip().startswith(where + ":")), None)
+    line = next((ln for ln in msg.splitlines() if ln.strip().startswith(where + ":")), None)
     assert line is not None, f"no error line for {where}:\n{msg}"
     for t in texts:
         assert t in line, f"{t!r} missing from {line!r}"

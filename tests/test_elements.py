@@ -39,7 +39,9 @@ def test_disc_torque_derivative_and_direction_split():
     T, D = disc_torque(phi, TABLE1)
     for k in range(3):
         def f(v, k=k):
-            p = phi.copy(); p[:, k] = v; return disc_torque(p, TABLE1)[0][:, k]
+            p = phi.copy()
+            p[:, k] = v
+            return disc_torque(p, TABLE1)[0][:, k]
         np.testing.assert_allclose(D[:, k], fd(f, phi[:, k]), rtol=1e-6)
     assert T[0, 1] == pytest.approx(torque_angle(0.05, *TABLE1["flexion"])[0])
     assert T[1, 1] == pytest.approx(torque_angle(-0.07, *TABLE1["extension"])[0])
@@ -152,7 +154,8 @@ def test_facet_gap_gradient_matches_finite_differences():
     P = inf[:3]
     _, grad, hess = s.gap(P)
     for k in range(3):
-        e = np.zeros(3); e[k] = 1e-7
+        e = np.zeros(3)
+        e[k] = 1e-7
         np.testing.assert_allclose(grad[:, k], (s.gap(P + e)[0] - s.gap(P - e)[0]) / 2e-7, rtol=1e-5, atol=1e-8)
         np.testing.assert_allclose(hess[:, :, k], (s.gap(P + e)[1] - s.gap(P - e)[1]) / 2e-7, rtol=1e-4, atol=1e-4)
 

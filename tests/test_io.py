@@ -105,7 +105,8 @@ class _Boom:
         raise RuntimeError("boom while formatting")
 
     __repr__ = __str__
-    __format__ = lambda self, spec: str(self)
+    def __format__(self, spec):
+        return str(self)
 
 
 def _leftovers(d):

@@ -24,7 +24,8 @@ def fd_jacobian(m, x, R, loads, h=1e-7, **kw):
     J = np.zeros((B, nb, 6, nb, 6))
     for b in range(nb):
         for k in range(6):
-            d = np.zeros((B, nb, 6)); d[:, b, k] = h
+            d = np.zeros((B, nb, 6))
+            d[:, b, k] = h
             Qp, _ = m.evaluate(x + d[..., :3], so3.exp(d[..., 3:]) @ R, loads, jacobian=False, **kw)
             Qm, _ = m.evaluate(x - d[..., :3], so3.exp(-d[..., 3:]) @ R, loads, jacobian=False, **kw)
             J[:, :, :, b, k] = (Qp - Qm) / (2 * h)

@@ -53,8 +53,8 @@ def test_lint_clean_for_geometry_rules():
 def test_conda_env_matches_environment_txt():
     import yaml
 
-    pins = sorted(l.strip() for l in (ROOT / "environment.txt").read_text().splitlines()
-                  if l.strip() and not l.startswith("#"))
+    pins = sorted(ln.strip() for ln in (ROOT / "environment.txt").read_text().splitlines()
+                  if ln.strip() and not ln.startswith("#"))
     env = yaml.safe_load((ROOT / "workflow" / "envs" / "lumbar.yaml").read_text())
     pip = next(d["pip"] for d in env["dependencies"] if isinstance(d, dict))
     assert sorted(pip) == pins

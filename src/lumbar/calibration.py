@@ -55,7 +55,7 @@ from scipy.optimize import least_squares
 from .characteristics import SoftplusLaw, load_characteristic_set
 from .elements.facet import fit_surface
 from .fsu import build_fsu
-from .io import save_figure_atomic, write_table_atomic
+from .io import save_figure_atomic, subplots, write_table_atomic
 from .stepwise_reduction import MAIN_DIRECTIONS, StageSolver
 
 log = logging.getLogger(__name__)
@@ -581,18 +581,10 @@ def derived_disc_only_rows(torque: dict, moments_nm=(1.0, 2.5, 5.0, 7.5, 10.0), 
 
 
 
-# ------------------------------------------------------------------ figures (matplotlib, Agg)
-def _plt():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
-
-
+# ------------------------------------------------------------------ figures (matplotlib object API, no pyplot)
 def plot_disc_torque_angle(disc_points: pd.DataFrame, table: pd.DataFrame, path, data_label="") -> None:
     """Fig. 4 analog: disc torque vs angle [deg], data points (ROM_mean, M) and the fitted Eq. 3."""
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(7, 4.5))
+    fig, ax = subplots(figsize=(7, 4.5))
     colours = dict(zip(MAIN_DIRECTIONS, ("C0", "C1", "C2", "C3")))
     for d in MAIN_DIRECTIONS:
         pts = disc_points[disc_points["direction"] == d]
@@ -608,13 +600,11 @@ def plot_disc_torque_angle(disc_points: pd.DataFrame, table: pd.DataFrame, path,
     ax.grid(alpha=0.3)
     fig.tight_layout()
     save_figure_atomic(fig, path, dpi=120)
-    plt.close(fig)
 
 
 def plot_ligament_characteristics(points: pd.DataFrame, table: pd.DataFrame, path, data_label="") -> None:
     """Fig. 5 analog: per ligament, modelled (strain, force) at the fit stage's solutions and the fitted Eq. 7."""
-    plt = _plt()
-    fig, axes = plt.subplots(2, 3, figsize=(11, 6.5))
+    fig, axes = subplots(2, 3, figsize=(11, 6.5))
     for ax, k in zip(axes.ravel(), ("ALL", "PLL", "CL", "FL", "ISL", "SSL")):
         row = table[table["ligament"] == k].iloc[0]
         pts = points[points["ligament"] == k] if len(points) else points
@@ -636,7 +626,6 @@ def plot_ligament_characteristics(points: pd.DataFrame, table: pd.DataFrame, pat
         fig.suptitle(f"Ligament characteristics calibrated on {data_label}", fontsize=10)
     fig.tight_layout()
     save_figure_atomic(fig, path, dpi=110)
-    plt.close(fig)
 
 
 # ------------------------------------------------------------------ fit on real targets

@@ -12,8 +12,8 @@ in the ligament laws:
 
 Data live in ``data/characteristics`` (see its README.md). The directory is
 found from ``data_dir``, else ``$LUMBAR_DATA_DIR`` (the repository ``data``
-directory, or the ``characteristics`` directory itself), else relative to this
-package (editable install / source tree), else ``./data/characteristics``.
+directory, or the ``characteristics`` directory itself), else the package data
+(:func:`lumbar.resources.data_dir`: the checkout's or the wheel's copy), else ``./data/characteristics``.
 
 Units: SI at load (m, N, N*m, rad) - except the softplus parameters, which stay
 in the paper's units [N, %] because Eq. 7 is defined in percent strain.
@@ -28,6 +28,7 @@ from fractions import Fraction
 from pathlib import Path
 from typing import Mapping
 
+from lumbar import resources
 from lumbar.io import Column, TableError, TableSchema, read_table
 
 __all__ = [
@@ -197,7 +198,7 @@ def default_data_dir() -> Path:
     if env:
         e = Path(env)
         candidates += [e / "characteristics", e]
-    candidates.append(Path(__file__).resolve().parents[2] / "data" / "characteristics")
+    candidates.append(resources.data_dir() / "characteristics")
     candidates.append(Path.cwd() / "data" / "characteristics")
     for c in candidates:
         if (c / "disc.csv").is_file():

@@ -22,9 +22,11 @@ from typing import Any
 import yaml
 from jsonschema import Draft202012Validator, validators
 
+from . import resources
+
 __all__ = ["ConfigError", "load_config", "default_schema_path", "key_path", "resolve_path", "default_geometry_path"]
 
-_SCHEMA_RELPATH = Path("workflow") / "schemas" / "config.schema.yaml"
+_SCHEMA_RELPATH = resources.SCHEMA_RELPATH
 
 
 class ConfigError(ValueError):
@@ -37,9 +39,8 @@ class ConfigError(ValueError):
 
 
 def default_schema_path() -> Path:
-    """The workflow schema, found relative to the package (src/lumbar -> repository root)."""
-    root = Path(__file__).resolve().parents[2]
-    path = root / _SCHEMA_RELPATH
+    """The workflow schema: the checkout's, or the copy shipped in the wheel (:mod:`lumbar.resources`)."""
+    path = resources.schema_path()
     if not path.is_file():
         raise ConfigError([("<schema>", f"config schema not found at {path}; "
                             "pass schema=<path to workflow/schemas/config.schema.yaml>")])
@@ -155,12 +156,12 @@ def _schema_doc(path: str, mtime_ns: int) -> dict:
 
 def resolve_path(path: str | Path) -> Path:
     """A config path (relative to the working directory, normally the repository root): as given when it exists
-    there or is absolute, else relative to the repository root this package belongs to (for library and CLI use
-    from another directory)."""
+    there or is absolute, else relative to :func:`lumbar.resources.root` (the checkout root, or the wheel's
+    bundled copy of ``data/``; for library and CLI use from another directory)."""
     p = Path(path)
     if p.is_absolute() or p.exists():
         return p
-    root = Path(__file__).resolve().parents[2] / p
+    root = resources.root() / p
     return root if root.exists() else p
 
 

@@ -54,6 +54,7 @@ import numpy as np
 import pandas as pd
 
 from . import effects as fx
+from .io import subplots
 
 log = logging.getLogger(__name__)
 
@@ -883,14 +884,7 @@ def _cross_validate(problem, cands, grids, coarse, fine_theta, fine, exact, y, w
     return cv
 
 
-# ------------------------------------------------------------------ figures and report section
-def _plt():
-    import matplotlib
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-    return plt
-
-
+# ------------------------------------------------------------------ figures (object API, no pyplot), report section
 def _save(fig, path):
     from .io import atomic_writer
     with atomic_writer(path, "wb", encoding=None, newline=None) as f:
@@ -935,23 +929,20 @@ def _map_size(rows, cols):
 
 
 def plot_disagreement_map(out, path):
-    plt = _plt()
     scen, p, r = out["scenarios"], out["problem"], out["result"]
     rows, cols, M = _pivot(scen, p, "z_before")
     vmax = max(3.0, float(np.nanpercentile(np.abs(M), 95))) if np.isfinite(M).any() else 3.0
-    fig, ax = plt.subplots(figsize=_map_size(rows, cols), constrained_layout=True)
+    fig, ax = subplots(figsize=_map_size(rows, cols), constrained_layout=True)
     im = _heat(ax, rows, cols, M, vmax, f"{p.experiment}: z = (model - measured) / sigma\n"
                f"gap (RMS z) = {r['gap_before']:.2f}; RMS {r['gap_before_rms']:.3g} {p.unit}")
     fig.colorbar(im, ax=ax, label="z (standard errors; + model above measurement)")
     _save(fig, path)
-    plt.close(fig)
 
 
 def plot_ranking(out, path):
-    plt = _plt()
     r = out["result"]
     items = [(m, v) for m, v in r["ranking"] if m != "none"]
-    fig, ax = plt.subplots(figsize=(7.5, 1.6 + 0.4 * max(1, len(items))), constrained_layout=True)
+    fig, ax = subplots(figsize=(7.5, 1.6 + 0.4 * max(1, len(items))), constrained_layout=True)
     names = [m for m, _ in items][::-1]
     vals = [v for _, v in items][::-1]
     colors = ["tab:green" if m == r["named_effect"] else "0.6" for m in names]
@@ -977,33 +968,29 @@ def plot_ranking(out, path):
     ax.set_title(t, fontsize=9)
     ax.set_xlim(0, max(vals + [1.0]) * 1.6)
     _save(fig, path)
-    plt.close(fig)
 
 
 def plot_before_after(out, path):
-    plt = _plt()
     scen, p, r = out["scenarios"], out["problem"], out["result"]
     rows, cols, M0 = _pivot(scen, p, "z_before")
     vmax = max(3.0, float(np.nanpercentile(np.abs(M0), 95))) if np.isfinite(M0).any() else 3.0
     w, h = _map_size(rows, cols)
     if not r["named_effect"]:
         # nothing added: one map and the reason (not the same map twice)
-        fig, ax = plt.subplots(figsize=(w, h + 0.6), constrained_layout=True)
+        fig, ax = subplots(figsize=(w, h + 0.6), constrained_layout=True)
         im = _heat(ax, rows, cols, M0, vmax, f"nothing named, the model is unchanged: gap {r['gap_before']:.2f} "
                    f"(RMS {r['gap_before_rms']:.3g} {p.unit})")
         ax.set_xlabel("; ".join(r["decision"].split(": ", 1)[-1].split("; ")[:1])[:110], fontsize=7)
         fig.colorbar(im, ax=ax, label="z (standard errors)")
         _save(fig, path)
-        plt.close(fig)
         return
     _, _, M1 = _pivot(scen, p, "z_after")
-    fig, axes = plt.subplots(2, 1, figsize=(w, 2 * h + 0.4), constrained_layout=True)
+    fig, axes = subplots(2, 1, figsize=(w, 2 * h + 0.4), constrained_layout=True)
     _heat(axes[0], rows, cols, M0, vmax, f"before: gap {r['gap_before']:.2f} (RMS {r['gap_before_rms']:.3g} {p.unit})")
     im = _heat(axes[1], rows, cols, M1, vmax, f"after adding {r['named_effect']}: "
                f"gap {r['gap_after']:.2f} (RMS {r['gap_after_rms']:.3g} {p.unit})")
     fig.colorbar(im, ax=axes, label="z (standard errors)")
     _save(fig, path)
-    plt.close(fig)
 
 
 def _fmt(v, spec=".3g"):
@@ -1352,8 +1339,7 @@ def summarise_benchmark(bench: pd.DataFrame, generator="batch") -> dict:
 
 
 def plot_benchmark(bench: pd.DataFrame, summary: dict, path):
-    plt = _plt()
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4.8), constrained_layout=True)
+    fig, axes = subplots(1, 3, figsize=(15, 4.8), constrained_layout=True)
     labels = sorted(set(bench["hidden_effect"]) | set(bench["named_effect"]))
     C = np.zeros((len(labels), len(labels)))
     for h, n in zip(bench["hidden_effect"], bench["named_effect"]):
@@ -1396,7 +1382,6 @@ def plot_benchmark(bench: pd.DataFrame, summary: dict, path):
     axes[2].set_ylabel("median |parameter error| of detections [%]")
     axes[2].set_title("parameter error", fontsize=9)
     _save(fig, path)
-    plt.close(fig)
 
 
 # ------------------------------------------------------------------ command line

@@ -17,6 +17,13 @@ Two families:
 * ``kind = "idp"``: acts on the IDP computed from the disc loads (no re-solve):
   ``idp_delta(name, value, idp_pa, f_axial_n, m_sagittal_nm, idp_per_newton)``.
 
+This module is the one effect registry of the package (``EFFECTS``). An effect may also carry a
+``params`` form, ``params(fsu, value) -> dict`` of per-scenario solver parameters
+(``lumbar.solve.solve(params=...)``; it may modify the specimen-private model in place), used by
+``lumbar.stepwise_reduction.simulate_stepwise_reduction`` when an effect outside ``SOLVER_EFFECTS`` is
+asked for; add such extra effects with :func:`register_effect` and turn a {name: value} dict into solver
+params with :func:`effect_params`.
+
 ``disc_tension`` is registered for completeness (paper 1, Sect. 4.3 hypothesis) but no scenario of the
 available experiments loads the L4-L5 disc in tension (the effect changes no ROM by more than 1e-8 deg
 and no IDP by more than 0.1 N of disc force), so it is not identifiable there and is not benchmarked.
@@ -24,13 +31,14 @@ and no IDP by more than 0.1 N of disc force), so it is not identifiable there an
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Callable, Mapping
 
 import numpy as np
 import pandas as pd
 
 from . import so3
-from .fsu import DIRECTIONS, MAIN_DIRECTIONS, STAGES, moment_loads
+from .fsu import DIRECTIONS, STAGES, moment_loads
 from .solve import solve
 
 EXPERIMENTS = ("stepwise_rom", "neutral_angle", "idp_invitro", "in_vivo")
@@ -54,9 +62,18 @@ class Effect:
     bounds: tuple                 # (lo, hi) of the fit, SI
     magnitudes: tuple             # benchmark magnitudes (SI), plausible sizes
     experiments: tuple            # experiments it acts on (benchmarked there)
-    kind: str                     # "solver" | "idp"
+    kind: str                     # "solver" | "idp" | "params" (registered: a params form only)
     description: str
     basis: str                    # where the papers point at it
+    params: Callable | None = None  # (fsu, value) -> dict of solver params (may edit fsu.model); None: none
+
+
+def _disc_tension_params(fsu, value):
+    """Disc axial tensile stiffness k_tension [N/m] (the paper's disc transmits no traction)."""
+    v = float(value)
+    if not np.isfinite(v) or v < 0:
+        raise ValueError(f"effect disc_tension: k_tension must be finite and >= 0 N/m, got {value!r}")
+    return {"k_tension": v}
 
 
 EFFECTS: dict[str, Effect] = {e.name: e for e in [
@@ -99,8 +116,35 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in [
            (), "solver",
            "disc tensile (traction) stiffness k_tension (the published disc transmits no traction)",
            "paper 1 Sect. 4.3: outliers with the cranial multifidus attributed partly to the disc's "
-           "inability to transmit traction"),
+           "inability to transmit traction", params=_disc_tension_params),
 ]}
+
+
+def register_effect(name: str, fn: Callable) -> None:
+    """Add an extra physical effect: ``fn(fsu, value) -> dict`` of solver params (may edit fsu.model).
+
+    A known effect keeps its description and solver form and gets ``fn`` as its params form; a new name
+    becomes an effect of kind ``"params"`` that acts on no benchmarked experiment."""
+    if name in EFFECTS:
+        EFFECTS[name] = replace(EFFECTS[name], params=fn)
+    else:
+        EFFECTS[name] = Effect(name, "value", "", (-np.inf, np.inf), (), (), "params",
+                               (fn.__doc__ or "").strip(), "registered with lumbar.effects.register_effect",
+                               params=fn)
+
+
+def effect_params(fsu, effects: Mapping | None) -> dict:
+    """Solver ``params`` for a dict {effect name: value} (effects with a params form); unknown names
+    raise ValueError."""
+    params: dict = {}
+    known = sorted(n for n, e in EFFECTS.items() if e.params is not None)
+    for name, value in (effects or {}).items():
+        if name not in known:
+            raise ValueError(f"unknown effect {name!r}; known effects: {known}")
+        if value is None:
+            continue
+        params.update(EFFECTS[name].params(fsu, value))
+    return params
 
 
 def effect_names(experiment=None, kind=None):
@@ -255,18 +299,3 @@ class FsuVariants:
         phi = so3.log(r0.R[:, 0]).reshape(G, len(stages), 3)
         return -np.degrees(phi[..., 1]), r0.converged.reshape(G, len(stages))
 
-
-def simulate_stepwise_reduction(fsu, stages=STAGES, directions=MAIN_DIRECTIONS, moments_nm=(1.0, 2.5, 5.0, 7.5, 10.0),
-                                effects=None, max_iter=50, tol=1e-7) -> pd.DataFrame:
-    """Like ``lumbar.stepwise_reduction.simulate_stepwise_reduction`` with solver effects of this module."""
-    from .stepwise_reduction import scenario_grid
-    scen = scenario_grid(stages, directions, moments_nm)
-    values = {}
-    for k, val in (effects or {}).items():
-        check_effect(k, val)
-        values[k] = np.array([float(val)])
-    rom, conv, _, _ = FsuVariants(fsu).simulate(scen, values, max_iter=max_iter, tol=tol)
-    out = scen.copy()
-    out["rom_deg"] = rom[0]
-    out["converged"] = conv[0]
-    return out

@@ -325,6 +325,17 @@ _FIGURE_METADATA = {"png": {"Software": None},
                     "svg": {"Creator": None, "Date": None}}
 
 
+def subplots(nrows: int = 1, ncols: int = 1, *, sharex=False, sharey=False, **figure_kwargs):
+    """``(fig, axes)`` like ``matplotlib.pyplot.subplots`` but without pyplot: a ``matplotlib.figure.Figure``
+    that no backend manages, so the library never selects or switches the user's backend, opens no window,
+    works headless and needs no ``close``; saving it renders with Agg (the same bytes as an Agg pyplot figure).
+    ``figure_kwargs`` go to ``Figure`` (figsize, dpi, constrained_layout, ...)."""
+    from matplotlib.figure import Figure  # noqa: PLC0415  (only for figures)
+
+    fig = Figure(**figure_kwargs)
+    return fig, fig.subplots(nrows, ncols, sharex=sharex, sharey=sharey)
+
+
 def save_figure_atomic(fig, path, **savefig_kwargs) -> Path:
     """``fig.savefig`` onto ``path`` atomically, format from the suffix, deterministic bytes (no time
     stamp, no software version; SVG ids from a fixed hash salt)."""

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import functools
 import logging
-import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,8 +23,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from . import resources
 from .fsu import DIRECTIONS, add_level
-from .io import Column, TableError, TableSchema, read_table
+from .io import Column, TableError, TableSchema, read_table, subplots
 from .model import GROUND, SpineModel
 from .solve import solve
 
@@ -49,7 +49,7 @@ SIDES = {"left": "l", "right": "r"}
 
 
 def default_cable_table() -> Path:
-    return Path(__file__).resolve().parents[2] / "data" / "cables" / "wilke1996_cables.csv"
+    return resources.data_dir() / "cables" / "wilke1996_cables.csv"
 
 
 CABLE_SCHEMA = TableSchema("wilke1996_cables", {
@@ -84,10 +84,11 @@ def christophy_sites(chain_xml: str | None = None):
     sites = {}
 
     def walk(body, R_parent, t_parent):
-        R = R_parent @ M._rot(body)
-        t = t_parent + R_parent @ M._vec(body, "pos", [0, 0, 0])
+        R = R_parent @ M.mjcf_rotation(body)
+        t = t_parent + R_parent @ M.mjcf_vector(body, "pos", [0, 0, 0])
         for s in body.findall("site"):
-            sites[s.get("name")] = (body.get("name"), M.R_PROJECT_FROM_WORLD @ (t + R @ M._vec(s, "pos", [0, 0, 0])))
+            sites[s.get("name")] = (body.get("name"),
+                                    M.R_PROJECT_FROM_WORLD @ (t + R @ M.mjcf_vector(s, "pos", [0, 0, 0])))
         for c in body.findall("body"):
             walk(c, R, t)
 
@@ -534,15 +535,11 @@ def _kind_note(syn):
 
 def plot_table5_grid(syn: pd.DataFrame, path):
     """Check/cross grid: rows = set-up x load case, columns = characteristic sets."""
-    import matplotlib
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-
     from .io import atomic_writer
     sets = list(dict.fromkeys(syn["set"]))
     rows = scenario_grid()
     idx = syn.set_index(["set", "muscle_setup", "load_case"])
-    fig, ax = plt.subplots(figsize=(2.0 + 1.3 * len(sets), 14), dpi=100)
+    fig, ax = subplots(figsize=(2.0 + 1.3 * len(sets), 14), dpi=100)
     for j, s in enumerate(sets):
         for i, (ms, lc) in enumerate(rows):
             r = idx.loc[(s, ms, lc)]
@@ -563,25 +560,20 @@ def plot_table5_grid(syn: pd.DataFrame, path):
     ax.set_title(f"Table 5: L4-L5 IDP within mean +- SD (\u2713) or outlier (\u2717, n.c. = no equilibrium)\n"
                  f"{_kind_note(syn)}", fontsize=9)
     fig.tight_layout()
-    try:
-        with atomic_writer(path, "wb") as fh:
-            fig.savefig(fh, format="png", metadata={"Software": None})
-    finally:
-        plt.close(fig)
+    with atomic_writer(path, "wb") as fh:
+        fig.savefig(fh, format="png", metadata={"Software": None})
 
 
 def plot_fig7(syn: pd.DataFrame, path, set_name="calibrated"):
     """Fig. 7: bars = reference mean with SD, circles = simulated IDP, red crosses = outliers."""
     import matplotlib
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
 
     from .io import atomic_writer
     if set_name not in set(syn["set"]):
         set_name = syn["set"].iloc[0]
     d = syn[syn["set"] == set_name].set_index(["muscle_setup", "load_case"])
-    colours = plt.get_cmap("tab10").colors
-    fig, ax = plt.subplots(figsize=(16, 6), dpi=100)
+    colours = matplotlib.colormaps["tab10"].colors
+    fig, ax = subplots(figsize=(16, 6), dpi=100)
     w = 0.8 / len(MUSCLE_SETUPS)
     for k, ms in enumerate(MUSCLE_SETUPS):
         xs = np.arange(len(LOAD_CASES)) - 0.4 + (k + 0.5) * w
@@ -600,8 +592,5 @@ def plot_fig7(syn: pd.DataFrame, path, set_name="calibrated"):
                  f"red crosses {n_out} outliers", fontsize=10)
     ax.legend(fontsize=8, ncol=4)
     fig.tight_layout()
-    try:
-        with atomic_writer(path, "wb") as fh:
-            fig.savefig(fh, format="png", metadata={"Software": None})
-    finally:
-        plt.close(fig)
+    with atomic_writer(path, "wb") as fh:
+        fig.savefig(fh, format="png", metadata={"Software": None})

@@ -227,7 +227,6 @@ class SpineModel:
         K = df/dp (world); ``body_relative``: the law is fixed in body ib (facets, disc translation)
         instead of depending on the distance between two attached points (fibres).
         """
-        nb = self.nb
         Qa = np.concatenate([f, so3.cross(ra, f)], axis=-1)
         Qb = -np.concatenate([f, so3.cross(rb, f)], axis=-1)
         pairs = {}
@@ -241,7 +240,7 @@ class SpineModel:
                 Q[:, j] += Qb[:, sel].sum(1)
             if J is None:
                 continue
-            B, T = w.shape[0], w.shape[-1]
+            B = w.shape[0]
             vs = v[:, sel]
             fa = f[:, sel]
             wf = w[:, sel].reshape(B, -1, 1)
@@ -389,7 +388,6 @@ class SpineModel:
             D[..., 0, 0] = -spec.k_shear
             D[..., 1, 1] = -spec.k_shear
             D[..., 2, 2] = dFz
-            f_B = F_loc @ spec.frame                                  # in lower-body coordinates
             # K = R_B frame^T D frame R_B^T = sum_k D_kk (R_B e_k)(R_B e_k)^T
             v = self._rotate(R, ib, np.broadcast_to(spec.frame, (x.shape[0], 1, 3, 3)).copy())
             f = np.einsum("bnk,bnki->bni", F_loc, v)

@@ -27,10 +27,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from . import so3
+from . import resources, so3
 from .fsu import add_level, disc_frame
 from .geometry.core import LEVEL_NAMES
 from .model import SpineModel
+from .muscles.nlp import IpoptPostureSolver
 from .muscles.muscle_set import ABDOMINALS, EXTENSORS, GROUPS, SCENARIOS, MuscleSet, load_muscle_set
 from .muscles.paths import N_PER_CM2, MusclePaths, baseline_properties
 
@@ -38,7 +39,7 @@ log = logging.getLogger(__name__)
 
 G = 9.81
 FREE = ("L1", "L2", "L3", "L4", "L5")
-DATA = Path(__file__).resolve().parents[2] / "data"
+DATA = resources.data_dir()
 LENGTH_SCALE = 0.05   # m, moments -> forces in the FSU-load cost
 PROP_FIELDS = ("spt_pa", "k_pa", "ssl_um", "in_situ_sl_um", "pennation_rad")
 IN_SITU_POSTURES = ("reference", "standing")   # where the fascicles have their in-situ sarcomere length
@@ -245,7 +246,9 @@ class LumbarMuscleModel:
         return np.stack([np.stack([np.broadcast_to(getattr(p, f), (self.ms.n,)) for f in PROP_FIELDS])
                          for p in props_list])
 
-    def _props(self, params):
+    def properties(self, params):
+        """Muscle properties of a batch: ``params["prop_stack"]`` (per scenario), else ``params["props"]``, else
+        the baseline."""
         st = params.get("prop_stack")
         if st is None:
             return params.get("props", self.props)
@@ -263,7 +266,7 @@ class LumbarMuscleModel:
         params = params or {}
         B = x.shape[0]
         a = np.broadcast_to(params.get("activation", 0.0), (B, self.ms.n))
-        props = self._props(params)
+        props = self.properties(params)
         Q = np.zeros((B, self.nb, 6)) if loads is None else np.array(loads, float, copy=True)
         J = np.zeros((B, self.nb, 6, self.nb, 6)) if jacobian else None
         if levels:
@@ -443,13 +446,23 @@ def idp_parts(compressive_n, moment_nm, area_m2=18e-4):
 
 
 def make_solver(model, cfg=None):
-    """RedundancySolver from the config section ``muscle_model.solver`` (weights, iterations, tracking)."""
+    """RedundancySolver from the config section ``muscle_model.solver`` (weights, iterations, tracking), with
+    IPOPT (:class:`lumbar.muscles.nlp.IpoptPostureSolver`) as the certifier of every reached optimum unless
+    ``certifier: sqp`` (the SQP's own KKT test, for comparison)."""
     from .muscles.redundancy import RedundancySolver, Weights
     cfg = cfg or {}
     keys = ("activation", "fsu_load_per_n2", "tracking_per_deg2", "length_scale_m")
     w = Weights(**{k: cfg[k] for k in keys if k in cfg})
-    return RedundancySolver(model, w, max_iter=cfg.get("max_iter", 150),
-                            max_tracking_deg=cfg.get("max_tracking_deg", 1.0))
+    solver = RedundancySolver(model, w, max_iter=cfg.get("max_iter", 150),
+                              max_tracking_deg=cfg.get("max_tracking_deg", 1.0))
+    certifier = cfg.get("certifier", "ipopt")
+    if certifier == "ipopt":
+        solver.certifier = IpoptPostureSolver(solver, tol=cfg.get("ipopt_tol", 1e-5),
+                                              max_iter=cfg.get("ipopt_max_iter", 50))
+        solver.multistart = bool(cfg.get("multistart", True))
+    elif certifier != "sqp":
+        raise ValueError(f"muscle_model.solver.certifier must be 'ipopt' or 'sqp', got {certifier!r}")
+    return solver
 
 
 def solve_postures(model, solver, activities, props_list=None, start=None):
@@ -489,8 +502,11 @@ def solve_with_progress(model, solver, activities, props_list=None, start=None, 
 
 def certificate(s) -> dict:
     """The optimality certificate of a solved posture as table columns: ``reached`` (equilibrium, thorax on
-    target), ``certified`` (reached and KKT residual <= the solver's ``kkt_tol``) and ``kkt_residual``."""
-    return {"reached": bool(s.reached), "certified": bool(s.certified), "kkt_residual": float(s.kkt_residual)}
+    target), ``certified`` (reached and IPOPT's convergence test passed, :mod:`lumbar.muscles.nlp`),
+    ``kkt_residual`` (IPOPT's NLP error), ``optimum`` (sqp | ipopt_cold: which start gave the reported optimum)
+    and ``other_cost`` (the other start's certified cost, NaN if none; cold solves only)."""
+    return {"reached": bool(s.reached), "certified": bool(s.certified), "kkt_residual": float(s.kkt_residual),
+            "optimum": s.optimum, "other_cost": float(s.other_cost)}
 
 
 def read_in_vivo(path) -> pd.DataFrame:
@@ -742,22 +758,44 @@ def run_sensitivity(model, solver, rows: pd.DataFrame, baseline: dict, area_m2=1
 
 SOBOL_BOUNDS = {"ssl_um": (2.0, 3.6), "k_n_per_cm2": (10.0, 1000.0), "in_situ_sl_um": (2.0, 3.6),
                 "spt_n_per_cm2": (5.0, 150.0), "pennation_deg": (0.0, 30.0)}
+SOBOL_Q2_MIN = 0.9          # a PCE whose leave-one-out Q2 is below this is flagged (fit_ok False)
+SOBOL_STABLE_WIDTH = 0.1    # stable: the top parameter's bootstrap 95 % S1 interval is narrower than this
+# Sobol indices from a polynomial chaos surrogate (Sudret 2008; lumbar.pce), not from Saltelli sampling: SALib's
+# Saltelli estimator with N = 16 (112 solves per posture) gave S1 up to 3.1 and 95 % half-widths 0.4-0.5 at
+# N = 64; stable S1 would need N ~ 4096 (28 672 solves per posture).
+# Default n_train 256, degree 3 (config/config.yaml), measured on 2026-11-23 with the config's model and solver
+# (SQP certifier), seed 20261123, 500 bootstrap resamples; n_train 64/128 = the first points of the same design:
+#   standing: 241 of 256 reached. degree 3: Q2_loo 0.952, top S1 (SSL) 0.340, interval width 0.040; degree 4:
+#             Q2 0.978, width 0.050; degree 2: Q2 0.796. n_train 128, degree 3: Q2 0.933, width 0.099.
+#   flexion:  193 of 256 reached. degree 3: Q2 0.960, top S1 (SSL) 0.376, width 0.067; degree 4 (126 terms on
+#             193 points): Q2 0.960, width 0.284; degree 2: Q2 0.900. n_train 128, degree 3: Q2 0.957 but width
+#             0.304 (98 reached points for 56 terms); n_train 64: width 0.18-0.22 in both postures.
+# So degree 3 on 256 points is the smallest design stable in both postures (Q2 > 0.95). Tried and not better at
+# n_train 128: hyperbolic (q = 0.75) or two-way-interaction truncation (Q2 0.70-0.93, widths 0.13-0.21: the
+# SSL x in-situ SL interaction carries 28 % (standing) / 16 % (flexion) of the variance and needs its cubic
+# terms, the SSL x K x in-situ SL term another 3 %) and sparse least squares (orthogonal matching pursuit with
+# LOO selection; flexion width 0.17). Inputs stay uniform on the paper's ranges (a log-K input would change the
+# question: indices for a log-uniform K). Cost: 2 x 256 solves; measured 1.9 s (standing) and 4.6 s (flexion)
+# per solve with the SQP + IPOPT certifier on this 2-core machine (~14 min on 2 cores; the issue-16 budget of
+# 5 min for these and the 288 sweep solves needs <= 0.75 s per solve on average). Measured with
+#   python -c "import pandas as pd; from lumbar import muscle_model as mm; m = mm.LumbarMuscleModel(); \
+#   s = mm.make_solver(m, {'certifier': 'sqp'}); b = dict(zip(mm.POSTURES, mm.solve_postures(m, s, \
+#   list(mm.POSTURES.values())))); X = mm.sobol_samples(256, 20261123); d = pd.concat([mm.sobol_evaluate(m, s, b, \
+#   X, range(256), p) for p in b]); [print(n, g, mm.sobol_indices(d[d['sample'] < n], n, g, 20261123)) \
+#   for n in (64, 128, 256) for g in (2, 3, 4)]"
 
 
-def sobol_problem() -> dict:
-    """SALib problem: the five parameters, uniform on the paper's ranges (``SOBOL_BOUNDS``)."""
-    return {"num_vars": len(PARAMETERS), "names": list(PARAMETERS),
-            "bounds": [list(SOBOL_BOUNDS[p]) for p in PARAMETERS]}
+def sobol_bounds() -> np.ndarray:
+    """(lower, upper) of the five parameters (rows in ``PARAMETERS`` order, each in the units of its name)."""
+    return np.array([SOBOL_BOUNDS[p] for p in PARAMETERS], float)
 
 
-def sobol_samples(n_base: int, seed: int) -> np.ndarray:
-    """Saltelli sample (SALib ``sobol.sample``, no second order): ``n_base * (D + 2)`` rows, D = 5.
-    ``n_base`` must be a power of two (Sobol sequence balance)."""
-    from SALib.sample import sobol as sobol_sample
-    n_base = int(n_base)
-    if n_base < 1 or n_base & (n_base - 1):
-        raise ValueError(f"sobol n_base must be a power of two >= 1, got {n_base}")
-    return sobol_sample.sample(sobol_problem(), n_base, calc_second_order=False, seed=seed)
+def sobol_samples(n_train: int, seed: int) -> np.ndarray:
+    """Training design of the Sobol study: ``n_train`` scrambled Sobol QMC points (scipy.stats.qmc.Sobol,
+    seeded; ``n_train`` a power of two) uniform on ``SOBOL_BOUNDS``; columns ``PARAMETERS`` in their units."""
+    from . import pce
+    b = sobol_bounds()
+    return b[:, 0] + pce.qmc_points(n_train, len(PARAMETERS), seed) * (b[:, 1] - b[:, 0])
 
 
 def sobol_chunk_rows(n_samples: int, n_chunks: int, chunk: int) -> np.ndarray:
@@ -794,41 +832,75 @@ def sobol_evaluate(model, solver, baseline: dict, X: np.ndarray, rows, posture: 
     return out
 
 
-def sobol_indices(samples: pd.DataFrame, n_base: int, seed: int) -> pd.DataFrame:
-    """First-order and total Sobol indices (SALib ``sobol.analyze``, bootstrap 95 % intervals) per posture
-    from the evaluated samples (all ``n_base * (D + 2)`` rows of each posture). Samples whose posture is not
-    reached are replaced by the posture's mean IDP over the reached ones and counted (``n_failed``); reached
-    samples without a certified optimum are kept and counted (``n_uncertified``)."""
-    from SALib.analyze import sobol as sobol_analyze
-    problem = sobol_problem()
-    n = int(n_base) * (len(PARAMETERS) + 2)
+def sobol_indices(samples: pd.DataFrame, n_train: int, degree: int, seed: int, n_bootstrap: int = 500) -> pd.DataFrame:
+    """First-order (S1) and total (ST) Sobol indices of L4-L5 IDP per posture from a Legendre polynomial chaos
+    expansion of total degree ``degree`` fitted by least squares on the reached samples (all ``n_train`` rows of
+    each posture, :func:`sobol_evaluate`); indices analytic from the coefficients (:mod:`lumbar.pce`).
+
+    Columns: ``S1``, ``ST`` (point estimates from the fit to all reached samples); ``S1_lo``/``S1_hi``,
+    ``ST_lo``/``ST_hi`` (bootstrap 95 % percentile interval, ``n_bootstrap`` resamples of the reached samples,
+    each refitted); ``q2_loo`` (leave-one-out Q2 of the PCE, hat matrix) and ``fit_ok`` (Q2 >= ``SOBOL_Q2_MIN``);
+    ``top_parameter`` (largest S1), ``top_s1_width`` (its S1_hi - S1_lo) and ``stable`` (that width <
+    ``SOBOL_STABLE_WIDTH``); ``degree`` (the one fitted: lowered if the reached samples do not exceed the
+    number of terms), ``n_terms``, ``n_train``, ``n_fit`` (reached samples), ``n_failed`` (samples whose posture
+    is not reached: left out, so the indices are those of the reached part of the parameter box),
+    ``n_uncertified`` (reached, KKT residual above the solver's tolerance: kept), ``kkt_residual_max``,
+    ``idp_mean_mpa`` and ``idp_sd_mpa`` (mean and standard deviation of the PCE)."""
+    from math import comb
+
+    from . import pce
+    n = int(n_train)
     rows = []
-    for posture, d in samples.groupby("posture", sort=False):
-        d = d.sort_values("sample")
+    order = [q for q in POSTURES if q in set(samples["posture"])]       # standing before flexion
+    order += [q for q in dict.fromkeys(samples["posture"]) if q not in order]
+    for posture in order:
+        d = samples[samples["posture"] == posture].sort_values("sample")
         if list(d["sample"]) != list(range(n)):
-            raise ValueError(f"Sobol samples of {posture}: expected rows 0..{n - 1} (n_base {n_base}), "
-                             f"got {len(d)} rows")
+            raise ValueError(f"Sobol samples of {posture}: expected rows 0..{n - 1} (n_train {n}), got {len(d)} rows")
         ok = d["reached"].to_numpy(bool)
-        y = d["idp_mpa"].to_numpy(float)
-        y = np.where(ok, y, np.mean(y[ok]) if ok.any() else 0.0)
-        si = sobol_analyze.analyze(problem, y, calc_second_order=False, seed=seed)
-        kkt = d.loc[d["reached"].astype(bool), "kkt_residual"]
+        U = pce.to_unit(d.loc[ok, list(PARAMETERS)].to_numpy(float), sobol_bounds())
+        y = d.loc[ok, "idp_mpa"].to_numpy(float)
+        deg = int(degree)
+        while deg > 0 and comb(len(PARAMETERS) + deg, deg) >= len(y):
+            deg -= 1
+        if deg < int(degree):
+            log.warning("Sobol %s: %d reached samples do not exceed the %d terms of degree %d: degree %d fitted",
+                        posture, len(y), comb(len(PARAMETERS) + int(degree), int(degree)), int(degree), deg)
+        nan = np.full(len(PARAMETERS), np.nan)
+        if deg > 0:
+            r = pce.sobol_analysis(U, y, deg, n_bootstrap, seed)
+            f = r["fit"]
+            q2, mean, sd = f.q2_loo, f.mean, np.sqrt(f.variance)
+        else:
+            r = {k: nan for k in ("S1", "S1_lo", "S1_hi", "ST", "ST_lo", "ST_hi")}
+            q2, mean, sd = np.nan, float(np.mean(y)) if len(y) else np.nan, np.nan
+        top = int(np.nanargmax(r["S1"])) if np.isfinite(r["S1"]).any() else None
+        width = float(r["S1_hi"][top] - r["S1_lo"][top]) if top is not None else np.nan
+        fit_ok = bool(np.isfinite(q2) and q2 >= SOBOL_Q2_MIN)
+        if not fit_ok:
+            log.warning("Sobol %s: PCE degree %d leave-one-out Q2 = %.3f < %.2f: the indices are not reliable",
+                        posture, deg, q2, SOBOL_Q2_MIN)
+        kkt = d.loc[ok, "kkt_residual"]
         for k, name in enumerate(PARAMETERS):
-            rows.append({"posture": posture, "parameter": name, "S1": si["S1"][k], "S1_conf": si["S1_conf"][k],
-                         "ST": si["ST"][k], "ST_conf": si["ST_conf"][k], "n_base": int(n_base), "n_samples": n,
-                         "n_failed": int((~ok).sum()),
-                         "n_uncertified": int((d["reached"].astype(bool) & ~d["certified"].astype(bool)).sum()),
+            rows.append({"posture": posture, "parameter": name, "S1": r["S1"][k], "S1_lo": r["S1_lo"][k],
+                         "S1_hi": r["S1_hi"][k], "ST": r["ST"][k], "ST_lo": r["ST_lo"][k], "ST_hi": r["ST_hi"][k],
+                         "q2_loo": q2, "fit_ok": fit_ok,
+                         "top_parameter": PARAMETERS[top] if top is not None else "",
+                         "top_s1_width": width, "stable": bool(np.isfinite(width) and width < SOBOL_STABLE_WIDTH),
+                         "degree": deg, "n_terms": comb(len(PARAMETERS) + deg, deg), "n_train": n,
+                         "n_fit": int(ok.sum()), "n_bootstrap": int(n_bootstrap), "n_failed": int((~ok).sum()),
+                         "n_uncertified": int((ok & ~d["certified"].to_numpy(bool)).sum()),
                          "kkt_residual_max": float(kkt.max()) if len(kkt) else np.nan,
-                         "scope": d["scope"].iloc[0]})
+                         "idp_mean_mpa": mean, "idp_sd_mpa": sd, "scope": d["scope"].iloc[0]})
     return pd.DataFrame(rows)
 
 
-def sobol_study(model, solver, baseline: dict, n_base: int, seed: int, scope="ALL", postures=("standing", "flexion"),
-                area_m2=18e-4):
+def sobol_study(model, solver, baseline: dict, n_train: int, seed: int, degree: int = 3, n_bootstrap: int = 500,
+                scope="ALL", postures=("standing", "flexion"), area_m2=18e-4):
     """Variance-based (Sobol) indices of L4-L5 IDP to the five parameters (uniform on the paper's ranges,
-    applied to ``scope``), Saltelli sampling (SALib), per posture, in one process (the workflow runs the
+    applied to ``scope``) from a polynomial chaos surrogate, per posture, in one process (the workflow runs the
     samples in chunks: :func:`sobol_samples`, :func:`sobol_evaluate`, :func:`sobol_indices`)."""
-    X = sobol_samples(n_base, seed)
+    X = sobol_samples(n_train, seed)
     samples = pd.concat([sobol_evaluate(model, solver, baseline, X, np.arange(len(X)), p, scope, area_m2)
                          for p in postures], ignore_index=True)
-    return sobol_indices(samples, n_base, seed)
+    return sobol_indices(samples, n_train, degree, seed, n_bootstrap)

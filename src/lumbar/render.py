@@ -14,7 +14,6 @@ matplotlib and a warning is logged. Coordinates are drawn in millimetres.
 from __future__ import annotations
 
 import logging
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -82,7 +81,7 @@ def facet_surfaces(lev, n: int = 12) -> dict[str, np.ndarray]:
             grid = np.asarray(surf.grid(n), float)
             if grid.ndim == 3 and grid.shape[2] == 3:
                 out[side] = grid
-        except Exception as exc:  # a figure must not fail because one surface fit does
+        except Exception as exc:  # noqa: BLE001 - a figure must not fail because one surface fit does
             log.warning("facet surface %s not drawn: %s", side, exc)
     return out
 
@@ -101,7 +100,7 @@ def _items(geometry, level: str, surfaces):
         meshes.append((name, np.asarray(m.vertices, float) * MM, np.asarray(m.faces, np.int64), colour))
     sup = [np.asarray(f.superior, float) * MM for f in lev.facets.values()]
     inf = [np.asarray(f.inferior, float) * MM for f in lev.facets.values()]
-    fibres = [(np.asarray(l.upper, float) * MM, np.asarray(l.lower, float) * MM) for l in lev.ligaments]
+    fibres = [(np.asarray(lig.upper, float) * MM, np.asarray(lig.lower, float) * MM) for lig in lev.ligaments]
     return dict(
         meshes=meshes,
         centre=np.asarray(lev.disc_centre, float) * MM,
@@ -185,13 +184,10 @@ def _render_pyvista(items, path: Path) -> None:
 
 
 def _render_matplotlib(items, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-    fig = plt.figure(figsize=(WINDOW_SIZE[0] / 100, WINDOW_SIZE[1] / 100), dpi=100)
+    fig = Figure(figsize=(WINDOW_SIZE[0] / 100, WINDOW_SIZE[1] / 100), dpi=100)
     for col, (label, (pos, focal, _up)) in enumerate(_views(items)):
         ax = fig.add_subplot(1, 2, col + 1, projection="3d")
         for name, v, f, colour in items["meshes"]:
@@ -232,13 +228,15 @@ def mpl_view(ax, mid, half, pos, focal, title):
 
 
 def save_png_closing(fig, path):
-    """Write ``fig`` atomically as PNG without time/software metadata, then close it."""
-    import matplotlib.pyplot as plt
+    """Write ``fig`` atomically as PNG without time/software metadata, then close it if pyplot manages it (a
+    ``matplotlib.figure.Figure`` of the object API, as the library makes, has nothing to close)."""
     try:
         with atomic_writer(path, "wb") as f:
             fig.savefig(f, format="png", metadata={"Software": None})
     finally:
-        plt.close(fig)
+        if getattr(fig.canvas, "manager", None) is not None:
+            import matplotlib.pyplot as plt
+            plt.close(fig)
 
 
 def render_fsu(geometry, level: str, path, surfaces=None, backend: str = "auto") -> str:

@@ -31,8 +31,8 @@ def _items(geometry, levels, cables, cable_draw_m):
                 verts.append(v)
     meshes = [(v, np.asarray(geometry.vertebrae[v].mesh.vertices, float) * MM,
                np.asarray(geometry.vertebrae[v].mesh.faces, np.int64)) for v in verts]
-    fibres = [(np.asarray(l.upper) * MM, np.asarray(l.lower) * MM) for lv in levels
-              for l in geometry.levels[lv].ligaments]
+    fibres = [(np.asarray(lig.upper) * MM, np.asarray(lig.lower) * MM) for lv in levels
+              for lig in geometry.levels[lv].ligaments]
     cab = []
     if cables is not None:
         for _, r in cables.iterrows():
@@ -82,13 +82,10 @@ def _render_pyvista(items, path):
 
 
 def _render_matplotlib(items, path):
-    import matplotlib
-
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-    fig = plt.figure(figsize=(WINDOW_SIZE[0] / 100, WINDOW_SIZE[1] / 100), dpi=100)
+    fig = Figure(figsize=(WINDOW_SIZE[0] / 100, WINDOW_SIZE[1] / 100), dpi=100)
     allv = np.vstack([v for _, v, _ in items["meshes"]])
     lo, hi = allv.min(0), allv.max(0)
     half, mid = 0.5 * float(np.max(hi - lo)), 0.5 * (lo + hi)

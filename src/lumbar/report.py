@@ -649,7 +649,14 @@ class _Builder:
         self.csv_table(T + "sensitivity_idp.csv", "Sensitivity of L4-L5 IDP to the muscle parameters")
         self.csv_table(T + "sensitivity_directions.csv", "The paper's sensitivity statements: stated and simulated "
                        "direction of the L4-L5 IDP change")
-        self.csv_table(T + "sobol_indices.csv", "Sobol indices of L4-L5 IDP")
+        sobol, cols = T + "sobol_indices.csv", ["posture", "parameter", "S1", "S1_lo", "S1_hi", "ST", "ST_lo", "ST_hi",
+                                                "q2_loo", "n_train", "stable"]   # the rest: caption and CSV
+        try:
+            have = list(pd.read_csv(self.path(sobol), nrows=0).columns) if self.has(sobol) else []
+        except (ValueError, pd.errors.ParserError):
+            have = []
+        self.csv_table(sobol, "Sobol indices of L4-L5 IDP (polynomial chaos expansion; S1/ST_lo-hi: bootstrap 95 % "
+                       "intervals)", columns=cols if set(cols) <= set(have) else None)
         for f in figs:
             if _norm(f) not in self.shown:
                 name = Path(f).stem.replace("muscle_", "").replace("_", " ")

@@ -62,3 +62,19 @@ def left_jacobian_inverse(phi: np.ndarray) -> np.ndarray:
                     1.0 / th**2 - (1.0 + np.cos(th)) / (2.0 * th * np.sin(th)))
     eye = np.broadcast_to(np.eye(3), K.shape)
     return eye - 0.5 * K + coef[..., None, None] * K2
+
+
+def left_jacobian(phi: np.ndarray) -> np.ndarray:
+    """Left Jacobian of SO(3): exp(phi + dphi) = exp(J_l(phi) dphi) exp(phi) to first order, batched.
+
+    J_l = I + (1 - cos theta) / theta^2 [phi]x + (theta - sin theta) / theta^3 [phi]x^2
+    """
+    phi = np.asarray(phi, dtype=float)
+    theta = np.linalg.norm(phi, axis=-1)
+    K = hat(phi)
+    small = theta < 1e-4
+    th = np.where(small, 1.0, theta)
+    c1 = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(th)) / th**2)
+    c2 = np.where(small, 1.0 / 6.0 - theta**2 / 120.0, (th - np.sin(th)) / th**3)
+    eye = np.broadcast_to(np.eye(3), K.shape)
+    return eye + c1[..., None, None] * K + c2[..., None, None] * (K @ K)

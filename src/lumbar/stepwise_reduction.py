@@ -16,22 +16,25 @@ Outlier rule (project decision): a simulated ROM is an outlier when it lies outs
 kind ``derived_from_published_fit``) use ``mean +- tolerance_deg`` (default 0.5 deg). A scenario
 without equilibrium (``converged = False``) always counts as an outlier.
 
-Extra physical effects (hook for the discrepancy workflow): ``EFFECTS`` maps an effect name to a
-function ``(fsu, value) -> dict`` of per-scenario solver parameters (``lumbar.solve.solve(params=...)``)
-and may modify the (specimen-private) model in place. Register new ones with ``register_effect``.
+Extra physical effects (hook for the discrepancy workflow): the one registry is ``lumbar.effects.EFFECTS``.
+Its solver effects (``lumbar.effects.SOLVER_EFFECTS``) are solved with ``lumbar.effects.FsuVariants``; any
+other effect needs a params form ``(fsu, value) -> dict`` of per-scenario solver parameters
+(``lumbar.solve.solve(params=...)``, may modify the specimen-private model in place), added with
+``lumbar.effects.register_effect`` (re-exported here with ``effect_params``).
 """
 from __future__ import annotations
 
 import logging
 from pathlib import Path
-from typing import Callable, Mapping
 
 import numpy as np
 import pandas as pd
 
 from . import so3
+from .effects import SOLVER_EFFECTS, FsuVariants, check_effect, effect_params
+from .effects import register_effect as register_effect  # re-export: the documented extension hook
 from .fsu import DIRECTIONS, MAIN_DIRECTIONS, STAGES, moment_loads
-from .io import Column, TableError, TableSchema, read_table, save_figure_atomic
+from .io import Column, TableError, TableSchema, read_table, save_figure_atomic, subplots
 from .solve import solve
 
 log = logging.getLogger(__name__)
@@ -54,35 +57,6 @@ EXPERIMENT_SCHEMA = TableSchema("stepwise_reduction_rom", {
     "source": Column("str"),
     "note": Column("str", required=False, nullable=True),
 })
-
-
-# ------------------------------------------------------------------ effects (extension point)
-def _effect_disc_tension(fsu, value):
-    """Disc axial tensile stiffness k_tension [N/m] (the paper's disc transmits no traction)."""
-    v = float(value)
-    if not np.isfinite(v) or v < 0:
-        raise ValueError(f"effect disc_tension: k_tension must be finite and >= 0 N/m, got {value!r}")
-    return {"k_tension": v}
-
-
-EFFECTS: dict[str, Callable] = {"disc_tension": _effect_disc_tension}
-
-
-def register_effect(name: str, fn: Callable) -> None:
-    """Add an extra physical effect: ``fn(fsu, value) -> dict`` of solver params (may edit fsu.model)."""
-    EFFECTS[name] = fn
-
-
-def effect_params(fsu, effects: Mapping | None) -> dict:
-    """Solver ``params`` for a dict {effect name: value}; unknown names raise ValueError."""
-    params: dict = {}
-    for name, value in (effects or {}).items():
-        if name not in EFFECTS:
-            raise ValueError(f"unknown effect {name!r}; known effects: {sorted(EFFECTS)}")
-        if value is None:
-            continue
-        params.update(EFFECTS[name](fsu, value))
-    return params
 
 
 # ------------------------------------------------------------------ simulation
@@ -165,16 +139,24 @@ def simulate_stepwise_reduction(fsu, stages=STAGES, directions=MAIN_DIRECTIONS, 
     """ROM of every (stage, direction, moment) scenario: stage, direction, moment_nm, rom_deg, converged,
     residual_force_n, residual_moment_nm (max residual of the loaded solve; the effects path may omit them).
 
-    ``effects`` {name: value}: names of ``lumbar.effects.EFFECTS`` (the discrepancy candidates) are solved
-    by ``lumbar.effects.simulate_stepwise_reduction``; other names must be registered in ``EFFECTS`` here."""
-    from . import effects as _fx
-    if effects and all(k in _fx.SOLVER_EFFECTS for k in effects):
-        out = _fx.simulate_stepwise_reduction(fsu, stages, directions, moments_nm, effects, max_iter=max_iter, tol=tol)
+    ``effects`` {name: value} of the registry ``lumbar.effects.EFFECTS``: when every name is a solver effect
+    (``lumbar.effects.SOLVER_EFFECTS``, the discrepancy candidates; values within their bounds) the scenarios
+    are solved as one ``lumbar.effects.FsuVariants`` batch (no residual columns, ``load_steps`` unused);
+    otherwise every name needs a params form (``lumbar.effects.register_effect``)."""
+    scen = scenario_grid(stages, directions, moments_nm)
+    if effects and all(k in SOLVER_EFFECTS for k in effects):
+        values = {}
+        for k, val in effects.items():
+            check_effect(k, val)
+            values[k] = np.array([float(val)])
+        rom, conv, _, _ = FsuVariants(fsu).simulate(scen, values, max_iter=max_iter, tol=tol)
+        out = scen.copy()
+        out["rom_deg"] = rom[0]
+        out["converged"] = conv[0]
         if not out["converged"].all():
             log.warning("stepwise reduction: %d of %d scenario(s) did not converge (rom_deg NaN, converged=False)",
                         int((~out["converged"]).sum()), len(out))
         return out
-    scen = scenario_grid(stages, directions, moments_nm)
     ss = StageSolver(fsu, scen, params=effect_params(fsu, effects), max_iter=max_iter, tol=tol,
                      load_steps=load_steps)
     rom, conv, res = ss.run()
@@ -318,23 +300,17 @@ def compare_with_paper(counts: pd.DataFrame, published_csv=None) -> pd.DataFrame
     return out
 
 
-# ------------------------------------------------------------------ figures (matplotlib, Agg)
-def _plt():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
-
-
+# ------------------------------------------------------------------ figures (matplotlib object API, no pyplot)
 def plot_table4_grid(synopsis: pd.DataFrame, path, sets=None) -> None:
     """Check/cross grid like the paper's Table 4: rows stage x moment, columns set x direction."""
-    plt = _plt()
+    from matplotlib.patches import Rectangle
+
     sets = list(dict.fromkeys(synopsis["set"])) if sets is None else list(sets)
     moments = sorted(synopsis["moment_nm"].unique())
     rows = [(s, M) for s in STAGES for M in moments]
     cols = [(k, d) for k in sets for d in MAIN_DIRECTIONS]
     idx = synopsis.set_index(["set", "stage", "direction", "moment_nm"])
-    fig, ax = plt.subplots(figsize=(1.2 + 0.32 * len(cols), 1.2 + 0.22 * len(rows)))
+    fig, ax = subplots(figsize=(1.2 + 0.32 * len(cols), 1.2 + 0.22 * len(rows)))
     for i, (st, M) in enumerate(rows):
         for j, (k, d) in enumerate(cols):
             key = (k, st, d, M)
@@ -345,7 +321,7 @@ def plot_table4_grid(synopsis: pd.DataFrame, path, sets=None) -> None:
                 out = bool(r["outlier"])
                 colour = "#f4b6b6" if out else "#b9e4b9"
                 mark = ("x" if bool(r["converged"]) else "NC") if out else "v"
-            ax.add_patch(plt.Rectangle((j, i), 1, 1, color=colour, ec="white"))
+            ax.add_patch(Rectangle((j, i), 1, 1, color=colour, ec="white"))
             ax.text(j + 0.5, i + 0.5, mark, ha="center", va="center", fontsize=6,
                     color="darkred" if mark in ("x", "NC") else "darkgreen")
     ax.set_xlim(0, len(cols))
@@ -358,16 +334,16 @@ def plot_table4_grid(synopsis: pd.DataFrame, path, sets=None) -> None:
     ax.set_title(f"Outliers (x), not converged (NC), within range (v); reference data: {kinds}", fontsize=8)
     fig.tight_layout()
     save_figure_atomic(fig, path, dpi=130)
-    plt.close(fig)
 
 
 def plot_rom_stepwise_reduction(synopsis: pd.DataFrame, path, set_name="calibrated") -> None:
     """Fig. 6 analog: bars = reference mean with min-max whiskers per stage, circles = simulated, red x = outliers."""
-    plt = _plt()
+    import matplotlib
+
     syn = synopsis[synopsis["set"] == set_name]
     moments = sorted(syn["moment_nm"].unique())
-    fig, axes = plt.subplots(len(MAIN_DIRECTIONS), 1, figsize=(12, 11), sharex=True)
-    colours = plt.get_cmap("viridis")(np.linspace(0, 0.95, len(STAGES)))
+    fig, axes = subplots(len(MAIN_DIRECTIONS), 1, figsize=(12, 11), sharex=True)
+    colours = matplotlib.colormaps["viridis"](np.linspace(0, 0.95, len(STAGES)))
     width = 0.8 / len(STAGES)
     for ax, d in zip(axes, MAIN_DIRECTIONS):
         for k, st in enumerate(STAGES):
@@ -395,4 +371,3 @@ def plot_rom_stepwise_reduction(synopsis: pd.DataFrame, path, set_name="calibrat
                  f"({kinds}; hatched = derived from the published Eq. 3 fit, no range)", fontsize=9)
     fig.tight_layout()
     save_figure_atomic(fig, path, dpi=110)
-    plt.close(fig)

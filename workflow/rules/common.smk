@@ -152,12 +152,10 @@ def published_model_results(wildcards):
 
 # ---- stepwise reduction (issue 3)
 def stepwise_reduction_experiment(wildcards):
-    """The ROM table to calibrate on and compare with: the user's measured table when
-    stepwise_reduction.measured_table is set, else the workflow's surrogate."""
+    """The ROM table to calibrate on and compare with: stepwise_reduction.measured_table
+    when set, else the table of rule stepwise_reduction_surrogate."""
     measured = config["stepwise_reduction"]["measured_table"]
-    return (
-        measured if measured else "results/experiments/stepwise_reduction_surrogate.csv"
-    )
+    return measured or str(rules.stepwise_reduction_surrogate.output.table)
 
 
 def stepwise_reduction_derived(wildcards):
@@ -231,11 +229,9 @@ def report_inputs(wildcards):
 
 # ---- L2-S1 IDP experiment (issue 4)
 def l2s1_idp_reference(wildcards):
-    """The IDP table Table 5 compares with: l2s1.measured_table when set, else the surrogate."""
-    return (
-        config["l2s1"]["measured_table"]
-        or "results/experiments/idp_wilke1996_surrogate.csv"
-    )
+    """The IDP table Table 5 compares with: l2s1.measured_table when set, else the surrogate
+    (rule idp_surrogate)."""
+    return config["l2s1"]["measured_table"] or str(rules.idp_surrogate.output[0])
 
 
 def l2s1_characteristics(wildcards):

@@ -1,7 +1,8 @@
 # Muscle-driven L1-S1 model (paper 2, issue 5): validation against in-vivo L4-L5 IDP (Table 1, Fig. 3,
 # flexion-relaxation), the one-at-a-time sensitivity sweep (Figs. 5-11; one job per Paramspace chunk)
-# and a variance-based (Sobol) sensitivity study (muscle_sobol_chunk per posture and sample chunk, so that
-# --cores 2 keeps both cores busy; muscle_sobol computes the indices). Long jobs log progress lines
+# and a variance-based (Sobol) sensitivity study (muscle_sobol_chunk: model solves of the polynomial chaos
+# training design per posture and sample chunk, so that --cores 2 keeps both cores busy; muscle_sobol fits
+# the expansion and computes the indices with bootstrap intervals, lumbar.pce). Long jobs log progress lines
 # (scenarios done / total, elapsed, remaining). Library: lumbar.muscle_model, lumbar.muscles.
 import pandas as pd
 from snakemake.utils import Paramspace

@@ -33,22 +33,22 @@ rule table4:
         real_targets=config["stepwise_reduction"]["real_targets"],
         published=published_model_results,
     output:
-        report(
+        synopsis=report(
             "results/tables/table4_rom_synopsis.csv",
             caption="../report/table4_rom_synopsis.rst",
             category="Stepwise reduction",
         ),
-        report(
+        counts=report(
             "results/tables/table4_outlier_counts.csv",
             caption="../report/table4_outlier_counts.rst",
             category="Stepwise reduction",
         ),
-        report(
+        vs_paper=report(
             "results/tables/table4_vs_paper.csv",
             caption="../report/table4_vs_paper.rst",
             category="Stepwise reduction",
         ),
-        report(
+        grid=report(
             "results/figures/table4_grid.png",
             caption="../report/table4_grid.rst",
             category="Stepwise reduction",

@@ -3,53 +3,15 @@ set) and the figures fig4_disc_torque_angle, fig5_ligament_characteristics.
 
 By hand: python workflow/scripts/calibration.py calibrate --configfile config/test/config.yaml
 """
-import importlib.util
+import sys
 from pathlib import Path
 
 import pandas as pd
 
-_spec = importlib.util.spec_from_file_location("_common", Path(__file__).resolve().parent / "_common.py")
-_common = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_common)
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _common.py
+import _common  # noqa: E402
 
-CAL = "results/calibration"
-CHAR_FILES = ["disc.csv", "facet.csv", "ligament_prestrain.csv", "ligaments_softplus.csv",
-              "ligaments_rupp2015.csv", "rupp2015_shape_check.csv"]
-
-
-def _experiment(c):
-    sr = c["stepwise_reduction"]
-    return sr["measured_table"] or "results/experiments/stepwise_reduction_surrogate.csv"
-
-
-RULES = {
-    "calibrate": lambda c: dict(
-        input=dict(experiment=_experiment(c), derived=c["stepwise_reduction"]["disc_only_derived"] or [],
-                   real_targets=c["stepwise_reduction"]["real_targets"],
-                   characteristics=c["characteristics"]["data_dir"]),
-        output=dict(characteristics=[f"{CAL}/characteristics/{n}" for n in CHAR_FILES],
-                    summary=f"{CAL}/calibration_summary.csv", rom_fit=f"{CAL}/calibration_rom_fit.csv",
-                    real_fit=f"{CAL}/calibration_real_fit.csv",
-                    disc_points=f"{CAL}/fig4_points.csv", ligament_points=f"{CAL}/fig5_points.csv",
-                    table1="results/tables/table1_disc_calibrated.csv",
-                    table2="results/tables/table2_facet_surfaces.csv",
-                    table3="results/tables/table3_ligaments_calibrated.csv"),
-        params=dict(geometry=c["geometry"], fsu=c["fsu"], solver=c["solver"], sr=c["stepwise_reduction"])),
-    "fig4_disc_torque_angle": lambda c: dict(
-        input=dict(points=f"{CAL}/fig4_points.csv", table="results/tables/table1_disc_calibrated.csv"),
-        output=["results/figures/fig4_disc_torque_angle.png"], params={}),
-    "fig5_ligament_characteristics": lambda c: dict(
-        input=dict(points=f"{CAL}/fig5_points.csv", table="results/tables/table3_ligaments_calibrated.csv"),
-        output=["results/figures/fig5_ligament_characteristics.png"], params={}),
-}
-
-if "snakemake" not in globals():
-    snakemake = _common.stand_in(RULES, __doc__)
-    if snakemake.rule == "calibrate":   # named outputs for the stand-in
-        spec = RULES["calibrate"](snakemake.config)["output"]
-        snakemake.output = _common._Named(**spec)
-
-log = _common.setup_logging(snakemake)
+snakemake, log = _common.start(globals())
 
 from lumbar import calibration as cal  # noqa: E402
 from lumbar.io import write_table_atomic  # noqa: E402

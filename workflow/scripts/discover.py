@@ -5,56 +5,16 @@ or "null"), discovery_benchmark.
 By hand: python workflow/scripts/discover.py discovery_va_artefact --configfile config/test/config.yaml \
     --output /tmp/va/discovery.json /tmp/va/disagreement_map.png /tmp/va/ranking.png \
              /tmp/va/before_after.png /tmp/va/section.md /tmp/va/scenarios.csv
-         python workflow/scripts/discover.py discovery_benchmark_job --configfile config/test/config.yaml \
-    --output /tmp/bench/ligament_prestrain.csv /tmp/bench/ligament_prestrain_fixtures   (job = file stem)
+         python workflow/scripts/discover.py discovery_benchmark_job job=ligament_prestrain \
+    --configfile config/test/config.yaml --output /tmp/bench/ligament_prestrain.csv /tmp/bench/fixtures
 """
-import importlib.util
+import sys
 from pathlib import Path
 
-_spec = importlib.util.spec_from_file_location("_common", Path(__file__).resolve().parent / "_common.py")
-_common = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_common)
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _common.py
+import _common  # noqa: E402
 
-FILES = ("discovery.json", "disagreement_map.png", "ranking.png", "before_after.png", "section.md", "scenarios.csv")
-IDP_MODEL = "results/discrepancy/model/idp_invitro_model.csv"
-
-
-def _cfg(c):
-    return {k: c[k] for k in ("geometry", "characteristics", "fsu", "solver", "l2s1", "discovery", "seed") if k in c}
-
-
-def _case(case, measured, **extra):
-    return lambda c: dict(input=dict(measured=measured(c), **{k: v(c) for k, v in extra.items()}),
-                          output=[f"results/discrepancy/{case}/{f}" for f in FILES], params=dict(cfg=_cfg(c)))
-
-
-RULES = {
-    "discovery_idp_model": lambda c: dict(input=dict(characteristics=c["characteristics"]["data_dir"]),
-                                          output=[IDP_MODEL], params=dict(cfg=_cfg(c))),
-    "discovery_default": _case("default", lambda c: c["stepwise_reduction"]["measured_table"]
-                               or "results/experiments/stepwise_reduction_surrogate.csv"),
-    "discovery_va_artefact": _case("va_artefact", lambda c: c["discovery"]["va_artefact"]),
-    "discovery_intact_rom": _case("intact_rom", lambda c: c["discovery"]["intact_rom"]),
-    "discovery_real_data_summary": lambda c: dict(
-        input=dict(runs=[f"results/discrepancy/{k}/discovery.json" for k in ("intact_rom", "va_artefact")]),
-        output=["results/discrepancy/real_data_summary.csv"], params=dict(cfg=_cfg(c))),
-    "discovery_in_vivo": _case("in_vivo", lambda c: "results/tables/in_vivo_validation.csv",
-                               segment_loads=lambda c: c["discovery"]["in_vivo_segment_loads"]),
-    "discovery_benchmark_job": lambda c: dict(
-        input=dict(idp_model=IDP_MODEL),
-        output=["results/discrepancy/benchmark/ligament_prestrain.csv",
-                "results/discrepancy/benchmark/ligament_prestrain_fixtures"], params=dict(cfg=_cfg(c))),
-    "discovery_benchmark": lambda c: dict(
-        input=dict(jobs=[f"results/discrepancy/benchmark/{j}.csv" for j in
-                         list(c["discovery"]["benchmark"]["effects"]) + ["null"]]),
-        output=["results/discrepancy/benchmark.csv", "results/discrepancy/benchmark_summary.json",
-                "results/figures/discrepancy_benchmark.png"], params=dict(cfg=_cfg(c))),
-}
-
-if "snakemake" not in globals():
-    snakemake = _common.stand_in(RULES, __doc__)
-
-log = _common.setup_logging(snakemake)
+snakemake, log = _common.start(globals())
 
 import copy  # noqa: E402
 import time  # noqa: E402
@@ -66,7 +26,7 @@ from lumbar.io import write_json_atomic, write_table_atomic  # noqa: E402
 
 rule = snakemake.rule
 cfg = copy.deepcopy(dict(snakemake.params.cfg))
-idp_model = _common.first(getattr(snakemake.input, "idp_model", []))
+idp_model = _common.first(snakemake.input.get("idp_model", []))   # discovery_benchmark_job only
 if idp_model and Path(idp_model).is_file():
     cfg["discovery"]["idp_model_table"] = str(idp_model)
 t0 = time.perf_counter()
@@ -79,7 +39,7 @@ if rule == "discovery_idp_model":
 elif rule in ("discovery_default", "discovery_va_artefact", "discovery_in_vivo", "discovery_intact_rom"):
     if rule == "discovery_in_vivo":
         cfg["discovery"]["in_vivo_segment_loads"] = str(snakemake.input.segment_loads)
-    out_dir = Path(snakemake.output[0]).parent
+    out_dir = Path(snakemake.output.discovery).parent   # lumbar.discover.run writes the case's files there
     r = discover.run(cfg, snakemake.input.measured, out_dir)
     log.info("%s on %s: named %s (estimate %s), gap %.2f -> %.2f; %s", rule, snakemake.input.measured,
              r["named_effect"], r["parameter_estimate"], r["gap_before"], r["gap_after"], r["decision"])
@@ -91,14 +51,14 @@ elif rule == "discovery_real_data_summary":
     write_table_atomic(table, snakemake.output[0], float_format="%.6g")
     log.info("real-data summary: %d dataset(s); named: %s", len(table), table["named_effect"].tolist())
 elif rule == "discovery_benchmark_job":
-    job = Path(snakemake.output[0]).stem
+    job = snakemake.wildcards.job
     cases = discover.benchmark_cases(cfg)
     sel = cases[cases["hidden_effect"] == ("none" if job == "null" else job)]
     if sel.empty:
         raise ValueError(f"benchmark job {job!r} has no case; hidden effects: {sorted(set(cases['hidden_effect']))}")
-    bench = discover.run_benchmark_cases(cfg, sel, snakemake.output[1], worked_cases=1)
+    bench = discover.run_benchmark_cases(cfg, sel, snakemake.output.fixtures, worked_cases=1)
     log.info("seconds per discovery: %s", bench.pop("seconds").round(2).tolist())   # timings only in the log
-    write_table_atomic(bench, snakemake.output[0], float_format="%.6g")
+    write_table_atomic(bench, snakemake.output.table, float_format="%.6g")
     log.info("benchmark job %s: %d case(s), %d named correctly", job, len(bench), int(bench["correct"].sum()))
 elif rule == "discovery_benchmark":
     bench = pd.concat([pd.read_csv(p) for p in snakemake.input.jobs], ignore_index=True)
@@ -107,9 +67,9 @@ elif rule == "discovery_benchmark":
     cols = ["case", "experiment", "hidden_effect", "magnitude_label", "magnitude", "named_effect", "correct",
             "p_value", "best_candidate", "param_true", "param_est", "at_bound", "gap_before", "gap_after",
             "confidence", "fixture"]
-    write_table_atomic(bench[cols], snakemake.output[0], float_format="%.6g")
-    write_json_atomic(summary, snakemake.output[1], allow_nan=True)
-    discover.plot_benchmark(bench, summary, snakemake.output[2])
+    write_table_atomic(bench[cols], snakemake.output.table, float_format="%.6g")
+    write_json_atomic(summary, snakemake.output.summary, allow_nan=True)
+    discover.plot_benchmark(bench, summary, snakemake.output.figure)
     log.info("benchmark: %d nulls, false-positive rate %.3f (95%% CI %s), power at the larger magnitude %s, all "
              "targets met: %s", summary["n_null"], summary["false_positive_rate"], summary["false_positive_rate_95ci"],
              summary["power_at_larger_magnitude"], summary["all_pass"])

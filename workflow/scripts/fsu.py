@@ -2,26 +2,15 @@
 
 By hand: python workflow/scripts/fsu.py fsu_rom --configfile config/test/config.yaml --output /tmp/rom.csv
 """
-import importlib.util
+import sys
 from pathlib import Path
 
 import pandas as pd
 
-_spec = importlib.util.spec_from_file_location("_common", Path(__file__).resolve().parent / "_common.py")
-_common = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_common)
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _common.py
+import _common  # noqa: E402
 
-RULES = {
-    "fsu_rom": lambda c: dict(
-        input=dict(characteristics=c["characteristics"]["data_dir"]),
-        output=["results/tables/fsu_rom_intact.csv"],
-        params=dict(geometry=c["geometry"], fsu=c["fsu"], solver=c["solver"], sets=c["characteristics"]["sets"])),
-}
-
-if "snakemake" not in globals():
-    snakemake = _common.stand_in(RULES, __doc__)
-
-log = _common.setup_logging(snakemake)
+snakemake, log = _common.start(globals())
 
 from lumbar.characteristics import resolve_characteristic_set  # noqa: E402
 from lumbar.fsu import build_fsu, range_of_motion  # noqa: E402
@@ -32,7 +21,7 @@ g, f, s = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solv
 geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
 tables = []
 for name in snakemake.params.sets:
-    cal = _common.as_list(getattr(snakemake.input, "calibrated", []))
+    cal = _common.as_list(snakemake.input.calibrated)
     cs = resolve_characteristic_set(name, data_dir=snakemake.input.characteristics,
                                     calibrated_dir=Path(cal[0]).parent if cal else None)
     fsu = build_fsu(geo, cs, f["level"], facet_stiffness=f["facet_stiffness_n_per_m"],

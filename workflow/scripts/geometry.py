@@ -2,28 +2,13 @@
 
 By hand: python workflow/scripts/geometry.py fsu_geometry --configfile config/test/config.yaml
 """
-import importlib.util
+import sys
 from pathlib import Path
 
-import numpy as np
-import pandas as pd
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _common.py
+import _common  # noqa: E402
 
-_spec = importlib.util.spec_from_file_location("_common", Path(__file__).resolve().parent / "_common.py")
-_common = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_common)
-
-RULES = {
-    "fsu_geometry": lambda c: dict(
-        output=["results/tables/fsu_geometry.csv"], params=dict(geometry=c["geometry"])),
-    "fig1_l4l5_model": lambda c: dict(
-        output=["results/figures/fig1_l4l5_model.png"],
-        params=dict(geometry=c["geometry"], level=c["fsu"]["level"], backend=c["render"]["backend"])),
-}
-
-if "snakemake" not in globals():
-    snakemake = _common.stand_in(RULES, __doc__)
-
-log = _common.setup_logging(snakemake)
+snakemake, log = _common.start(globals())
 
 from lumbar.geometry import load_geometry, summary_table  # noqa: E402  (after logging, so import warnings are logged)
 

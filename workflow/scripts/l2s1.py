@@ -2,53 +2,18 @@
 49 scenarios), table5 (synopsis, outlier counts, comparison with the paper, internal loads, Table 5 grid,
 Fig. 7) and fig3_l2s1_cables.
 
-By hand: python workflow/scripts/l2s1.py l2s1_idp --configfile config/test/config.yaml \
-    --output /tmp/idp_rupp2015.csv      (the set is taken from the file name)
+By hand: python workflow/scripts/l2s1.py l2s1_idp set=rupp2015 --configfile config/test/config.yaml \
+    --output /tmp/idp_rupp2015.csv
 """
-import importlib.util
-import re
+import sys
 from pathlib import Path
 
 import pandas as pd
 
-_spec = importlib.util.spec_from_file_location("_common", Path(__file__).resolve().parent / "_common.py")
-_common = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_common)
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _common.py
+import _common  # noqa: E402
 
-OUT = "results/l2s1"
-SURROGATE = "results/experiments/idp_wilke1996_surrogate.csv"
-
-
-def _cal(c):
-    cal = c["l2s1"]["calibrated_characteristics"]
-    return cal if cal and Path(cal).is_dir() else c["characteristics"]["data_dir"]
-
-
-RULES = {
-    "idp_surrogate": lambda c: dict(
-        input=dict(characteristics=c["characteristics"]["data_dir"], cables=c["l2s1"]["cables"]),
-        output=[SURROGATE],
-        params=dict(geometry=c["geometry"], fsu=c["fsu"], solver=c["solver"], l2s1=c["l2s1"], seed=c["seed"])),
-    "l2s1_idp": lambda c: dict(
-        input=dict(characteristics=_cal(c), cables=c["l2s1"]["cables"]),
-        output=[f"{OUT}/idp_calibrated.csv"],
-        params=dict(geometry=c["geometry"], fsu=c["fsu"], solver=c["solver"], l2s1=c["l2s1"])),
-    "table5": lambda c: dict(
-        input=dict(sims=[f"{OUT}/idp_{s}.csv" for s in c["l2s1"]["sets"]],
-                   reference=c["l2s1"]["measured_table"] or SURROGATE),
-        output=["results/tables/table5_idp_synopsis.csv", "results/tables/table5_outlier_counts.csv",
-                "results/tables/table5_vs_paper.csv", "results/tables/l2s1_internal_loads.csv",
-                "results/figures/table5_grid.png", "results/figures/fig7_idp.png"],
-        params=dict(l2s1=c["l2s1"], published=c["paths"]["published_model_results"])),
-    "fig3_l2s1_cables": lambda c: dict(
-        input=dict(cables=c["l2s1"]["cables"]), output=["results/figures/fig3_l2s1_cables.png"],
-        params=dict(geometry=c["geometry"], render=c["render"])),
-}
-
-if "snakemake" not in globals():
-    snakemake = _common.stand_in(RULES, __doc__)
-
-log = _common.setup_logging(snakemake)
+snakemake, log = _common.start(globals())
 
 from lumbar import l2s1  # noqa: E402
 from lumbar.characteristics import load_characteristic_set, resolve_characteristic_set  # noqa: E402
@@ -70,7 +35,7 @@ if rule == "idp_surrogate":
     from lumbar.virtual_experiment import idp_table
 
     p = snakemake.params.l2s1
-    cal = _common.as_list(getattr(snakemake.input, "calibrated", []))
+    cal = _common.as_list(snakemake.input.calibrated)
     cs = resolve_characteristic_set(p["generator_set"], data_dir=snakemake.input.characteristics,
                                     calibrated_dir=Path(cal[0]).parent if cal else None)
     log.info("generator set %s from %s", p["generator_set"],
@@ -84,7 +49,7 @@ if rule == "idp_surrogate":
              p["generator_set"])
     write_table_atomic(df, snakemake.output[0])
 elif rule == "l2s1_idp":
-    name = getattr(snakemake.wildcards, "set", None) or re.search(r"idp_(\w+)\.csv$", snakemake.output[0]).group(1)
+    name = snakemake.wildcards.set
     p, s = snakemake.params.l2s1, snakemake.params.solver
     d = _chardir(snakemake.input.characteristics)
     log.info("set %s: characteristics from %s", name, d)
@@ -113,14 +78,14 @@ elif rule == "table5":
     counts = l2s1.outlier_counts(syn)
     vs = l2s1.versus_paper(counts, snakemake.params.published)
     out = snakemake.output
-    write_table_atomic(syn, out[0])
-    write_table_atomic(counts, out[1])
-    write_table_atomic(vs, out[2])
+    write_table_atomic(syn, out.synopsis)
+    write_table_atomic(counts, out.counts)
+    write_table_atomic(vs, out.vs_paper)
     internal = sims.drop(columns=["idp_mpa"]).merge(syn[["set", "muscle_setup", "load_case", "idp_sim_mpa",
                                                          "outlier", "data_kind"]], on=["set", "muscle_setup", "load_case"])
-    write_table_atomic(internal, out[3])
-    l2s1.plot_table5_grid(syn, out[4])
-    l2s1.plot_fig7(syn, out[5])
+    write_table_atomic(internal, out.internal)
+    l2s1.plot_table5_grid(syn, out.grid)
+    l2s1.plot_fig7(syn, out.fig7)
     for _, r in vs.iterrows():
         log.info("set %s: %d outliers of %d (paper: %s) [reference %s]", r["set"], r["outliers"], r["scenarios"],
                  r["paper_outliers"], r["data_kind"])

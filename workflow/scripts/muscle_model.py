@@ -1,59 +1,27 @@
 """Muscle-driven model stage (paper 2, issue 5): rules muscle_validation, muscle_sensitivity (one
-Paramspace chunk), muscle_sensitivity_table, muscle_sobol_chunk (one posture, one chunk of the Saltelli
-samples) and muscle_sobol (indices and figure). The long jobs log progress lines through the library's
+Paramspace chunk), muscle_sensitivity_table, muscle_sobol_chunk (one posture, one chunk of the PCE
+training samples) and muscle_sobol (indices and figure). The long jobs log progress lines through the library's
 logger (lumbar.muscle_model: scenarios done / total, elapsed, estimated remaining), which setup_logging sends
 to the rule's log and the console.
 
 By hand: python workflow/scripts/muscle_model.py muscle_validation --configfile config/test/config.yaml
-    (outputs as in workflow/rules/muscle_model.smk; --output to redirect)
+         python workflow/scripts/muscle_model.py muscle_sobol_chunk posture=standing chunk=0 \
+    --configfile config/test/config.yaml      (the rule's wildcards as name=value; --output to redirect)
 """
-import importlib.util
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-_spec = importlib.util.spec_from_file_location("_common", Path(__file__).resolve().parent / "_common.py")
-_common = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_common)
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _common.py
+import _common  # noqa: E402
 
-OUT = "results/muscle_model"
-BASELINE = f"{OUT}/baseline.npz"
-VALIDATION_OUT = ["results/tables/muscle_model_segment_loads.csv", "results/tables/in_vivo_validation.csv",
-                  f"{OUT}/in_vivo_metrics.json", "results/tables/flexion_relaxation.csv",
-                  "results/figures/muscle_in_vivo_validation.png", BASELINE, "results/tables/muscle_fascicles.csv",
-                  "results/tables/muscle_capacity.csv"]
+# the order of the figures output of rule muscle_sensitivity_table (MUSCLE_FIGURE_PARAMETERS in the rule file)
 FIGURE_PARAMETERS = ("ssl_um", "k_n_per_cm2", "in_situ_sl_um", "spt_n_per_cm2", "pennation_deg")
 
-
-RULES = {
-    "muscle_validation": lambda c: dict(
-        input=dict(in_vivo=c["muscle_model"]["in_vivo_table"]), output=VALIDATION_OUT,
-        params=dict(muscle_model=c["muscle_model"], published=c["paths"]["published_model_results"])),
-    "muscle_sensitivity": lambda c: dict(
-        input=dict(baseline=BASELINE), output=[f"{OUT}/sensitivity/parameter~ssl_um_ssl_um~none.csv"],
-        params=dict(muscle_model=c["muscle_model"], chunk={"parameter": "ssl_um", "ssl_um": "none"})),
-    "muscle_sensitivity_table": lambda c: dict(
-        input=dict(chunks=sorted(str(f) for f in Path(OUT, "sensitivity").glob("*.csv")),
-                   baseline_table="results/tables/in_vivo_validation.csv"),
-        output=["results/tables/sensitivity_idp.csv"]
-        + [f"results/figures/muscle_sensitivity_{p}.png" for p in FIGURE_PARAMETERS]
-        + ["results/tables/sensitivity_directions.csv"],
-        params=dict(muscle_model=c["muscle_model"])),
-    "muscle_sobol_chunk": lambda c: dict(
-        input=dict(baseline=BASELINE), output=[f"{OUT}/sobol/standing_0.csv"],
-        params=dict(muscle_model=c["muscle_model"], seed=c["seed"], chunk={"posture": "standing", "chunk": "0"})),
-    "muscle_sobol": lambda c: dict(
-        input=dict(chunks=sorted(str(f) for f in Path(OUT, "sobol").glob("*.csv"))),
-        output=["results/tables/sobol_indices.csv", "results/figures/muscle_sobol.png"],
-        params=dict(muscle_model=c["muscle_model"], seed=c["seed"])),
-}
-
-if "snakemake" not in globals():
-    snakemake = _common.stand_in(RULES, __doc__)
-
-log = _common.setup_logging(snakemake)
+snakemake, log = _common.start(globals())
 
 import matplotlib  # noqa: E402
 
@@ -95,45 +63,37 @@ UNITS = {"ssl_um": "SSL [um]", "k_n_per_cm2": "K [N/cm2]", "in_situ_sl_um": "in-
          "spt_n_per_cm2": "SpT [N/cm2]", "pennation_deg": "pennation [deg]"}
 
 
+POSTURE_TITLES = {"standing": "upright standing", "flexion": "36 deg flexion"}
+
+
 def _sobol_figure(df, path):
-    """S1 and ST with bootstrap 95 % intervals per posture. The y-range is set by the indices (not by the
-    intervals) within [-0.5, 1.5]; a whisker or bar beyond it is clipped and marked with a triangle at the edge
-    (a bar also with its value)."""
+    """S1 and ST per parameter with their bootstrap 95 % intervals (whiskers), one panel per posture; the panel
+    title gives the method (PCE degree, model solves, leave-one-out Q2). Indices and intervals lie in [0, 1]."""
     posts = list(dict.fromkeys(df["posture"]))
-    fig, axes = plt.subplots(1, len(posts), figsize=(4.3 * len(posts), 4.0), squeeze=False, sharey=True,
+    fig, axes = plt.subplots(1, len(posts), figsize=(4.6 * len(posts), 4.2), squeeze=False, sharey=True,
                              layout="constrained")
-    vals = np.r_[df["S1"], df["ST"]]
-    lo = max(-0.5, min(-0.05, float(np.nanmin(vals)) - 0.05))
-    hi = min(1.5, max(1.05, float(np.nanmax(vals)) + 0.05))
     for ax, post in zip(axes[0], posts):
         d = df[df["posture"] == post]
         xs = np.arange(len(d))
         for off, key, lab, col in ((-0.2, "S1", "first-order index S1", "#4c72b0"),
                                    (0.2, "ST", "total index ST", "#dd8452")):
-            v, c = d[key].to_numpy(float), d[f"{key}_conf"].to_numpy(float)
-            vc = np.clip(v, lo, hi)
-            ax.bar(xs + off, vc, 0.4, color=col, label=lab)
-            ax.errorbar(xs + off, vc, yerr=[np.clip(vc - np.maximum(v - c, lo), 0, None),
-                                            np.clip(np.minimum(v + c, hi) - vc, 0, None)],
+            v = d[key].to_numpy(float)
+            lo, hi = d[f"{key}_lo"].to_numpy(float), d[f"{key}_hi"].to_numpy(float)
+            ax.bar(xs + off, np.nan_to_num(v), 0.4, color=col, label=lab)
+            ax.errorbar(xs + off, np.nan_to_num(v), yerr=[np.clip(np.nan_to_num(v - lo), 0, None),
+                                                          np.clip(np.nan_to_num(hi - v), 0, None)],
                         fmt="none", ecolor="k", lw=0.8, capsize=2)
-            for x, vv, cc in zip(xs + off, v, c):
-                if vv + cc > hi:
-                    ax.plot(x, hi, "k^", ms=5, clip_on=False)
-                if vv - cc < lo:
-                    ax.plot(x, lo, "kv", ms=5, clip_on=False)
-                if not lo <= vv <= hi:
-                    ax.annotate(f"{vv:.2g}", (x, hi if vv > hi else lo), xytext=(0, -10 if vv > hi else 4),
-                                textcoords="offset points", ha="center", fontsize=6)
-        ax.axhline(0, color="0.5", lw=0.6)
-        ax.set_ylim(lo, hi)
-        ax.set_xticks(xs, [UNITS.get(q, q) for q in d["parameter"]], rotation=35, ha="right", fontsize=7)
+        ax.set_ylim(0, 1.05)
+        ax.set_xticks(xs, [UNITS.get(q, q) for q in d["parameter"]], rotation=30, ha="right", fontsize=8)
         r = d.iloc[0]
-        ax.set_title(f"{post}: N = {int(r['n_base'])} ({int(r['n_samples'])} solves)\n{int(r['n_failed'])} not "
-                     f"reached, {int(r['n_uncertified'])} reached but not certified", fontsize=8)
+        q2 = (f"{r['q2_loo']:.3f}" if np.isfinite(r["q2_loo"]) else "n/a") + ("" if r["fit_ok"] else " (poor fit)")
+        ax.set_title(f"{POSTURE_TITLES.get(post, post)}: PCE degree {int(r['degree'])}, {int(r['n_train'])} model "
+                     f"solves, Q2_loo = {q2}\n{int(r['n_failed'])} not reached (left out), {int(r['n_uncertified'])} "
+                     f"not certified; top S1 interval width {r['top_s1_width']:.3f}", fontsize=8)
     axes[0, 0].set_ylabel("Sobol index of L4-L5 IDP [-]")
     handles, labels = axes[0, 0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower center", ncol=2, fontsize=7,
-               title="whiskers: bootstrap 95 % interval; triangle: clipped at the axis limit", title_fontsize=7)
+               title="whiskers: bootstrap 95 % interval", title_fontsize=7)
     _save(fig, path)
 
 
@@ -315,27 +275,38 @@ elif rule == "muscle_sobol_chunk":
         else snakemake.params.chunk
     posture, k = chunk["posture"], int(chunk["chunk"])
     sb = p["sobol"]
-    X = mm.sobol_samples(sb["n_base"], snakemake.params.seed)
+    X = mm.sobol_samples(sb["n_train"], snakemake.params.seed)
     rows = mm.sobol_chunk_rows(len(X), sb.get("chunks", 1), k)
     model = _model(p)
     solver = mm.make_solver(model, p["solver"])
     t0 = time.perf_counter()
-    log.info("Sobol %s, chunk %d of %d: samples %d-%d of %d (n_base %d)", posture, k + 1, sb.get("chunks", 1),
-             rows[0], rows[-1], len(X), sb["n_base"])
+    log.info("Sobol %s, chunk %d of %d: samples %d-%d of %d (PCE training design, n_train %d)", posture, k + 1,
+             sb.get("chunks", 1), rows[0], rows[-1], len(X), sb["n_train"])
     out = mm.sobol_evaluate(model, solver, _load_baseline(snakemake.input.baseline), X, rows, posture, sb["scope"],
                             p["disc_area_m2"], label=f"sobol {posture} chunk {k + 1}/{sb.get('chunks', 1)}")
-    log.info("Sobol %s chunk %d: %d samples in %.1f s, %d not reached, %d reached but not certified", posture, k,
+    log.info("Sobol %s chunk %d: %d samples in %.1f s, %d not reached, %d reached but not certified", posture, k + 1,
              len(out), time.perf_counter() - t0, int((~out["reached"]).sum()),
              int((out["reached"] & ~out["certified"]).sum()))
     write_table_atomic(out, snakemake.output[0])
 elif rule == "muscle_sobol":
+    import time
+
+    sb = p["sobol"]
     samples = pd.concat([pd.read_csv(f) for f in snakemake.input.chunks], ignore_index=True)
-    df = mm.sobol_indices(samples, p["sobol"]["n_base"], snakemake.params.seed)
+    t0 = time.perf_counter()
+    df = mm.sobol_indices(samples, sb["n_train"], sb["degree"], snakemake.params.seed, sb.get("n_bootstrap", 500))
+    log.info("PCE fits and %d bootstrap refits per posture in %.1f s", sb.get("n_bootstrap", 500),
+             time.perf_counter() - t0)
     for post, d in df.groupby("posture", sort=False):
-        top = d.loc[d["S1"].idxmax()]
-        log.info("Sobol %s: N = %d, top first-order index %s S1 = %.3f +- %.3f (95 %% bootstrap half-width), "
-                 "sum S1 = %.2f; %d not reached, %d not certified", post, int(top["n_base"]), top["parameter"],
-                 top["S1"], top["S1_conf"], d["S1"].sum(), int(top["n_failed"]), int(top["n_uncertified"]))
+        r = d.iloc[0]
+        top = d[d["parameter"] == r["top_parameter"]]
+        top = top.iloc[0] if len(top) else r
+        log.info("Sobol %s: PCE degree %d on %d of %d samples, Q2_loo = %.3f%s; top first-order index %s S1 = %.3f "
+                 "[%.3f, %.3f] (bootstrap 95 %%; width %.3f: %s), sum S1 = %.2f; %d not reached, %d not certified",
+                 post, int(r["degree"]), int(r["n_fit"]), int(r["n_train"]), r["q2_loo"],
+                 "" if r["fit_ok"] else f" < {mm.SOBOL_Q2_MIN} (poor fit)", top["parameter"], top["S1"],
+                 top["S1_lo"], top["S1_hi"], r["top_s1_width"], "stable" if r["stable"] else "NOT stable",
+                 d["S1"].sum(), int(r["n_failed"]), int(r["n_uncertified"]))
     write_table_atomic(df, snakemake.output[0])
     _sobol_figure(df, snakemake.output[1])
 else:  # pragma: no cover

@@ -2,45 +2,18 @@
 table4 (synopsis, outlier counts, comparison with the paper, check/cross grid) and
 fig6_rom_stepwise_reduction.
 
-By hand: python workflow/scripts/stepwise_reduction.py stepwise_reduction_sim --configfile config/test/config.yaml \
-    --output results/stepwise_reduction/rom_chazal1985.csv      (the set is taken from the file name)
+By hand: python workflow/scripts/stepwise_reduction.py stepwise_reduction_sim set=chazal1985 \
+    --configfile config/test/config.yaml --output /tmp/rom_chazal1985.csv
 """
-import importlib.util
+import sys
 from pathlib import Path
 
 import pandas as pd
 
-_spec = importlib.util.spec_from_file_location("_common", Path(__file__).resolve().parent / "_common.py")
-_common = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_common)
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _common.py
+import _common  # noqa: E402
 
-OUT = "results/stepwise_reduction"
-
-
-def _experiment(c):
-    return c["stepwise_reduction"]["measured_table"] or "results/experiments/stepwise_reduction_surrogate.csv"
-
-
-RULES = {
-    "stepwise_reduction_sim": lambda c: dict(
-        input=dict(characteristics="results/calibration/characteristics/disc.csv"),
-        output=[f"{OUT}/rom_calibrated.csv"],
-        params=dict(geometry=c["geometry"], fsu=c["fsu"], solver=c["solver"], sr=c["stepwise_reduction"])),
-    "table4": lambda c: dict(
-        input=dict(sims=[f"{OUT}/rom_{s}.csv" for s in c["characteristics"]["sets"]], experiment=_experiment(c),
-                   derived=c["stepwise_reduction"]["disc_only_derived"] or []),
-        output=["results/tables/table4_rom_synopsis.csv", "results/tables/table4_outlier_counts.csv",
-                "results/tables/table4_vs_paper.csv", "results/figures/table4_grid.png"],
-        params=dict(sr=c["stepwise_reduction"], published=c["paths"]["published_model_results"])),
-    "fig6_rom_stepwise_reduction": lambda c: dict(
-        input=["results/tables/table4_rom_synopsis.csv"],
-        output=["results/figures/fig6_rom_stepwise_reduction.png"], params={}),
-}
-
-if "snakemake" not in globals():
-    snakemake = _common.stand_in(RULES, __doc__)
-
-log = _common.setup_logging(snakemake)
+snakemake, log = _common.start(globals())
 
 from lumbar import stepwise_reduction as sr_mod  # noqa: E402
 from lumbar.io import write_table_atomic  # noqa: E402
@@ -51,7 +24,7 @@ if snakemake.rule == "stepwise_reduction_sim":
     from lumbar.geometry import load_geometry
 
     g, f, s, sr = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solver, snakemake.params.sr
-    set_name = getattr(snakemake.wildcards, "set", None) or Path(snakemake.output[0]).stem.replace("rom_", "", 1)
+    set_name = snakemake.wildcards.set
     data_dir = Path(snakemake.input.characteristics)
     data_dir = data_dir.parent if data_dir.is_file() else data_dir
     geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
@@ -69,7 +42,7 @@ elif snakemake.rule == "table4":
     exp = sr_mod.read_experiment_table(snakemake.input.experiment)
     derived = sr_mod.read_experiment_table(_common.first(snakemake.input.derived)) \
         if _common.first(snakemake.input.derived) else None
-    real = [sr_mod.read_experiment_table(p) for p in _common.as_list(getattr(snakemake.input, "real_targets", []))]
+    real = [sr_mod.read_experiment_table(p) for p in _common.as_list(snakemake.input.real_targets)]
     ref = sr_mod.reference_table(exp, derived, pd.concat(real, ignore_index=True) if real else None)
     parts = []
     for p in snakemake.input.sims:
@@ -82,10 +55,10 @@ elif snakemake.rule == "table4":
     for _, r in counts.iterrows():
         log.info("set %-18s %3d outliers of %d (%d not converged; reference %s)", r["set"], r["n_outliers"],
                  r["n_scenarios"], r["n_not_converged"], r["data_kinds"])
-    write_table_atomic(syn, snakemake.output[0])
-    write_table_atomic(counts, snakemake.output[1])
-    write_table_atomic(vs, snakemake.output[2])
-    sr_mod.plot_table4_grid(syn, snakemake.output[3])
+    write_table_atomic(syn, snakemake.output.synopsis)
+    write_table_atomic(counts, snakemake.output.counts)
+    write_table_atomic(vs, snakemake.output.vs_paper)
+    sr_mod.plot_table4_grid(syn, snakemake.output.grid)
 elif snakemake.rule == "fig6_rom_stepwise_reduction":
     syn = pd.read_csv(snakemake.input[0])
     set_name = "calibrated" if "calibrated" in set(syn["set"]) else str(syn["set"].iloc[0])

@@ -3,29 +3,13 @@
 
 By hand: python workflow/scripts/validation.py validation_real_data --configfile config/test/config.yaml
 """
-import importlib.util
+import sys
 from pathlib import Path
 
-_spec = importlib.util.spec_from_file_location("_common", Path(__file__).resolve().parent / "_common.py")
-_common = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_common)
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _common.py
+import _common  # noqa: E402
 
-RULES = {
-    "validation_real_data": lambda c: dict(
-        input=dict(synopsis="results/tables/table4_rom_synopsis.csv",
-                   real_targets=c["stepwise_reduction"]["real_targets"],
-                   calibrated=["results/calibration/characteristics/disc.csv"],
-                   va_artefact=c["discovery"]["va_artefact"],
-                   anatomy="data/anatomy/l4l5_magnitudes_original_text.csv",
-                   in_vivo="results/tables/in_vivo_validation.csv"),
-        output=["results/tables/validation_real_data.csv"],
-        params=dict(geometry=c["geometry"], fsu=c["fsu"], sr=c["stepwise_reduction"])),
-}
-
-if "snakemake" not in globals():
-    snakemake = _common.stand_in(RULES, __doc__)
-
-log = _common.setup_logging(snakemake)
+snakemake, log = _common.start(globals())
 
 import pandas as pd  # noqa: E402
 

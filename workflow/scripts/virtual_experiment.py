@@ -2,29 +2,15 @@
 from virtual specimens (the measured table of Heuer et al. 2007 is not available to the project).
 
 By hand: python workflow/scripts/virtual_experiment.py stepwise_reduction_surrogate \
-    --configfile config/test/config.yaml --output /tmp/stepwise_reduction_surrogate.csv
+    --configfile config/test/config.yaml --output /tmp/surrogate.csv /tmp/generator_fit.csv /tmp/generator_targets.csv
 """
-import importlib.util
+import sys
 from pathlib import Path
 
-_spec = importlib.util.spec_from_file_location("_common", Path(__file__).resolve().parent / "_common.py")
-_common = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_common)
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _common.py
+import _common  # noqa: E402
 
-RULES = {
-    "stepwise_reduction_surrogate": lambda c: dict(
-        input=dict(characteristics=c["characteristics"]["data_dir"]),
-        output=dict(table="results/experiments/stepwise_reduction_surrogate.csv",
-                    generator_fit="results/experiments/stepwise_reduction_generator_fit.csv",
-                    generator_targets="results/experiments/stepwise_reduction_generator_targets.csv"),
-        params=dict(geometry=c["geometry"], fsu=c["fsu"], solver=c["solver"], sr=c["stepwise_reduction"],
-                    seed=c["seed"])),
-}
-
-if "snakemake" not in globals():
-    snakemake = _common.stand_in(RULES, __doc__)
-
-log = _common.setup_logging(snakemake)
+snakemake, log = _common.start(globals())
 
 from lumbar.characteristics import load_characteristic_set  # noqa: E402
 from lumbar.geometry import load_geometry  # noqa: E402

@@ -87,7 +87,7 @@ def fit_surface(superior, inferior, medial_hint=None, contact="mean_surface") ->
     ``medial_hint``: unit vector used to orient w when the two sets are not separated.
     """
     S = np.asarray(superior, float)
-    I = np.asarray(inferior, float)
+    I = np.asarray(inferior, float)  # noqa: E741 - S/I: superior/inferior landmarks, as in the paper
     if S.shape[0] < 5 or I.shape[0] < 5 or S.shape[1:] != (3,) or I.shape[1:] != (3,):
         raise ValueError(f"facet landmarks must be (n>=5, 3) arrays, got {S.shape} and {I.shape}")
     allp = np.vstack([S, I])

@@ -119,7 +119,7 @@ def projected_area(points: np.ndarray, normal: np.ndarray) -> float:
     return float(ConvexHull(q).volume)
 
 
-def summary_table(geo) -> "pd.DataFrame":
+def summary_table(geo) -> "pd.DataFrame":  # noqa: F821 - pandas is imported in the body (lazily)
     """One row per level: disc centre/normal/CSA/height, facet landmarks, ligament fibres (mm)."""
     import pandas as pd
 

@@ -83,3 +83,18 @@ class SpineGeometry:
 def level_vertebrae(level: str) -> tuple[str, str]:
     up, lo = level.split("-")
     return up, lo
+
+
+def levels_and_vertebrae(levels) -> tuple[list[str], list[str]]:
+    """(levels in ``LEVEL_NAMES`` order, their vertebrae in ``VERTEBRA_NAMES`` order) for ``levels``: None
+    (all levels), one level name or an iterable of them; unknown names raise :class:`GeometryError`."""
+    if levels is None:
+        levels = list(LEVEL_NAMES)
+    if isinstance(levels, str):
+        levels = [levels]
+    bad = [lv for lv in levels if lv not in LEVEL_NAMES]
+    if bad:
+        raise GeometryError(f"unknown level(s) {bad}; expected some of {list(LEVEL_NAMES)}")
+    levels = [lv for lv in LEVEL_NAMES if lv in levels]
+    verts = sorted({v for lv in levels for v in level_vertebrae(lv)}, key=VERTEBRA_NAMES.index)
+    return levels, verts

@@ -12,6 +12,7 @@ import numpy as np
 import pandas as pd
 import trimesh
 
+from .. import resources
 from .analysis import EZ, facing_endplate, inferior_endplate, sagittal_split
 from .core import GeometryError, LEVEL_NAMES, level_vertebrae
 
@@ -29,7 +30,7 @@ def _source(body: str, version: str) -> str:
     return f"myo-sim {version} {stl} (Apache-2.0), vertex chosen by rule"
 
 
-class _Feat:
+class VertebraFeatures:
     """Per-vertebra reference features in the project frame."""
 
     def __init__(self, name, mesh, x_post=None, x_lam=None):
@@ -67,7 +68,7 @@ def _snap(v, target, used, mask=None, mesh=None):
     return i, np.asarray(p[0], dtype=float)
 
 
-def _facet_clusters(fu: _Feat, fl: _Feat, s: float):
+def _facet_clusters(fu: VertebraFeatures, fl: VertebraFeatures, s: float):
     vu, vl = fu.v, fl.v
     mu = (vu[:, 0] < fu.x_post - 2 * MM) & (s * vu[:, 1] > 8 * MM) & (s * vu[:, 1] < 30 * MM)
     iap = vu[mu & (vu[:, 2] < vu[mu, 2].min() + 10 * MM)]
@@ -139,10 +140,10 @@ def propose_landmarks(meshes: dict, version: str = "0.2.4") -> pd.DataFrame:
     feats = {}
     for v in ("L1", "L2", "L3", "L4", "L5"):
         if v in meshes:
-            feats[v] = _Feat(v, meshes[v])
+            feats[v] = VertebraFeatures(v, meshes[v])
     if "S1" in meshes and "L5" in feats:
         f5 = feats["L5"]
-        feats["S1"] = _Feat("S1", meshes["S1"], x_post=f5.x_post, x_lam=f5.x_lam)
+        feats["S1"] = VertebraFeatures("S1", meshes["S1"], x_post=f5.x_post, x_lam=f5.x_lam)
 
     def add(level, structure, side, k, body, vidx, p, rule, kind="derived_from_geometry"):
         rows.append(dict(level=level, structure=structure, side=side, point_index=k,
@@ -337,7 +338,7 @@ def landmarks_to_level_parts(df: pd.DataFrame, level: str, upper: str, lower: st
 
 
 def default_csv_path() -> Path:
-    return Path(__file__).resolve().parents[3] / "data" / "landmarks" / "myo_sim_landmarks.csv"
+    return resources.data_dir() / "landmarks" / "myo_sim_landmarks.csv"
 
 
 def main():  # pragma: no cover

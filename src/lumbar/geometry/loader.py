@@ -4,37 +4,25 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
+from .. import resources
 from . import analysis as A
-from .core import LEVEL_NAMES, VERTEBRA_NAMES, GeometryError, Level, SpineGeometry, Vertebra, level_vertebrae
+from .core import GeometryError, Level, SpineGeometry, Vertebra, level_vertebrae, levels_and_vertebrae
 
 CSA_OFFSET_M = 0.002   # section plane this far inside the upper vertebral body, above its inferior endplate
-
-
-def _levels_and_vertebrae(levels):
-    if levels is None:
-        levels = list(LEVEL_NAMES)
-    if isinstance(levels, str):
-        levels = [levels]
-    bad = [lv for lv in levels if lv not in LEVEL_NAMES]
-    if bad:
-        raise GeometryError(f"unknown level(s) {bad}; expected some of {list(LEVEL_NAMES)}")
-    levels = [lv for lv in LEVEL_NAMES if lv in levels]
-    verts = sorted({v for lv in levels for v in level_vertebrae(lv)}, key=VERTEBRA_NAMES.index)
-    return levels, verts
 
 
 def embedded_visible_human_path():
     """The Visible Human geometry embedded in the repository (data/geometry/visible_human_lss, BSD-3).
 
-    Found from ``$LUMBAR_DATA_DIR`` (the repository ``data`` directory), else relative to this package
-    (editable install / source tree), else ``./data``.
+    Found from ``$LUMBAR_DATA_DIR`` (the repository ``data`` directory), else the package data
+    (:func:`lumbar.resources.data_dir`: the checkout's or the wheel's copy), else ``./data``.
     """
     import os  # noqa: PLC0415
     from pathlib import Path  # noqa: PLC0415
     cands = []
     if os.environ.get("LUMBAR_DATA_DIR"):
         cands.append(Path(os.environ["LUMBAR_DATA_DIR"]) / "geometry" / "visible_human_lss")
-    cands.append(Path(__file__).resolve().parents[3] / "data" / "geometry" / "visible_human_lss")
+    cands.append(resources.data_dir() / "geometry" / "visible_human_lss")
     cands.append(Path.cwd() / "data" / "geometry" / "visible_human_lss")
     for c in cands:
         if (c / "meshes").is_dir():
@@ -83,17 +71,18 @@ def _body_centroid(mesh: trimesh.Trimesh, x_post: float) -> np.ndarray:
 
 def load_myo_sim(landmarks_csv=None, levels=None) -> SpineGeometry:
     from . import myo_sim  # noqa: PLC0415
-    from .landmarks import ENDPLATE_RADIUS, _Feat, default_csv_path, landmarks_to_level_parts, read_landmarks  # noqa: PLC0415
-    levels, verts = _levels_and_vertebrae(levels)
+    from .landmarks import (ENDPLATE_RADIUS, VertebraFeatures, default_csv_path,  # noqa: PLC0415
+                            landmarks_to_level_parts, read_landmarks)
+    levels, verts = levels_and_vertebrae(levels)
     need = list(verts)
     if "S1" in need and "L5" not in need:
         need.append("L5")
     meshes = myo_sim.load_raw_meshes(tuple(need))
     csv = default_csv_path() if landmarks_csv is None else landmarks_csv
     df = read_landmarks(csv, meshes)
-    feats = {v: _Feat(v, meshes[v]) for v in need if v != "S1"}
+    feats = {v: VertebraFeatures(v, meshes[v]) for v in need if v != "S1"}
     if "S1" in need:
-        feats["S1"] = _Feat("S1", meshes["S1"], x_post=feats["L5"].x_post, x_lam=feats["L5"].x_lam)
+        feats["S1"] = VertebraFeatures("S1", meshes["S1"], x_post=feats["L5"].x_post, x_lam=feats["L5"].x_lam)
     geo_levels, s1_endplate = {}, None
     for lv in levels:
         U, L = level_vertebrae(lv)

@@ -38,22 +38,24 @@ def package_version() -> str:
     try:
         from importlib.metadata import version  # noqa: PLC0415
         return version("myo-sim")
-    except Exception:  # pragma: no cover
+    except Exception:  # pragma: no cover  # noqa: BLE001 - no metadata in any form: "unknown"
         return "unknown"
 
 
-def _vec(el, name, default):
+def mjcf_vector(el, name, default):
+    """The numbers of the MJCF attribute ``name`` of element ``el`` as an array (``default`` if absent)."""
     s = el.get(name)
     return np.array([float(v) for v in s.split()]) if s else np.array(default, dtype=float)
 
 
-def _rot(el) -> np.ndarray:
+def mjcf_rotation(el) -> np.ndarray:
+    """Rotation matrix of an MJCF element's orientation (``quat`` or ``euler``; identity if none)."""
     if el.get("quat"):
-        w, x, y, z = _vec(el, "quat", [1, 0, 0, 0])
+        w, x, y, z = mjcf_vector(el, "quat", [1, 0, 0, 0])
         return Rotation.from_quat([x, y, z, w]).as_matrix()
     if el.get("euler"):
         # MuJoCo default eulerseq "xyz" = intrinsic (rotating axes) == scipy "XYZ"
-        return Rotation.from_euler("XYZ", _vec(el, "euler", [0, 0, 0])).as_matrix()
+        return Rotation.from_euler("XYZ", mjcf_vector(el, "euler", [0, 0, 0])).as_matrix()
     if el.get("axisangle") or el.get("xyaxes") or el.get("zaxis"):  # pragma: no cover
         raise GeometryError(f"unsupported orientation attribute in <{el.tag} name={el.get('name')}>")
     return np.eye(3)
@@ -74,21 +76,21 @@ def placements(chain_xml: str) -> dict:
     if assets.is_file():
         for m in ET.parse(assets).getroot().iter("mesh"):
             if m.get("scale"):
-                s = _vec(m, "scale", [1, 1, 1])
+                s = mjcf_vector(m, "scale", [1, 1, 1])
                 if not np.allclose(s, 1):  # pragma: no cover
                     raise GeometryError(f"{assets}: mesh {m.get('name')} has scale {s}; not supported")
             mesh_files[m.get("name")] = m.get("file")
     out = {}
 
     def walk(body, R_parent, t_parent):
-        R = R_parent @ _rot(body)
-        t = t_parent + R_parent @ _vec(body, "pos", [0, 0, 0])
+        R = R_parent @ mjcf_rotation(body)
+        t = t_parent + R_parent @ mjcf_vector(body, "pos", [0, 0, 0])
         name = body.get("name")
         if name in BODY_OF.values():
             for g in body.findall("geom"):
                 if g.get("type") == "mesh" and g.get("mesh"):
-                    Rg = R @ _rot(g)
-                    tg = t + R @ _vec(g, "pos", [0, 0, 0])
+                    Rg = R @ mjcf_rotation(g)
+                    tg = t + R @ mjcf_vector(g, "pos", [0, 0, 0])
                     f = mesh_files.get(g.get("mesh"), f"meshes/{name}.stl")
                     out[name] = (f, R_PROJECT_FROM_WORLD @ Rg, R_PROJECT_FROM_WORLD @ tg)
                     break

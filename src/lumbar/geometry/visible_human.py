@@ -30,7 +30,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from . import analysis as A
-from .core import FacetLandmarks, GeometryError, Level, Ligament, SpineGeometry, Vertebra, level_vertebrae
+from .core import (FacetLandmarks, GeometryError, Level, Ligament, SpineGeometry, Vertebra, level_vertebrae,
+                   levels_and_vertebrae)
 from .meshio import read_mesh, require_dir
 
 PREFIX = {"L1-L2": "L12", "L2-L3": "L23", "L3-L4": "L34", "L4-L5": "L45", "L5-S1": "L51"}
@@ -207,14 +208,13 @@ def _split_joint_layer(nodes: np.ndarray, tree_upper, tree_lower):
 
 
 def load_visible_human(path, levels=None) -> SpineGeometry:
-    from .loader import _levels_and_vertebrae  # noqa: PLC0415
     if not Path(path).is_dir():
         raise GeometryError(f"{path}: visible_human geometry directory missing; expected the visible_human_lss "
                             "folder (workflow config key geometry.path, or path= of load_geometry)")
     folder = require_dir(path, "visible_human geometry")
     for sub in ("meshes", "ligaments", "disc_fe", "facet_fe"):
         require_dir(folder / sub, f"visible_human '{sub}'")
-    levels, verts = _levels_and_vertebrae(levels)
+    levels, verts = levels_and_vertebrae(levels)
     # validate every file before computing anything
     files = [folder / "meshes" / f"{v}_{p}.obj" for v in verts for p in ("vertebra", "body")]
     for lv in levels:

@@ -31,6 +31,7 @@ import numpy as np
 import pandas as pd
 from scipy.spatial.transform import Rotation
 
+from .. import resources
 from ..geometry.myo_sim import R_PROJECT_FROM_WORLD, package_version
 
 GROUPS = ("MF", "IL", "LT", "QL", "Ps", "EO", "IO", "RA")
@@ -41,7 +42,7 @@ BODY_MAP = {"sacrum": "S1", "lumbar1": "L1", "lumbar2": "L2", "lumbar3": "L3", "
             "lumbar5": "L5", "torso": "L1", "Abdomen": "L5"}
 SOURCE_SPT_N_PER_M2 = 100.0e4          # 100 N/cm^2
 OPTIMAL_SL_UM = 2.8                    # Delp et al. 2001 (paper Sect. 2.5)
-DATA_DIR = Path(__file__).resolve().parents[3] / "data" / "muscles"
+DATA_DIR = resources.data_dir() / "muscles"
 
 
 @dataclass

@@ -1,0 +1,251 @@
+"""Architecture rules of the ``lumbar`` package (issue 17), checked on the source of every module:
+
+* no import circle between the package's modules (imports inside function bodies count too);
+* no module imports a private name (``_x``) of another ``lumbar`` module, or reaches one through a
+  module it imported (``from . import myo_sim`` then ``myo_sim._rot``);
+* no library module switches the user's matplotlib backend (``matplotlib.use`` / ``pyplot.switch_backend``).
+
+The modules are found with ``pkgutil.walk_packages`` and imported with ``importlib`` (so every module is also
+importable); the graph is built from their source with ``ast``. Dynamic imports
+(``importlib.import_module(variable)``, as in ``lumbar.tables.schema_of``) are not seen.
+
+The checkers are tested on a tiny fake package, so that each rule can fail.
+"""
+from __future__ import annotations
+
+import ast
+import importlib
+import importlib.util
+import pkgutil
+import sys
+import textwrap
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import networkx as nx
+import pytest
+
+import lumbar
+
+
+def _private(name: str) -> bool:
+    return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
+
+
+@dataclass
+class ModuleInfo:
+    name: str
+    path: Path
+    is_pkg: bool
+    tree: ast.Module = field(repr=False)
+
+
+def discover_modules(package) -> dict[str, ModuleInfo]:
+    """Every module of ``package`` (walk_packages + import_module), with its parsed source."""
+    names = [package.__name__] + [m.name for m in pkgutil.walk_packages(package.__path__, package.__name__ + ".")]
+    out = {}
+    for name in names:
+        mod = importlib.import_module(name)
+        path = Path(mod.__file__)
+        out[name] = ModuleInfo(name, path, path.name == "__init__.py",
+                               ast.parse(path.read_text(encoding="utf-8"), filename=str(path)))
+    return out
+
+
+def _resolve(info: ModuleInfo, node: ast.ImportFrom) -> str:
+    if not node.level:
+        return node.module or ""
+    package = info.name if info.is_pkg else info.name.rpartition(".")[0]
+    return importlib.util.resolve_name("." * node.level + (node.module or ""), package)
+
+
+@dataclass
+class Analysis:
+    graph: nx.DiGraph
+    private_imports: list      # (module, line, "target:name")
+    backend_switches: list     # (module, line, call)
+
+
+def analyse(modules: dict[str, ModuleInfo], root: str) -> Analysis:
+    """Intra-package import graph (module -> imported module), private-name imports, backend switches."""
+    g = nx.DiGraph()
+    g.add_nodes_from(modules)
+    private, backend = [], []
+
+    def inside(name):
+        return name == root or name.startswith(root + ".")
+
+    for info in modules.values():
+        aliases: dict[str, str] = {}            # local name -> lumbar module it is bound to
+        mpl_names: set[str] = set()             # local names of matplotlib / matplotlib.pyplot / their `use`
+        for node in ast.walk(info.tree):
+            if isinstance(node, ast.Import):
+                for a in node.names:
+                    if inside(a.name):
+                        target = a.name
+                        while target not in modules and "." in target:
+                            target = target.rpartition(".")[0]
+                        if target in modules and target != info.name:
+                            g.add_edge(info.name, target)
+                        if a.asname:
+                            aliases[a.asname] = a.name
+                    elif a.name in ("matplotlib", "matplotlib.pyplot"):
+                        mpl_names.add(a.asname or a.name.split(".")[0])
+            elif isinstance(node, ast.ImportFrom):
+                base = _resolve(info, node)
+                if base in ("matplotlib", "matplotlib.pyplot"):
+                    mpl_names.update(a.asname or a.name for a in node.names
+                                     if a.name in ("use", "switch_backend", "pyplot"))
+                if not inside(base):
+                    continue
+                for a in node.names:
+                    sub = f"{base}.{a.name}"
+                    if sub in modules:                       # `from . import effects`: the submodule
+                        if sub != info.name:
+                            g.add_edge(info.name, sub)
+                        aliases[a.asname or a.name] = sub
+                        if _private(a.name) and sub != info.name:
+                            private.append((info.name, node.lineno, sub))
+                    else:                                    # `from .effects import EFFECTS`: a name of base
+                        if base in modules and base != info.name:
+                            g.add_edge(info.name, base)
+                            if _private(a.name):
+                                private.append((info.name, node.lineno, f"{base}:{a.name}"))
+        for node in ast.walk(info.tree):
+            if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and _private(node.attr)
+                    and aliases.get(node.value.id, info.name) != info.name):
+                private.append((info.name, node.lineno, f"{aliases[node.value.id]}:{node.attr}"))
+            if isinstance(node, ast.Call):
+                f = node.func
+                if isinstance(f, ast.Attribute) and f.attr in ("use", "switch_backend") and (
+                        isinstance(f.value, ast.Name) and f.value.id in mpl_names
+                        or isinstance(f.value, ast.Attribute) and f.value.attr == "pyplot"):
+                    backend.append((info.name, node.lineno, ast.unparse(f)))
+                elif isinstance(f, ast.Name) and f.id in mpl_names and f.id in ("use", "switch_backend"):
+                    backend.append((info.name, node.lineno, f.id))
+    return Analysis(g, private, backend)
+
+
+def import_cycles(graph: nx.DiGraph, limit: int = 20) -> list[list[str]]:
+    """Up to ``limit`` elementary cycles of the import graph, each starting at its smallest module name
+    (empty: no circle)."""
+    out = []
+    for c in nx.simple_cycles(graph):
+        k = c.index(min(c))
+        out.append(c[k:] + c[:k])
+        if len(out) >= limit:
+            break
+    return sorted(out)
+
+
+@pytest.fixture(scope="module")
+def lumbar_analysis():
+    return analyse(discover_modules(lumbar), "lumbar")
+
+
+# ------------------------------------------------------------------ the package
+def test_every_module_is_found_and_imports(lumbar_analysis):
+    nodes = set(lumbar_analysis.graph)
+    for name in ("lumbar", "lumbar.effects", "lumbar.stepwise_reduction", "lumbar.geometry.loader",
+                 "lumbar.geometry.visible_human", "lumbar.l2s1"):
+        assert name in nodes
+    assert lumbar_analysis.graph.number_of_edges() > 20          # the graph sees the package's imports
+
+
+def test_no_import_cycle(lumbar_analysis):
+    cycles = import_cycles(lumbar_analysis.graph)
+    assert not cycles, "import circles (module -> ... -> module):\n" + "\n".join(" -> ".join(c + c[:1])
+                                                                               for c in cycles)
+
+
+def test_no_private_name_of_another_module(lumbar_analysis):
+    hits = lumbar_analysis.private_imports
+    assert not hits, "private names used across modules:\n" + "\n".join(f"{m}:{ln} uses {t}" for m, ln, t in hits)
+
+
+def test_library_never_switches_the_matplotlib_backend(lumbar_analysis):
+    hits = lumbar_analysis.backend_switches
+    assert not hits, "backend switches in the library:\n" + "\n".join(f"{m}:{ln} {c}" for m, ln, c in hits)
+
+
+def test_one_effect_registry():
+    from lumbar import effects, stepwise_reduction
+    assert "disc_tension" in effects.EFFECTS
+    for name in ("EFFECTS", "register_effect", "effect_params"):
+        if hasattr(stepwise_reduction, name):                   # a re-export, never a second registry
+            assert getattr(stepwise_reduction, name) is getattr(effects, name)
+    assert not hasattr(effects, "simulate_stepwise_reduction")
+
+
+# ------------------------------------------------------------------ the checkers can fail
+FAKE = {
+    "__init__.py": "",
+    "a.py": """
+        import matplotlib
+        from . import b
+
+        def f():
+            from .sub.c import _helper       # private name of another module, inside a function
+            matplotlib.use("Agg")
+            return _helper
+        """,
+    "b.py": """
+        def g():
+            from .sub import c               # b -> sub.c (inside a function)
+            return c._hidden()               # private attribute through a module alias
+        """,
+    "sub/__init__.py": "",
+    "sub/c.py": """
+        import matplotlib.pyplot as plt
+
+        def _helper():
+            from ..a import f                # c -> a: closes a -> b -> c -> a
+            plt.switch_backend("Agg")
+            return f
+
+        def _hidden():
+            return 1
+        """,
+    "ok.py": """
+        from .sub import c
+        from . import b as bee
+        import fakepkg_arch.sub.c as cc
+
+        def _own():
+            return 0
+
+        def h():
+            return _own(), c.__name__, bee.g, cc
+        """,
+}
+
+
+@pytest.fixture
+def fake_package(tmp_path, monkeypatch):
+    root = tmp_path / "fakepkg_arch"
+    for rel, text in FAKE.items():
+        p = root / rel
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_text(textwrap.dedent(text))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    yield importlib.import_module("fakepkg_arch")
+    for name in [n for n in sys.modules if n == "fakepkg_arch" or n.startswith("fakepkg_arch.")]:
+        del sys.modules[name]
+
+
+def test_cycle_checker_on_a_tiny_graph():
+    assert import_cycles(nx.DiGraph([("x", "y"), ("y", "z")])) == []
+    assert import_cycles(nx.DiGraph([("x", "y"), ("y", "z"), ("z", "x")])) == [["x", "y", "z"]]
+
+
+def test_checkers_find_the_faults_of_a_fake_package(fake_package):
+    res = analyse(discover_modules(fake_package), "fakepkg_arch")
+    assert set(res.graph) == {"fakepkg_arch", "fakepkg_arch.a", "fakepkg_arch.b", "fakepkg_arch.ok",
+                              "fakepkg_arch.sub", "fakepkg_arch.sub.c"}
+    assert ("fakepkg_arch.b", "fakepkg_arch.sub.c") in res.graph.edges
+    assert ("fakepkg_arch.ok", "fakepkg_arch.sub.c") in res.graph.edges
+    assert import_cycles(res.graph) == [["fakepkg_arch.a", "fakepkg_arch.b", "fakepkg_arch.sub.c"],
+                                        ["fakepkg_arch.a", "fakepkg_arch.sub.c"]]
+    assert sorted((m, t) for m, _, t in res.private_imports) == [
+        ("fakepkg_arch.a", "fakepkg_arch.sub.c:_helper"), ("fakepkg_arch.b", "fakepkg_arch.sub.c:_hidden")]
+    assert sorted(m for m, _, _ in res.backend_switches) == ["fakepkg_arch.a", "fakepkg_arch.sub.c"]
