@@ -101,16 +101,36 @@ def test_ipopt_iterates_from_a_perturbed_start_to_the_same_optimum(solver, stand
     assert np.abs(r.a - s.a).max() < 0.02
 
 
-@pytest.mark.slow
-def test_multistart_reports_the_lower_cost_certified_optimum(model):
-    """19 deg extension has two certified local optima (SQP: cost 3.038; IPOPT from the same cold start:
-    2.896); with multistart the lower one is reported, and the SQP's is kept as ``other_cost``."""
-    from lumbar.muscle_model import make_solver, solve_postures
-    single = solve_postures(model, make_solver(model, {"multistart": False}), ["extension_19deg"])[0]
-    multi = solve_postures(model, make_solver(model, {"multistart": True}), ["extension_19deg"])[0]
-    assert single.certified and multi.certified
-    assert multi.cost <= single.cost + 1e-9
-    if multi.optimum == "ipopt_cold":
-        assert multi.cost < single.cost and multi.other_cost == pytest.approx(single.cost)
-    else:
-        assert multi.cost == pytest.approx(single.cost) and not multi.other_cost < single.cost - 1e-6
+def test_multistart_reports_the_lower_cost_certified_optimum(solver, standing):
+    """Multistart keeps the lower certified cost: a second start that reaches a certified optimum of lower cost
+    replaces the SQP's (``optimum`` ipopt_cold, ``other_cost`` = the SQP's cost); one of higher cost does not.
+    (The real case, 19 deg extension: SQP 3.038, IPOPT from the cold start 2.896, is measured by
+    benchmarks/bench_muscle_solvers.py; a stub certifier keeps this test fast.)"""
+    import copy
+    from lumbar.muscles.nlp import NLPResult
+    s, params = standing
+
+    class Stub:
+        tol = 1e-5
+
+        def __init__(self, a):
+            self.a = a
+
+        def solve(self, target, p, x0, R0, a0, warm=True, max_iter=None):
+            return NLPResult(s.x, s.R, self.a, True, "Solve_Succeeded", 1e-9, 0.0, 7, 0.0)
+
+    keep = solver.certifier
+    try:
+        for scale, replaced in ((0.9, True), (1.1, False)):
+            solver.certifier = Stub(s.a * scale)       # same poses, activations scaled: cost lower / higher
+            out = [copy.deepcopy(s)]
+            solver._multistart(out, np.array([0.0]), params)
+            o = out[0]
+            assert (o.optimum == "ipopt_cold") is replaced
+            if replaced:
+                assert o.cost < s.cost and o.other_cost == pytest.approx(s.cost)
+                assert np.allclose(o.a, s.a * 0.9) and o.certified and o.reached
+            else:
+                assert o.cost == s.cost and o.other_cost > s.cost and np.allclose(o.a, s.a)
+    finally:
+        solver.certifier = keep

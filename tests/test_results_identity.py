@@ -1,8 +1,8 @@
 """Byte identity of the results (issue 17): the test-config DAG writes the same result tables as the commit
-the manifest was written at (tests/data/results_sha256_test_config.json: 46 tables of every stage except the
-muscle model; written at 2ed2998 and checked unchanged after the issue-17 restructuring). A refactoring must
-leave it green; a change meant to change results re-writes the manifest (tests/data/results_manifest.py) and
-says so in its commit."""
+the manifest was written at (tests/data/results_sha256_test_config.json: 44 tables of every stage except the
+muscle model and the two *_vs_paper tables, whose paper columns come from ../shared; written at 2ed2998 and
+checked unchanged after the issue-17 restructuring). A refactoring must leave it green; a change meant to
+change results re-writes the manifest (tests/data/results_manifest.py) and says so in its commit."""
 import importlib.util
 import json
 from pathlib import Path

@@ -168,7 +168,7 @@ class LumbarMuscleModel:
         as-segmented reference pose (the paper's model has the multifidus at its in-situ 2.27 um in upright
         standing, Sect. 3.2.2): the path lengths of that solution become ``l_ref``. The solution depends a
         little on ``l_ref`` (active force-length), so this is repeated ``iterations`` times."""
-        solver = make_solver(self)
+        solver = make_solver(self, {"multistart": False})   # one start: the SQP optimum, IPOPT-certified
         for _ in range(iterations):
             sol = solve_postures(self, solver, [activity])[0]
             if not sol.converged:

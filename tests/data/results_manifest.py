@@ -14,7 +14,9 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 MANIFEST = HERE / "results_sha256_test_config.json"
-EXCLUDE = ("benchmarks/", "muscle", "sobol", "sensitivity", "in_vivo", "flexion_relaxation")
+# muscle-model tables: changed by issue 16; *_vs_paper: their paper columns come from ../shared
+# (paths.published_model_results), which the test DAG's copy of the repository does not have beside it
+EXCLUDE = ("benchmarks/", "muscle", "sobol", "sensitivity", "in_vivo", "flexion_relaxation", "_vs_paper")
 
 
 def covered(results: Path) -> list[str]:

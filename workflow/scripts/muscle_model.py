@@ -134,14 +134,14 @@ if rule == "muscle_validation":
                   "optimal fibre and path lengths within 3 % of Christophy's table; MuJoCo wrapping changes extensor "
                   "lengths by < 3 mm). Extensor fibres stretch ~20-30 % from in-situ 2.2-2.4 um and reach only the "
                   "toe of the passive curve; 334 N over the extensors' PCSA would need SL ~3.5 um in all of them "
-                  "(25 % beyond SSL 2.8). Not tuned; README, Muscle-driven model.")
+                  "(25 % beyond SSL 2.8). Not tuned; docs/findings.md, Muscle-driven model.")
     write_table_atomic(seg[["level", "activity", "compressive_n", "shear_n", "moment_nm", "converged",
                             "lateral_moment_nm", "axial_moment_nm", "reached", "certified", "kkt_residual"]],
-                       snakemake.output[0])
-    write_table_atomic(val2, snakemake.output[1])
-    Path(snakemake.output[2]).parent.mkdir(parents=True, exist_ok=True)
-    Path(snakemake.output[2]).write_text(json.dumps(metrics, indent=2, sort_keys=True) + "\n")
-    write_table_atomic(fr, snakemake.output[3])
+                       snakemake.output.segment_loads)
+    write_table_atomic(val2, snakemake.output.validation)
+    Path(snakemake.output.metrics).parent.mkdir(parents=True, exist_ok=True)
+    Path(snakemake.output.metrics).write_text(json.dumps(metrics, indent=2, sort_keys=True) + "\n")
+    write_table_atomic(fr, snakemake.output.flexion_relaxation)
     log.info("in-vivo validation: %s", metrics)
     # Fig. 3 analog
     fig, ax = plt.subplots(figsize=(6.5, 4))
@@ -163,20 +163,20 @@ if rule == "muscle_validation":
     ax.set_title(f"L4-L5 IDP, model vs in vivo (R2 = {r2:.2f}, n = {metrics['n']})" if r2 is not None
                  else "L4-L5 IDP, model vs in vivo (R2 undefined: < 3 converged)", fontsize=10)
     ax.legend(fontsize=7)
-    _save(fig, snakemake.output[4])
+    _save(fig, snakemake.output.figure)
     base = {}
     for post, name in mm.POSTURES.items():
         s = sols[names.index(name)]
         base.update({f"{post}_x": s.x, f"{post}_R": s.R, f"{post}_a": s.a})
-    tmp = Path(snakemake.output[5]).with_suffix(".tmp.npz")
+    tmp = Path(snakemake.output.baseline).with_suffix(".tmp.npz")
     np.savez(tmp, **base)
-    tmp.replace(snakemake.output[5])
+    tmp.replace(snakemake.output.baseline)
     fas = model.ms.table()
     fas["l_ref_m"] = model.props.l_ref_m
     fas["l_opt_m"] = model.props.l_opt_m
-    write_table_atomic(fas, snakemake.output[6])
+    write_table_atomic(fas, snakemake.output.fascicles)
     cap = mm.capacity_table(model, [s for n, s in zip(names, sols) if n in keep], keep)
-    write_table_atomic(cap, snakemake.output[7])
+    write_table_atomic(cap, snakemake.output.capacity)
     short = cap[(cap["pose"] == "own solution") & (cap["demand_ratio"] > 1.0)]
     for _, r in short.iterrows():
         log.info("%s, %s: external + passive muscle moment %.1f N*m exceeds the active extension capacity %.1f N*m "
@@ -186,11 +186,7 @@ if rule == "muscle_validation":
 elif rule == "muscle_sensitivity":
     import time
 
-    chunk = getattr(snakemake.wildcards, "parameter", None)
-    if chunk is not None:
-        param, ssl = snakemake.wildcards.parameter, snakemake.wildcards.ssl_um
-    else:
-        param, ssl = snakemake.params.chunk["parameter"], snakemake.params.chunk["ssl_um"]
+    param, ssl = snakemake.wildcards.parameter, snakemake.wildcards.ssl_um
     s = p["sensitivity"]
     rows = mm.sensitivity_rows(param, None if ssl == "none" else float(ssl), s[param], s["scopes"], s["postures"])
     model = _model(p)
@@ -270,10 +266,7 @@ elif rule == "muscle_sensitivity_table":
 elif rule == "muscle_sobol_chunk":
     import time
 
-    wc = getattr(snakemake, "wildcards", None)
-    chunk = dict(posture=wc.posture, chunk=wc.chunk) if wc is not None and hasattr(wc, "posture") \
-        else snakemake.params.chunk
-    posture, k = chunk["posture"], int(chunk["chunk"])
+    posture, k = snakemake.wildcards.posture, int(snakemake.wildcards.chunk)
     sb = p["sobol"]
     X = mm.sobol_samples(sb["n_train"], snakemake.params.seed)
     rows = mm.sobol_chunk_rows(len(X), sb.get("chunks", 1), k)
