@@ -215,3 +215,13 @@ def dag_second_workdir(dag_workdir, tmp_path_factory) -> Path:
         run_dag(second)
         return second
     return _wait_dag("second")
+
+
+@pytest.fixture(scope="session", name="model")
+def muscle_model():
+    """``model``: the default muscle-driven L1-S1 model (lumbar.muscle_model.LumbarMuscleModel), built once per
+    session for test_muscles, test_muscle_model and test_nlp; read-only for tests (solvers take their settings
+    from their own fixtures)."""
+    from lumbar.muscle_model import LumbarMuscleModel
+    return LumbarMuscleModel()
+

@@ -10,12 +10,6 @@ from lumbar import so3
 
 
 @pytest.fixture(scope="module")
-def model():
-    from lumbar.muscle_model import LumbarMuscleModel
-    return LumbarMuscleModel()
-
-
-@pytest.fixture(scope="module")
 def solver(model):
     from lumbar.muscle_model import make_solver
     return make_solver(model, {"max_iter": 40, "multistart": False})
@@ -255,19 +249,6 @@ def test_kkt_residual_certifies_the_optimum_and_detects_a_perturbation(model, so
     a2[:20] += 0.05
     st = r._state(s.x[None], s.R[None], a2[None], params, np.arange(1), np.array([0.0]))
     assert r.kkt_residuals(st)[0] > 100 * r.kkt_tol
-
-
-def test_sobol_chunks_cover_the_samples():
-    """The PCE training design (n_train QMC points, tests/test_sobol.py for the indices) split into chunks."""
-    from lumbar.muscle_model import sobol_chunk_rows, sobol_samples
-    X = sobol_samples(8, 1)
-    assert X.shape == (8, 5)
-    rows = np.concatenate([sobol_chunk_rows(len(X), 3, k) for k in range(3)])
-    assert rows.tolist() == list(range(8))
-    with pytest.raises(ValueError, match="power of two"):
-        sobol_samples(14, 1)
-    with pytest.raises(ValueError, match="chunk"):
-        sobol_chunk_rows(8, 3, 3)
 
 
 def test_unreachable_posture_is_flagged_not_silent(model, solver):

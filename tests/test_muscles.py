@@ -132,12 +132,6 @@ def test_sites_lie_on_their_vertebrae(muscle_set):
         assert np.median(d) < 0.015, (v, np.median(d))
 
 
-@pytest.fixture(scope="module")
-def model():
-    from lumbar.muscle_model import LumbarMuscleModel
-    return LumbarMuscleModel()
-
-
 def _pose(model, seed=0):
     from lumbar import so3
     rng = np.random.default_rng(seed)

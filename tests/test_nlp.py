@@ -10,12 +10,6 @@ from lumbar import so3
 
 
 @pytest.fixture(scope="module")
-def model():
-    from lumbar.muscle_model import LumbarMuscleModel
-    return LumbarMuscleModel()
-
-
-@pytest.fixture(scope="module")
 def solver(model):
     from lumbar.muscle_model import make_solver
     return make_solver(model, {"max_iter": 60, "multistart": False})

@@ -130,24 +130,39 @@ class _Problem:
         return st["c"], g, grad, Jg, x, R
 
 
-class _FG(ca.Callback):
-    def __init__(self, prob, name="posture_fg"):
+class _Callback(ca.Callback):
+    """A CasADi callback over the posture problem, its inputs and outputs given as sparsity lists (CasADi asks
+    for their number and each one's sparsity through the get_* methods)."""
+
+    def __init__(self, prob, name, ins, outs, opts=None):
         ca.Callback.__init__(self)
-        self.p = prob
-        self.nz = prob.n + prob.nm
-        self.construct(name, {"enable_fd": False})
+        self.p, self.nz = prob, prob.n + prob.nm
+        self._ins, self._outs = ins, outs
+        self.construct(name, opts or {})
 
     def get_n_in(self):
-        return 1
+        return len(self._ins)
 
     def get_n_out(self):
-        return 2
+        return len(self._outs)
 
     def get_sparsity_in(self, i):
-        return ca.Sparsity.dense(self.nz, 1)
+        return self._ins[i]
 
     def get_sparsity_out(self, i):
-        return ca.Sparsity.dense(1, 1) if i == 0 else ca.Sparsity.dense(self.p.n, 1)
+        return self._outs[i]
+
+
+def _dense(rows, cols=1):
+    return ca.Sparsity.dense(rows, cols)
+
+
+class _FG(_Callback):
+    """Cost f and constraints g at z, with the exact Jacobian (:class:`_Jac`)."""
+
+    def __init__(self, prob, name="posture_fg"):
+        nz = prob.n + prob.nm
+        super().__init__(prob, name, [_dense(nz)], [_dense(1), _dense(prob.n)], {"enable_fd": False})
 
     def eval(self, arg):
         f, g = self.p.evaluate(np.asarray(arg[0]))[:2]
@@ -157,56 +172,29 @@ class _FG(ca.Callback):
         return True
 
     def get_jacobian(self, name, inames, onames, opts):
-        self._jac = _Jac(self.p, name, self.nz)
+        self._jac = _Jac(self.p, name)
         return self._jac
 
 
-class _Jac(ca.Callback):
+class _Jac(_Callback):
     """Jacobian of (f, g): inputs (z, f, g) (CasADi passes the nominal outputs too), outputs df/dz, dg/dz."""
 
-    def __init__(self, prob, name, nz):
-        ca.Callback.__init__(self)
-        self.p, self.nz = prob, nz
-        self.construct(name, {})
-
-    def get_n_in(self):
-        return 3
-
-    def get_n_out(self):
-        return 2
-
-    def get_sparsity_in(self, i):
-        return [ca.Sparsity.dense(self.nz, 1), ca.Sparsity.dense(1, 1), ca.Sparsity.dense(self.p.n, 1)][i]
-
-    def get_sparsity_out(self, i):
-        return ca.Sparsity.dense(1, self.nz) if i == 0 else ca.Sparsity.dense(self.p.n, self.nz)
+    def __init__(self, prob, name):
+        nz = prob.n + prob.nm
+        super().__init__(prob, name, [_dense(nz), _dense(1), _dense(prob.n)], [_dense(1, nz), _dense(prob.n, nz)])
 
     def eval(self, arg):
         _, _, grad, Jg = self.p.evaluate(np.asarray(arg[0]))[:4]
         return [grad[None, :], Jg]
 
 
-class _Hess(ca.Callback):
+class _Hess(_Callback):
     """Hessian of the Lagrangian for IPOPT (nlpsol option ``hess_lag``): inputs (z, p, lam_f, lam_g), output
     its upper triangle (dense)."""
 
     def __init__(self, prob, name="posture_hess"):
-        ca.Callback.__init__(self)
-        self.p, self.nz = prob, prob.n + prob.nm
-        self.construct(name, {})
-
-    def get_n_in(self):
-        return 4
-
-    def get_n_out(self):
-        return 1
-
-    def get_sparsity_in(self, i):
-        return [ca.Sparsity.dense(self.nz, 1), ca.Sparsity.dense(0, 1), ca.Sparsity.dense(1, 1),
-                ca.Sparsity.dense(self.p.n, 1)][i]
-
-    def get_sparsity_out(self, i):
-        return ca.Sparsity.upper(self.nz)
+        nz = prob.n + prob.nm
+        super().__init__(prob, name, [_dense(nz), _dense(0), _dense(1), _dense(prob.n)], [ca.Sparsity.upper(nz)])
 
     def eval(self, arg):
         H = self.p.hessian(np.asarray(arg[0]), float(arg[2]), np.asarray(arg[3]))
