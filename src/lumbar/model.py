@@ -166,6 +166,23 @@ class SpineModel:
             cache[key] = (idx, [(b, np.array(v)) for b, v in g.items()])
         return cache[key][1]
 
+    def _pairs(self, ia, ib):
+        """[((body a, body b), elements)] for two element-to-body index arrays (cached per pair of arrays);
+        the elements of a pair as a slice where they are contiguous (a view instead of a copy)."""
+        key = (id(ia), id(ib))
+        cache = self.__dict__.setdefault("_pair_cache", {})
+        if key not in cache:
+            pairs = {}
+            for n, k in enumerate(zip(np.asarray(ia).tolist(), np.asarray(ib).tolist())):
+                pairs.setdefault(k, []).append(n)
+            out = []
+            for k, v in pairs.items():
+                v = np.array(v)
+                contiguous = np.all(np.diff(v) == 1)
+                out.append((k, slice(int(v[0]), int(v[-1]) + 1) if contiguous else v))
+            cache[key] = (ia, ib, out)
+        return cache[key][2]
+
     def _attach(self, x, R, idx, s):
         """World positions p (B, n, 3) of reference points s (n, 3) on bodies idx, and x of each body."""
         B = x.shape[0]
@@ -229,11 +246,7 @@ class SpineModel:
         """
         Qa = np.concatenate([f, so3.cross(ra, f)], axis=-1)
         Qb = -np.concatenate([f, so3.cross(rb, f)], axis=-1)
-        pairs = {}
-        for n, key in enumerate(zip(ia.tolist(), ib.tolist())):
-            pairs.setdefault(key, []).append(n)
-        for (i, j), idx in pairs.items():
-            sel = np.array(idx)
+        for (i, j), sel in self._pairs(ia, ib):
             if i >= 0:
                 Q[:, i] += Qa[:, sel].sum(1)
             if j >= 0:

@@ -255,14 +255,18 @@ class LumbarMuscleModel:
         return self.props.with_(**{f: st[:, k] for k, f in enumerate(PROP_FIELDS)})
 
     # ------------------------------------------------------------------ evaluation
-    def evaluate(self, x, R, loads=None, fmask=1.0, cmask=1.0, jacobian=True, params=None, levels=False):
+    def evaluate(self, x, R, loads=None, fmask=1.0, cmask=1.0, jacobian=True, params=None, levels=False,
+                 muscles=False):
         """Residual (B, nb, 6) and Jacobian (B, nb, 6, nb, 6).
 
         ``params``: ``activation`` (B, nm); muscle properties as ``props`` (one MuscleProperties) or
         ``prop_stack`` (B, 5, nm, see :meth:`props_stack`); point loads as ``force_vec``/``force_pt``
         (B, nf, 3, see :meth:`load_arrays`) or ``forces`` (a :class:`PointForces`). With ``levels=True``
         also returns each level's passive load on its upper vertebra (B, nlev, 6) and its derivative
-        (B, nlev, 6, nb, 6) (or None without ``jacobian``)."""
+        (B, nlev, 6, nb, 6) (or None without ``jacobian``); with ``muscles=True`` also a dict of the muscle
+        path lengths ``L`` (B, nm), their derivative ``G`` (B, nm, nb, 6) and the active force at full
+        activation ``act1`` (B, nm) [N] (what the redundancy solver needs for dQ/da, without evaluating the
+        paths twice)."""
         params = params or {}
         B = x.shape[0]
         a = np.broadcast_to(params.get("activation", 0.0), (B, self.ms.n))
@@ -283,13 +287,13 @@ class LumbarMuscleModel:
                 if jacobian:
                     DL[:, k] = j[:, up]
         L, Gd = self.paths.lengths(x, R, gradient=True)
-        T, dT, _, _ = props.tension(L, a)
+        T, dT, act1, _ = props.tension(L, a)
         q, j = self.cables.evaluate(x, R, fmask=T[:, self.paths.seg_m], jacobian=jacobian)
         Q += q
         if jacobian:
             J += j
             g = Gd.reshape(B, self.ms.n, -1)
-            J -= np.einsum("bm,bmi,bmj->bij", dT, g, g).reshape(J.shape)
+            J -= (np.swapaxes(g * dT[..., None], 1, 2) @ g).reshape(J.shape)   # sum_m dT_m g_m g_m^T (BLAS)
         items = []
         if "force_vec" in params:
             fv, fp = np.broadcast_to(params["force_vec"], (B,) + np.shape(params["force_vec"])[-2:]), \
@@ -307,9 +311,10 @@ class LumbarMuscleModel:
                     J[:, b, 3:, b, 3:] -= so3.hat(np.cross(r, fw))
                 else:
                     J[:, b, 3:, b, 3:] += so3.hat(fw) @ so3.hat(r)
-        if levels:
-            return Q, J, FL, DL
-        return Q, J
+        out = (Q, J) + ((FL, DL) if levels else ())
+        if muscles:
+            out += ({"L": L, "G": Gd, "act1": act1},)
+        return out
 
     def reference_state(self, batch=1):
         x = np.broadcast_to(self.c, (batch, self.nb, 3)).copy()
@@ -455,6 +460,7 @@ def make_solver(model, cfg=None):
     w = Weights(**{k: cfg[k] for k in keys if k in cfg})
     solver = RedundancySolver(model, w, max_iter=cfg.get("max_iter", 150),
                               max_tracking_deg=cfg.get("max_tracking_deg", 1.0))
+    solver.batch_size = int(cfg.get("batch_size", solver.batch_size))
     certifier = cfg.get("certifier", "ipopt")
     if certifier == "ipopt":
         solver.certifier = IpoptPostureSolver(solver, tol=cfg.get("ipopt_tol", 1e-5),
@@ -482,11 +488,13 @@ def solve_postures(model, solver, activities, props_list=None, start=None):
     return solver.solve_batch([a.thorax_flexion_deg for a in acts], params, **kw)
 
 
-def solve_with_progress(model, solver, activities, props_list=None, start=None, batch_size=16, label="scenarios"):
-    """:func:`solve_postures` in batches of ``batch_size`` scenarios, logging after each batch the scenarios
+def solve_with_progress(model, solver, activities, props_list=None, start=None, batch_size=None, label="scenarios"):
+    """:func:`solve_postures` in batches of ``batch_size`` scenarios (None: the solver's ``batch_size``, config
+    ``muscle_model.solver.batch_size``), logging after each batch the scenarios
     done / total, the elapsed time and an estimate of the remaining time (through this module's logger; the
     workflow scripts send it to the rule's log and the console)."""
     n = len(activities)
+    batch_size = int(batch_size or solver.batch_size)
     out, t0 = [], time.perf_counter()
     for k in range(0, n, batch_size):
         sl = slice(k, k + batch_size)
@@ -724,7 +732,7 @@ def sensitivity_rows(parameter, ssl_um, values, scopes, postures) -> pd.DataFram
     return pd.DataFrame(rows)
 
 
-def run_sensitivity(model, solver, rows: pd.DataFrame, baseline: dict, area_m2=18e-4, batch_size=16,
+def run_sensitivity(model, solver, rows: pd.DataFrame, baseline: dict, area_m2=18e-4, batch_size=None,
                     label="sensitivity") -> pd.DataFrame:
     """Solve every row (batches of ``batch_size``, progress logged), warm-started from the baseline solution
     of its posture."""
@@ -806,7 +814,7 @@ def sobol_chunk_rows(n_samples: int, n_chunks: int, chunk: int) -> np.ndarray:
 
 
 def sobol_evaluate(model, solver, baseline: dict, X: np.ndarray, rows, posture: str, scope="ALL", area_m2=18e-4,
-                   batch_size=16, label="sobol") -> pd.DataFrame:
+                   batch_size=None, label="sobol") -> pd.DataFrame:
     """Solve the Sobol samples ``X[rows]`` in ``posture`` (parameters applied to ``scope``, warm-started from
     the baseline), one table row per sample: L4-L5 IDP, reached, certified, KKT residual."""
     if posture not in POSTURES:

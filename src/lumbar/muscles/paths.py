@@ -142,10 +142,27 @@ class MusclePaths:
         G = np.zeros((B, self.nm, nb, 6))
         ga = np.concatenate([u, np.cross(ra, u)], axis=-1)
         gb = -np.concatenate([u, np.cross(rb, u)], axis=-1)
-        for idx, g in ((self.seg_a, ga), (self.seg_b, gb)):
-            ok = idx >= 0
-            np.add.at(G, (slice(None), self.seg_m[ok], idx[ok]), g[:, ok])
+        for side, g in enumerate((ga, gb)):
+            for b, sel, S in self._scatter[side]:       # G[:, m, b] += sum of the muscle's segments on b
+                G[:, :, b] += S @ g[:, sel]
         return L, G
+
+    @property
+    def _scatter(self):
+        """Per path end (a, b) and body: (body, segments, muscle-by-segment indicator) to sum the segments'
+        length gradients into their muscles by matrix products (cached; np.add.at was 4x slower)."""
+        if self.__dict__.get("_scatter_cache") is None:
+            out = []
+            for idx in (self.seg_a, self.seg_b):
+                lst = []
+                for b in np.unique(idx[idx >= 0]):
+                    sel = np.flatnonzero(idx == b)
+                    S = np.zeros((self.nm, sel.size))
+                    S[self.seg_m[sel], np.arange(sel.size)] = 1.0
+                    lst.append((int(b), sel, S))
+                out.append(lst)
+            self._scatter_cache = out
+        return self._scatter_cache
 
     def reference_lengths(self, nb):
         x = self.c[None].copy()

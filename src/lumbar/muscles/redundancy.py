@@ -198,6 +198,7 @@ class RedundancySolver:
         self.polish_from = 1e-3      # N, N*m: residual below which the final Newton polish takes over
         self.max_step_m, self.max_step_rad = 1e-3, 0.02   # per-iteration step limits of the poses
         self.restore_iter = 4        # Newton corrections of each trial point back onto equilibrium
+        self.batch_size = 64         # postures advanced together by the callers' batched loops (muscle_model)
         # start (cold): for thorax targets beyond start_min_deg, the free vertebrae are first put in
         # equilibrium with the thorax held (a = 0, up to start_iter Newton iterations); nearer the reference
         # posture the SQP starts from the reference pose directly (the passive spine under gravity alone
@@ -231,10 +232,9 @@ class RedundancySolver:
         """Everything one SQP iteration needs at (x, R, a), for the scenarios ``idx`` (one evaluation)."""
         m = self.m
         p = self._params(params, a, idx)
-        Q, J, FL, DL = m.evaluate(x, R, params=p, levels=True)
+        Q, J, FL, DL, mus = m.evaluate(x, R, params=p, levels=True, muscles=True)
         e, Te = self.tracking(R, targets)
-        L, Gd = m.paths.lengths(x, R)
-        act1 = m.properties(p).tension(L, 1.0)[2]
+        Gd, act1 = mus["G"], mus["act1"]
         n = 6 * m.nb
         Bm = -np.swapaxes(Gd.reshape(len(idx), m.ms.n, n) * act1[..., None], 1, 2)   # dQ/da (B, n, nm)
         return dict(Q=Q.reshape(-1, n), J=J.reshape(-1, n, n), FL=FL, DL=DL, e=e, Te=Te, Bm=Bm,
@@ -448,7 +448,12 @@ class RedundancySolver:
         error; ``sqp_kkt_residual`` keeps the SQP's own measure. Unreached postures get IPOPT's error at the
         returned point (no certificate)."""
         B = len(out)
+        t0 = time.perf_counter()
         for i, o in enumerate(out):
+            if i and i % 16 == 0:
+                el = time.perf_counter() - t0
+                log.info("IPOPT certificate: %d / %d postures done, %.0f s elapsed, ~%.0f s remaining", i, B, el,
+                         el / i * (B - i))
             p = {k: (v[i:i + 1] if isinstance(v, np.ndarray) and v.ndim and v.shape[0] == B else v)
                  for k, v in params.items()}
             o.sqp_kkt_residual = o.kkt_residual
@@ -460,7 +465,7 @@ class RedundancySolver:
             if chk.success:
                 o.certified = True
             else:
-                r = self.certifier.solve(targets[i], p, o.x, o.R, o.a)
+                r = self.certifier.solve(targets[i], p, o.x, o.R, o.a, warm="primal")
                 st = self.evaluate_state(r.x[None], r.R[None], r.a[None], p, [targets[i]])
                 terr = float(np.linalg.norm(st["e"][0]))
                 eq = r.equilibrium_residual < 1e-6
@@ -566,18 +571,40 @@ class RedundancySolver:
             pred *= fac
             ts = self.line_search
             nt = len(ts)
-            tt = np.repeat(np.asarray(ts)[None], act.size, 0).reshape(-1)
-            rep = np.repeat(np.arange(act.size), nt)
-            an = a[act][rep] + tt[:, None] * da[rep]
-            dqt = tt[:, None, None] * dq[rep]
-            xn = x[act][rep] + dqt[..., :3]
-            Rn = so3.exp(dqt[..., 3:]) @ R[act][rep]
-            if not held and self.restore_iter:
-                xn, Rn = self._restore(xn, Rn, an, params, act[rep])
-            sn = self._state(xn, Rn, an, params, act[rep], targets[act][rep])
             iters[act] += 1
             m_old = self._merit({k: v[act] for k, v in st.items()}, mu[act], held)
-            m_new = self._merit(sn, mu[act][rep], held).reshape(act.size, nt)
+            # trial points: the full step first, for every scenario at once; the shorter steps only where it
+            # fails the Armijo test (about a quarter of the steps; evaluating all of them in one batch cost
+            # six trial evaluations per iteration). The step chosen is the same as with all of them.
+            m_new = np.full((act.size, nt), np.inf)
+            xn = np.zeros((act.size * nt, m.nb, 3))
+            Rn = np.zeros((act.size * nt, m.nb, 3, 3))
+            an = np.zeros((act.size * nt, nm))
+            sn = {}
+
+            def trial(rows, cols):
+                kk, jj = np.repeat(rows, len(cols)), np.tile(cols, len(rows))
+                r, tt = kk * nt + jj, np.asarray(ts)[jj]
+                an[r] = a[act][kk] + tt[:, None] * da[kk]
+                dqt = tt[:, None, None] * dq[kk]
+                xt, Rt = x[act][kk] + dqt[..., :3], so3.exp(dqt[..., 3:]) @ R[act][kk]
+                if not held and self.restore_iter:
+                    xt, Rt = self._restore(xt, Rt, an[r], params, act[kk])
+                xn[r], Rn[r] = xt, Rt
+                s_t = self._state(xt, Rt, an[r], params, act[kk], targets[act][kk])
+                for key, v in s_t.items():
+                    if key not in sn:
+                        sn[key] = np.zeros((act.size * nt,) + v.shape[1:], v.dtype)
+                    sn[key][r] = v
+                m_new[kk, jj] = self._merit(s_t, mu[act][kk], held)
+
+            first = np.flatnonzero(~skip)
+            if first.size:
+                trial(first, np.arange(1))
+                full = m_new[first, 0] <= m_old[first] - 1e-4 * ts[0] * np.maximum(pred[first], 0.0)
+                rest = first[~full]
+                if rest.size and nt > 1:
+                    trial(rest, np.arange(1, nt))
             for k, i in enumerate(act):
                 if skip[k]:
                     continue
