@@ -128,3 +128,38 @@ def test_multistart_reports_the_lower_cost_certified_optimum(solver, standing):
                 assert o.cost == s.cost and o.other_cost > s.cost and np.allclose(o.a, s.a)
     finally:
         solver.certifier = keep
+
+
+def test_full_step_first_line_search_reaches_the_same_optimum(model):
+    """The line search tries the full step alone first and the shorter ones only where it fails (issue 16,
+    speed); evaluating every step length at once (``full_step_first`` False, the former search) chooses the same
+    step, so both reach the same optimum from the same warm start (four standing Sobol samples, SQP alone)."""
+    from lumbar.muscle_model import POSTURES, make_solver, sobol_evaluate, solve_postures, sobol_samples
+    out = []
+    X = sobol_samples(16, 20261123)
+    for first in (True, False):
+        s = make_solver(model, {"certifier": "sqp"})
+        s.full_step_first = first
+        base = {"standing": solve_postures(model, s, [POSTURES["standing"]])[0]}
+        out.append(sobol_evaluate(model, s, base, X, np.arange(4), "standing"))
+    a, b = out
+    assert list(a["reached"]) == list(b["reached"]) and a["reached"].any()
+    assert np.allclose(a["idp_mpa"], b["idp_mpa"], rtol=1e-7, atol=1e-9)
+
+
+def test_primal_polish_certifies_a_perturbed_point_with_fewer_evaluations(solver, standing):
+    """IPOPT's polish of a point that fails the certificate starts from the primal point with IPOPT's own
+    multipliers (``warm="primal"``): on a perturbed standing optimum it certifies the same optimum as the start
+    with least-squares multipliers (``warm=True``), with no more model evaluations."""
+    s, params = standing
+    a0 = np.clip(s.a * 1.1 + 0.002, 0, 1)
+    cert = solver.certifier
+    res = {}
+    for warm in (True, "primal"):
+        n0 = cert.prob.n_eval
+        r = cert.solve(0.0, params, s.x, s.R, a0, warm=warm)
+        res[warm] = (r, cert.prob.n_eval - n0)
+    (rd, nd), (rp, npr) = res[True], res["primal"]
+    assert rd.success and rp.success, (rd.status, rp.status)
+    assert rp.cost == pytest.approx(rd.cost, rel=1e-6) and rp.cost == pytest.approx(s.cost, rel=1e-4)
+    assert npr <= nd, (npr, nd)

@@ -72,6 +72,7 @@ class SmoothSegmentedCurve:
         self.cx = self.px @ _B.T          # polynomial coefficients, powers u^5..u^0
         self.cy = self.py @ _B.T
         self.x_lo, self.x_hi = self.px[0, 0], self.px[-1, -1]
+        self._x_table = np.stack([np.polyval(c, _U_TABLE) for c in self.cx])   # x(u) per segment (monotone)
         if self.ends is None:
             self.y_lo, self.y_hi = self.py[0, 0], self.py[-1, -1]
             self.s_lo = self._slope_end(0, 0.0)
@@ -101,14 +102,23 @@ class SmoothSegmentedCurve:
             starts = self.px[:, 0]
             seg = np.clip(np.searchsorted(starts, xm, side="right") - 1, 0, len(starts) - 1)
             cx, cy = self.cx[seg], self.cy[seg]
-            a, b = np.zeros_like(xm), np.ones_like(xm)
-            u = 0.5 * (a + b)
+            # start: bracket and linear interpolation in a table of x(u) at 65 u per segment (Newton alone from
+            # u = 1/2 fell back to bisection near the segment ends, where dx/du vanishes: up to 30 sweeps)
+            xg = self._x_table
+            k = np.empty(xm.shape, int)
+            for sg in range(len(xg)):
+                on = seg == sg
+                k[on] = np.clip(np.searchsorted(xg[sg], xm[on], side="right") - 1, 0, xg.shape[1] - 2)
+            a, b = _U_TABLE[k], _U_TABLE[k + 1]
+            xa, xb = xg[seg, k], xg[seg, k + 1]
+            u = a + (b - a) * np.clip((xm - xa) / np.where(xb > xa, xb - xa, 1.0), 0.0, 1.0)
             # safeguarded Newton on x(u) = x (x(u) monotone): a Newton step that leaves the bracket [a, b] is
             # replaced by bisection. Converged when every point's step is at round-off or its residual x(u) - x
-            # is within 4 ulp of x: a step landing on a bracket end is kept (treating it as leaving the bracket
+            # is at the round-off of x(u): a step landing on a bracket end is kept (treating it as leaving the bracket
             # threw converged points back to a bisection midpoint), and a point oscillating between two floats
             # stops there (both took every call to all 60 iterations, 5-10x the work of converging).
-            tol = 4.0 * np.finfo(float).eps * np.maximum(1.0, np.abs(xm))
+            # (round-off of x(u) scales with the polynomial's coefficients, not with x: x ~ 0 on force-velocity)
+            tol = 4.0 * np.finfo(float).eps * np.maximum(1.0, np.abs(cx).sum(1))
             for _ in range(60):
                 f = _poly(cx, u) - xm
                 a = np.where(f < 0, u, a)
@@ -127,6 +137,9 @@ class SmoothSegmentedCurve:
 
     def __call__(self, x):
         return self.value_and_slope(x)[0]
+
+
+_U_TABLE = np.linspace(0.0, 1.0, 65)
 
 
 def _poly(c, u):

@@ -199,6 +199,7 @@ class RedundancySolver:
         self.max_step_m, self.max_step_rad = 1e-3, 0.02   # per-iteration step limits of the poses
         self.restore_iter = 4        # Newton corrections of each trial point back onto equilibrium
         self.batch_size = 64         # postures advanced together by the callers' batched loops (muscle_model)
+        self.polish_start = "primal"  # IPOPT's start where the SQP point fails the certificate (nlp.options)
         self.full_step_first = True  # line search: the full step alone first (False: every step length at once,
         #                              the same step chosen at 2-3x the cost; kept for benchmarks/)
         # start (cold): for thorax targets beyond start_min_deg, the free vertebrae are first put in
@@ -467,7 +468,7 @@ class RedundancySolver:
             if chk.success:
                 o.certified = True
             else:
-                r = self.certifier.solve(targets[i], p, o.x, o.R, o.a, warm="primal")
+                r = self.certifier.solve(targets[i], p, o.x, o.R, o.a, warm=self.polish_start)
                 st = self.evaluate_state(r.x[None], r.R[None], r.a[None], p, [targets[i]])
                 terr = float(np.linalg.norm(st["e"][0]))
                 eq = r.equilibrium_residual < 1e-6
