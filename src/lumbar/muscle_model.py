@@ -464,7 +464,7 @@ def make_solver(model, cfg=None):
     certifier = cfg.get("certifier", "ipopt")
     if certifier == "ipopt":
         solver.certifier = IpoptPostureSolver(solver, tol=cfg.get("ipopt_tol", 1e-5),
-                                              max_iter=cfg.get("ipopt_max_iter", 50))
+                                              max_iter=cfg.get("ipopt_max_iter", 150))
         solver.multistart = bool(cfg.get("multistart", True))
     elif certifier != "sqp":
         raise ValueError(f"muscle_model.solver.certifier must be 'ipopt' or 'sqp', got {certifier!r}")
@@ -751,6 +751,7 @@ def run_sensitivity(model, solver, rows: pd.DataFrame, baseline: dict, area_m2=1
     out["reached"] = [s.reached for s in sols]
     out["certified"] = [s.certified for s in sols]
     out["kkt_residual"] = [s.kkt_residual for s in sols]
+    out["ipopt_status"] = [s.ipopt_status for s in sols]      # why a reached posture is not certified
     out["tracking_error_deg"] = [s.tracking_error_deg for s in sols]
     ext, abd = np.isin(model.ms.groups, EXTENSORS), np.isin(model.ms.groups, ABDOMINALS)
     forces = [model.muscle_forces(s.x[None], s.R[None], s.a, pr)[2:4] for s, pr in zip(sols, props)]
@@ -838,6 +839,7 @@ def sobol_evaluate(model, solver, baseline: dict, X: np.ndarray, rows, posture: 
     out["converged"] = [s.converged for s in sols]
     for key in ("reached", "certified", "kkt_residual"):
         out[key] = [certificate(s)[key] for s in sols]
+    out["ipopt_status"] = [s.ipopt_status for s in sols]      # why a reached sample is not certified
     return out
 
 

@@ -203,7 +203,7 @@ elif rule == "muscle_sensitivity_table":
     df = pd.concat([pd.read_csv(f) for f in snakemake.input.chunks], ignore_index=True)
     base = pd.read_csv(snakemake.input.baseline_table).set_index("activity")
     cols = ["parameter", "value", "ssl_um", "group_scope", "posture", "idp_mpa", "idp_force_mpa", "idp_moment_mpa",
-            "converged", "reached", "certified", "kkt_residual", "tracking_error_deg", "extensor_active_n",
+            "converged", "reached", "certified", "kkt_residual", "ipopt_status", "tracking_error_deg", "extensor_active_n",
             "extensor_passive_n", "abdominal_active_n", "paper_change"]
     df = df[cols].copy()
     df["baseline_idp_mpa"] = [base.loc[mm.POSTURES[q], "idp_sim_mpa"] if mm.POSTURES[q] in base.index else np.nan
