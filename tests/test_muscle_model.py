@@ -152,8 +152,11 @@ def test_trial_point_correction_returns_to_equilibrium(model, solver, standing):
     res, keep = [], solver.restore_iter
     for n_iter in (2, 8):
         solver.restore_iter = n_iter
-        xr, Rr = solver._restore(x, R, a, params, np.arange(2))
-        res.append(np.abs(solver._state(xr, Rr, a, params, np.arange(2), np.zeros(2))["Q"]).max())
+        xr, Rr, st = solver._restored_state(x, R, a, params, np.arange(2), np.zeros(2))
+        fresh = solver._state(xr, Rr, a, params, np.arange(2), np.zeros(2))
+        for key in ("Q", "J", "FL", "c"):     # the returned state is the state of the corrected point
+            np.testing.assert_allclose(st[key], fresh[key], rtol=1e-12, atol=1e-12)
+        res.append(np.abs(fresh["Q"]).max())
     solver.restore_iter = keep
     assert res[1] < 1e-8 < res[0]          # more Newton steps, closer (uncapped steps: no trial left out)
 

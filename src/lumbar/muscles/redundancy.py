@@ -308,32 +308,42 @@ class RedundancySolver:
         dq = dq0 + S @ da
         return dq, da, pred, None
 
-    def _restore(self, x, R, a, params, idx):
+    def _restored_state(self, x, R, a, params, idx, targets):
         """Second-order correction of trial points: Newton steps on the poses with the activations fixed,
         back onto the equilibrium manifold (the SQP step satisfies equilibrium only to first order; without
-        the correction the L1 merit rejects good steps near curved parts of the manifold). A trial whose
-        Newton step grows (no nearby equilibrium) keeps its uncorrected pose (and its residual)."""
+        the correction the L1 merit rejects good steps near curved parts of the manifold), up to
+        ``restore_iter`` steps, until the residual is below 1e-3 ``tol``. A trial whose Newton step grows (no
+        nearby equilibrium) keeps its uncorrected pose (and its residual). Each Newton step uses the full state
+        (:meth:`_state`) of its point, so the state of the corrected point comes with the last check instead of
+        a further model evaluation. Returns (x, R, state)."""
         x, R = x.copy(), R.copy()
         m = self.m
+        n = 6 * m.nb
         live = np.arange(len(x))
-        for _ in range(self.restore_iter):
-            if live.size == 0:
+        st = None
+        for it in range(self.restore_iter + 1):
+            s_live = self._state(x[live], R[live], a[live], params, idx[live], targets[live])
+            if st is None:
+                st = s_live
+            else:
+                for key, v in s_live.items():
+                    st[key][live] = v
+            if it == self.restore_iter:
                 break
-            p = self._params(params, a[live], idx[live])
-            Q, J = m.evaluate(x[live], R[live], params=p)
-            n = 6 * m.nb
-            Qf = Q.reshape(-1, n)
+            Qf = s_live["Q"]
             small = np.abs(Qf).max(-1) > 1e-3 * self.tol
             live = live[small]
             if live.size == 0:
                 break
-            d = -np.linalg.solve(J.reshape(-1, n, n)[small], Qf[small][..., None])[..., 0].reshape(-1, m.nb, 6)
+            d = -np.linalg.solve(s_live["J"][small], Qf[small][..., None])[..., 0].reshape(-1, m.nb, 6)
             ok = (np.abs(d[..., :3]).max((-1, -2)) < 2 * self.max_step_m) & \
                  (np.abs(d[..., 3:]).max((-1, -2)) < 2 * self.max_step_rad)
             live, d = live[ok], d[ok]
+            if live.size == 0:
+                break
             x[live] += d[..., :3]
             R[live] = so3.exp(d[..., 3:]) @ R[live]
-        return x, R
+        return x, R, st
 
     # ------------------------------------------------------------------ certificate
     def kkt_residuals(self, st, idx=None):
@@ -592,9 +602,10 @@ class RedundancySolver:
                 dqt = tt[:, None, None] * dq[kk]
                 xt, Rt = x[act][kk] + dqt[..., :3], so3.exp(dqt[..., 3:]) @ R[act][kk]
                 if not held and self.restore_iter:
-                    xt, Rt = self._restore(xt, Rt, an[r], params, act[kk])
+                    xt, Rt, s_t = self._restored_state(xt, Rt, an[r], params, act[kk], targets[act][kk])
+                else:
+                    s_t = self._state(xt, Rt, an[r], params, act[kk], targets[act][kk])
                 xn[r], Rn[r] = xt, Rt
-                s_t = self._state(xt, Rt, an[r], params, act[kk], targets[act][kk])
                 for key, v in s_t.items():
                     if key not in sn:
                         sn[key] = np.zeros((act.size * nt,) + v.shape[1:], v.dtype)
