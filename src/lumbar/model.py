@@ -167,20 +167,16 @@ class SpineModel:
         return cache[key][1]
 
     def _pairs(self, ia, ib):
-        """[((body a, body b), elements)] for two element-to-body index arrays (cached per pair of arrays);
-        the elements of a pair as a slice where they are contiguous (a view instead of a copy)."""
+        """[((body a, body b), element indices)] for two element-to-body index arrays (cached per pair of
+        arrays). Index arrays, not slices: a sum over a strided view may round differently from the same sum
+        over a copy, and the results are kept byte-identical."""
         key = (id(ia), id(ib))
         cache = self.__dict__.setdefault("_pair_cache", {})
         if key not in cache:
             pairs = {}
             for n, k in enumerate(zip(np.asarray(ia).tolist(), np.asarray(ib).tolist())):
                 pairs.setdefault(k, []).append(n)
-            out = []
-            for k, v in pairs.items():
-                v = np.array(v)
-                contiguous = np.all(np.diff(v) == 1)
-                out.append((k, slice(int(v[0]), int(v[-1]) + 1) if contiguous else v))
-            cache[key] = (ia, ib, out)
+            cache[key] = (ia, ib, [(k, np.array(v)) for k, v in pairs.items()])
         return cache[key][2]
 
     def _attach(self, x, R, idx, s):
