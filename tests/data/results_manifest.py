@@ -1,19 +1,28 @@
-"""Write tests/data/results_sha256_test_config.json: the SHA-256 of every result table of the test-config DAG
-outside the muscle model (whose solver and Sobol method issue 16 changed) and outside the timing files.
+"""Write the byte-identity guard of the test-config DAG (issue 17): tests/data/results_sha256_test_config.json,
+the SHA-256 of every result table outside the muscle model (whose solver and Sobol method issue 16 changed)
+and outside the timing files, and tests/data/results_test_config.tar.gz, the tables themselves (the reference
+for the numeric comparison that tests/test_results_identity.py makes where a digest differs: floating-point
+round-off differs between CPUs and BLAS builds, so a machine other than the one that wrote the manifest may
+not reproduce every byte).
 
 Usage, after `snakemake --cores 2 --configfile config/test/config.yaml` in a checkout (or a copy):
     python tests/data/results_manifest.py <repo>/results
-Re-write it only when a change is meant to change results, and say which in the commit.
+Re-write it only when a change is meant to change results (or on moving the reference machine), and say which
+in the commit.
 """
 from __future__ import annotations
 
+import gzip
 import hashlib
+import io
 import json
 import sys
+import tarfile
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 MANIFEST = HERE / "results_sha256_test_config.json"
+SNAPSHOT = HERE / "results_test_config.tar.gz"
 # muscle-model tables: changed by issue 16; *_vs_paper: their paper columns come from ../shared
 # (paths.published_model_results), which the test DAG's copy of the repository does not have beside it
 EXCLUDE = ("benchmarks/", "muscle", "sobol", "sensitivity", "in_vivo", "flexion_relaxation", "_vs_paper")
@@ -29,11 +38,31 @@ def digest(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
+def read_snapshot(path: Path = SNAPSHOT) -> dict[str, bytes]:
+    """{relative path: CSV bytes} of the reference tables."""
+    with tarfile.open(path, "r:gz") as t:
+        return {m.name: t.extractfile(m).read() for m in t.getmembers() if m.isfile()}
+
+
+def write_snapshot(results: Path, rels: list[str], path: Path = SNAPSHOT):
+    """The tables as a deterministic tar.gz (sorted, no times, owners or modes that vary)."""
+    buf = io.BytesIO()
+    with tarfile.open(fileobj=buf, mode="w", format=tarfile.USTAR_FORMAT) as t:
+        for rel in rels:
+            data = (results / rel).read_bytes()
+            info = tarfile.TarInfo(rel)
+            info.size, info.mtime, info.mode = len(data), 0, 0o644
+            t.addfile(info, io.BytesIO(data))
+    path.write_bytes(gzip.compress(buf.getvalue(), mtime=0))
+
+
 def main(results):
     results = Path(results)
-    out = {rel: digest(results / rel) for rel in covered(results)}
+    rels = covered(results)
+    out = {rel: digest(results / rel) for rel in rels}
     MANIFEST.write_text(json.dumps(out, indent=1, sort_keys=True) + "\n")
-    print(f"{MANIFEST}: {len(out)} tables")
+    write_snapshot(results, rels)
+    print(f"{MANIFEST}, {SNAPSHOT}: {len(out)} tables")
 
 
 if __name__ == "__main__":
