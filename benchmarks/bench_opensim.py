@@ -53,6 +53,7 @@ from scipy.spatial.transform import Rotation  # noqa: E402
 
 from lumbar import so3  # noqa: E402
 from lumbar.characteristics import load_characteristic_set  # noqa: E402
+from lumbar.elements.ligament import slack_length  # noqa: E402
 from lumbar.fsu import (DIRECTIONS, MAIN_DIRECTIONS, build_fsu, disc_frame, moment_loads,  # noqa: E402
                         range_of_motion, removed_structures)
 from lumbar.geometry import load_geometry  # noqa: E402
@@ -265,7 +266,7 @@ class OpenSimFSU:
             extra = np.broadcast_to(np.asarray(lig.extra_length, float), (n,))
             for i in range(n):
                 l_ref = np.linalg.norm(lig.upper[i] - lig.lower[i]) + extra[i]
-                l0 = l_ref / (1.0 + law.prestrain_pct / 100.0)
+                l0 = slack_length(l_ref, law.prestrain)
                 expr = fibre_expression(law, l0, extra[i], 1.0 / n, slack_width_pct, fibre_damping / n)
                 f = osim.ExpressionBasedPointToPointForce(lev.upper, v3(lig.upper[i] - c4),
                                                           lev.lower, v3(lig.lower[i] - c5), expr)

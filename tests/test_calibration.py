@@ -12,8 +12,9 @@ from lumbar import calibration as cal
 from lumbar.characteristics import SoftplusLaw, load_characteristic_set
 from lumbar.elements.ligament import softplus_force
 from lumbar.fsu import build_fsu
-from lumbar.stepwise_reduction import (EXPERIMENT_SCHEMA, read_experiment_table, reference_table,
+from lumbar.stepwise_reduction import (read_experiment_table, reference_table,
                                        simulate_stepwise_reduction)
+from lumbar.tables import STEPWISE_ROM
 from lumbar.virtual_experiment import SpecimenVariation, stepwise_reduction_table
 
 from conftest import ROOT
@@ -147,7 +148,7 @@ def test_c_zero_gives_zero_force_at_zero_strain():
     for a, b, d in TRUTH.values():
         assert cal.softplus_zero_law(0.0, a, b, d) == pytest.approx(0.0, abs=1e-12)
         assert a * math.log1p(math.exp(b / d)) + cal.c_zero(a, b, d) == pytest.approx(0.0, abs=1e-9)
-    assert EXPERIMENT_SCHEMA.required[:3] == ["stage", "direction", "moment_nm"]
+    assert STEPWISE_ROM.required[:3] == ["stage", "direction", "moment_nm"]
 
 
 # ---------------------------------------------------------------- round trip with specimen variation and noise

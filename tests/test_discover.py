@@ -152,7 +152,7 @@ def test_planted_rom_effect_is_named_with_parameter_within_20pct_and_gap_shrinks
     assert r["gap_after"] < 0.5 * r["gap_before"]
     assert r["forward_batches"] == 3
     assert r["ranking"][0][0] == "ligament_prestrain" and r["confidence"] > 0.9
-    assert r["p_value"] < 0.01 and r["null_distribution_size"] == D.DEFAULTS["n_bootstrap"]
+    assert r["p_value"] < 0.01 and r["null_distribution_size"] == D.default_settings()["n_bootstrap"]
     assert r["at_bound"]["ligament_prestrain"] is False and r["parameter_estimate"]["at_bound"] is False
 
 

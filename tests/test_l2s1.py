@@ -198,7 +198,7 @@ def test_l2s1_rules_run(dag_workdir):
     if published.is_file():   # the paper's counts, read the way rule table5 reads them
         counts = pd.read_csv(tmp_path / "results/tables/table5_outlier_counts.csv")
         vs = l2s1.versus_paper(counts, published).set_index("set")
-        assert vs.loc["calibrated", "paper_outliers"] == 8 and vs.loc["rupp2015", "paper_outliers"] == 11
+        assert vs.loc["calibrated", "paper_n_outliers"] == 8 and vs.loc["rupp2015", "paper_n_outliers"] == 11
     internal = pd.read_csv(tmp_path / targets[2])
     assert {"disc_axial_force_n", "facet_left_n", "facet_right_n", "lig_ALL_n"} <= set(internal.columns)
     # values: paper-1 IDP = 1.68 F / CSA (l2s1.idp_formula paper1 in config/test), CSA = the L4-L5 endplate area

@@ -77,7 +77,7 @@ def _two_level_model(charset, law="softplus"):
     if law == "rupp":
         sh = rupp_shape(1.52e-3, 4.98e-3, 55.0, 456.0, 3)
         m.add_fibre_group("ALLr", "ALL", "L3-L5", 0, -1, [[0.02, 0.0, 0.03]], [[0.02, 0.0, -0.01]], 0.0,
-                          "rupp", sh, prestrain_pct=6.8, scale=3.0)
+                          "rupp", sh, prestrain=6.8 / 100.0, scale=3.0)
     m.add_fibre_group("cable", "cable", "L3", 0, -1, [[-0.03, 0.01, 0.05]], [[-0.04, 0.05, -0.06]], 0.0,
                       "cable", (80.0,))
     return m.finalize()

@@ -28,8 +28,10 @@ from fractions import Fraction
 from pathlib import Path
 from typing import Mapping
 
-from lumbar import resources
-from lumbar.io import Column, TableError, TableSchema, read_table
+from lumbar import resources, tables
+from lumbar.elements.ligament import slack_length
+from lumbar.io import TableError, TableSchema, read_table
+from lumbar.tables import CHARACTERISTIC_SETS, LIGAMENT_KINDS
 
 __all__ = [
     "CHARACTERISTIC_SETS",
@@ -46,10 +48,6 @@ __all__ = [
     "default_data_dir",
 ]
 
-CHARACTERISTIC_SETS = ("calibrated", "chazal1985", "shirazi_adl1986", "white_panjabi1990",
-                       "nolte1990", "rupp2015")
-SOFTPLUS_SETS = CHARACTERISTIC_SETS[:5]
-LIGAMENT_KINDS = ("ALL", "PLL", "FL", "CL", "ISL", "SSL", "ITL")
 DISC_DIRECTIONS = ("flexion", "extension", "lateral_bending", "axial_rotation")
 
 #: Ligament kinds each set must provide, and the documented reason for each absence.
@@ -65,11 +63,6 @@ ABSENT_LIGAMENTS: dict[str, dict[str, str]] = {
 EXPECTED_LIGAMENTS: dict[str, tuple[str, ...]] = {
     s: tuple(k for k in LIGAMENT_KINDS if k not in ABSENT_LIGAMENTS[s]) for s in CHARACTERISTIC_SETS
 }
-
-KINDS = frozenset({"original_text", "original_figure", "third_party", "derived_from_published_fit",
-                   "surrogate",
-                   # written by lumbar.calibration.write_characteristics (results/calibration/characteristics)
-                   "calibrated_on_surrogate", "calibrated_on_measured"})
 
 # unit -> factor to SI, per parameter family
 _LEN = {"m": 1.0, "mm": 1e-3}
@@ -137,6 +130,11 @@ class SoftplusLaw:
     prestrain_pct: float
     source: str = ""
 
+    @property
+    def prestrain(self) -> float:
+        """The prestrain as a strain (fraction): ``prestrain_pct / 100``, the one conversion from the tables' %."""
+        return self.prestrain_pct / 100.0
+
 
 @dataclass(frozen=True)
 class RuppLaw:
@@ -152,6 +150,11 @@ class RuppLaw:
     n_strands: int
     prestrain_pct: float
     source: str = ""
+
+    @property
+    def prestrain(self) -> float:
+        """The prestrain as a strain (fraction): ``prestrain_pct / 100``, the one conversion from the tables' %."""
+        return self.prestrain_pct / 100.0
 
 
 @dataclass(frozen=True)
@@ -175,7 +178,7 @@ def rupp_shape_parameters(law: RuppLaw, l_set_m: float) -> dict[str, float]:
     if not (math.isfinite(l_set_m) and l_set_m > 0):
         raise ValueError(f"l_set_m must be a positive finite length in m, got {l_set_m!r}")
     n = law.n_strands
-    l0 = l_set_m / (1.0 + law.prestrain_pct / 100.0)
+    l0 = slack_length(l_set_m, law.prestrain)
     du_nll = law.l_a_m / l0
     df0 = law.f_a_n / n
     du_l = df0 / l0 * (law.l_b_m - law.l_a_m) / ((law.f_b_n - law.f_a_n) / n)
@@ -208,38 +211,6 @@ def default_data_dir() -> Path:
         expected="a directory containing disc.csv (set LUMBAR_DATA_DIR to the repository 'data' dir); "
                  f"tried {[str(c) for c in candidates]}")
 
-
-# ------------------------------------------------------------------ schemas
-_COMMON = {
-    "value": Column("float"),
-    "unit": Column("str"),
-    "kind": Column("str", allowed=KINDS),
-    "source": Column("str"),
-    "note": Column("str", required=False, nullable=True),
-}
-DISC_SCHEMA = TableSchema("disc", {"parameter": Column("str"), "direction": Column("str"), **_COMMON})
-FACET_SCHEMA = TableSchema("facet", {"parameter": Column("str"), "side": Column("str"), **_COMMON})
-SOFTPLUS_SCHEMA = TableSchema("ligaments_softplus", {
-    "set": Column("str", allowed=frozenset(SOFTPLUS_SETS)),
-    "ligament": Column("str", allowed=frozenset(LIGAMENT_KINDS)),
-    "variant": Column("str", allowed=frozenset({"primary", "alternative"})),
-    "parameter": Column("str", allowed=frozenset("abcd")),
-    **_COMMON})
-PRESTRAIN_SCHEMA = TableSchema("ligament_prestrain", {
-    "ligament": Column("str", allowed=frozenset(LIGAMENT_KINDS)),
-    "prestrain": Column("float", min=-100.0),
-    **{k: v for k, v in _COMMON.items() if k != "value"}})
-RUPP_SCHEMA = TableSchema("ligaments_rupp2015", {
-    "ligament": Column("str", allowed=frozenset(LIGAMENT_KINDS)),
-    "parameter": Column("str", allowed=frozenset({"l_a", "l_b", "f_a", "f_b", "prestrain", "n_strands"})),
-    "value_as_printed": Column("str"),
-    **_COMMON})
-SHAPE_CHECK_SCHEMA = TableSchema("rupp2015_shape_check", {
-    "ligament": Column("str", allowed=frozenset(LIGAMENT_KINDS)),
-    "fibre": Column("str"),
-    "l0": Column("float", min=0.0), "dU_nll": Column("float", min=0.0), "nu": Column("float", min=0.0),
-    "K_nl": Column("float", min=0.0), "K_l": Column("float", min=0.0),
-    **{k: v for k, v in _COMMON.items() if k not in ("value", "unit")}})
 
 # parameter -> (allowed units -> SI factor, sign constraint) ; sign: "pos", "nonneg", "nonzero", None
 _DISC_PARAMS = {
@@ -336,7 +307,7 @@ def _iter(df):
 
 def _load_disc(d: Path) -> DiscParams:
     path = d / "disc.csv"
-    df = _read(path, DISC_SCHEMA)
+    df = _read(path, tables.DISC)
     vals: dict[tuple[str, str], float] = {}
     for row, r in _iter(df):
         p = r["parameter"]
@@ -380,7 +351,7 @@ def _load_disc(d: Path) -> DiscParams:
 
 def _load_facet(d: Path) -> FacetParams:
     path = d / "facet.csv"
-    df = _read(path, FACET_SCHEMA)
+    df = _read(path, tables.FACET)
     vals: dict[str, float] = {}
     surface: dict[str, dict[str, float]] = {}
     seen: set = set()
@@ -409,7 +380,7 @@ def _load_facet(d: Path) -> FacetParams:
 
 def _load_prestrain(d: Path) -> dict[str, float]:
     path = d / "ligament_prestrain.csv"
-    df = _read(path, PRESTRAIN_SCHEMA)
+    df = _read(path, tables.LIGAMENT_PRESTRAIN)
     out = {}
     for row, r in _iter(df):
         if r["unit"] != "%":
@@ -423,7 +394,7 @@ def _load_prestrain(d: Path) -> dict[str, float]:
 
 def _load_softplus(d: Path, name: str, prestrain: dict[str, float]):
     path = d / "ligaments_softplus.csv"
-    df = _read(path, SOFTPLUS_SCHEMA)
+    df = _read(path, tables.LIGAMENTS_SOFTPLUS)
     params: dict[tuple[str, str], dict[str, float]] = {}
     srcs: dict[tuple[str, str], str] = {}
     seen: set = set()
@@ -475,7 +446,7 @@ def _parse_printed(s: str) -> float:
 
 def _load_rupp(d: Path):
     path = d / "ligaments_rupp2015.csv"
-    df = _read(path, RUPP_SCHEMA)
+    df = _read(path, tables.LIGAMENTS_RUPP2015)
     vals: dict[str, dict[str, float]] = {}
     srcs: dict[str, str] = {}
     for row, r in _iter(df):
@@ -587,7 +558,7 @@ def load_characteristic_set(name: str, data_dir=None,
 def load_shape_check(data_dir=None):
     """The paper's calculated Rupp shape parameters (rupp2015_shape_check.csv) as a DataFrame."""
     d = Path(data_dir) if data_dir is not None else default_data_dir()
-    return _read(d / "rupp2015_shape_check.csv", SHAPE_CHECK_SCHEMA)
+    return _read(d / "rupp2015_shape_check.csv", tables.RUPP2015_SHAPE_CHECK)
 
 
 # ------------------------------------------------------------------ one resolver of a characteristic set

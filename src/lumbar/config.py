@@ -24,7 +24,8 @@ from jsonschema import Draft202012Validator, validators
 
 from . import resources
 
-__all__ = ["ConfigError", "load_config", "default_schema_path", "key_path", "resolve_path", "default_geometry_path"]
+__all__ = ["ConfigError", "load_config", "default_schema_path", "key_path", "resolve_path", "default_geometry_path",
+           "schema_defaults"]
 
 _SCHEMA_RELPATH = resources.SCHEMA_RELPATH
 
@@ -165,9 +166,24 @@ def resolve_path(path: str | Path) -> Path:
     return root if root.exists() else p
 
 
+@functools.lru_cache(maxsize=1)
+def _all_defaults() -> dict:
+    return load_config({})
+
+
+def schema_defaults(*keys: str):
+    """The schema's default of a configuration key (``schema_defaults("discovery")``: the section with every
+    default filled; no key: the whole default configuration). The schema is the one owner of the defaults; the
+    library reads them here instead of repeating them. Returns a new object (deep copy)."""
+    d = _all_defaults()
+    for k in keys:
+        d = d[k]
+    return copy.deepcopy(d)
+
+
 def default_geometry_path() -> Path:
     """The configuration's default ``geometry.path`` (the Visible Human folder), resolved by :func:`resolve_path`."""
-    return resolve_path(load_config({})["geometry"]["path"])
+    return resolve_path(schema_defaults("geometry", "path"))
 
 
 def load_config(path_or_dict: str | Path | Mapping[str, Any], schema: str | Path | None = None) -> dict:

@@ -2,7 +2,7 @@
 
 ``python -m lumbar.discover --config CONFIG --measured FILE.csv --out DIR``
 
-1. The experiment is detected from the table's columns (:data:`SCHEMAS`): stepwise-reduction ROM
+1. The experiment is detected from the table's columns (:data:`lumbar.tables.MEASURED`): stepwise-reduction ROM
    (``stage, direction, moment_nm, rom_mean_deg, ...``), L2-S1 IDP (``muscle_setup, load_case,
    idp_mean_mpa, idp_sd_mpa, ...``), in-vivo validation (``activity, idp_sim_mpa, idp_in_vivo_mpa, ...``;
    moments from the muscle model's segment loads) or the neutral lordotic angle per reduction stage
@@ -54,29 +54,20 @@ import numpy as np
 import pandas as pd
 
 from . import effects as fx
-from .io import subplots
+from .config import schema_defaults
+from .idp import DISC_AREA_M2, idp_per_newton
+from .io import TableError, read_table, subplots
+from .stepwise_reduction import read_experiment_table
+from .tables import MEASURED, SEGMENT_LOAD_COLUMNS
 
 log = logging.getLogger(__name__)
 
-SCHEMAS = {
-    "stepwise_rom": ("stage", "direction", "moment_nm", "rom_mean_deg", "rom_min_deg", "rom_max_deg", "n_specimens"),
-    "idp_invitro": ("muscle_setup", "load_case", "idp_mean_mpa", "idp_sd_mpa", "n_specimens"),
-    "in_vivo": ("activity", "idp_sim_mpa", "idp_in_vivo_mpa", "converged"),
-    "neutral_angle": ("stage", "lordosis_deg"),
-}
-SEGMENT_LOAD_COLUMNS = ("level", "activity", "compressive_n", "shear_n", "moment_nm", "converged")
 # expected range of n normal samples in SDs (d2 of quality control), n = 2..10
 D2 = {2: 1.128, 3: 1.693, 4: 2.059, 5: 2.326, 6: 2.534, 7: 2.704, 8: 2.847, 9: 2.970, 10: 3.078}
 
-DEFAULTS = dict(
-    characteristic_set="calibrated", effects=None, grid_points=9, fine_points=5,
-    min_gap=1.5, min_gap_reduction=0.3, alpha=0.01, n_bootstrap=199, min_rows=3, max_correlation=0.9, n_next=3,
-    cv_folds=8, seed=0, fine_candidates=2,
-    sigma_floor_deg=0.05, sigma_floor_mpa=0.005, no_range_sd_deg=0.5, neutral_sd_deg=0.3,
-    in_vivo_sd_mpa=0.1, in_vivo_level="L4-L5",
-    in_vivo_segment_loads="results/tables/muscle_model_segment_loads.csv",
-    idp_model_table=None,
-)
+#: discovery settings that are not configuration keys; every other setting and its default is owned by the
+#: ``discovery`` section of the configuration schema (:func:`lumbar.config.schema_defaults`)
+INTERNAL_SETTINGS = dict(seed=0, fine_candidates=2)
 
 
 class DiscoveryInputError(ValueError):
@@ -84,8 +75,16 @@ class DiscoveryInputError(ValueError):
 
 
 # ------------------------------------------------------------------ configuration
+def default_settings() -> dict:
+    """The discovery settings of an empty configuration: the schema's ``discovery`` defaults (without the
+    benchmark section) and :data:`INTERNAL_SETTINGS`."""
+    s = schema_defaults("discovery")
+    s.pop("benchmark", None)
+    return s | INTERNAL_SETTINGS
+
+
 def discovery_settings(config: dict | None) -> dict:
-    s = dict(DEFAULTS)
+    s = default_settings()
     s.update({k: v for k, v in ((config or {}).get("discovery") or {}).items() if k != "benchmark"})
     s["seed"] = int((config or {}).get("seed", 0))
     return s
@@ -93,40 +92,19 @@ def discovery_settings(config: dict | None) -> dict:
 
 # ------------------------------------------------------------------ reading and schema detection
 def detect_experiment(columns, path="<table>") -> str:
+    """The experiment of a table with ``columns`` (:data:`lumbar.tables.MEASURED`, in its order: the first one
+    whose signature columns are all present; then every column it uses must be)."""
     cols = set(columns)
-    for name in ("stepwise_rom", "idp_invitro", "in_vivo", "neutral_angle"):
-        key = SCHEMAS[name][:3] if name != "neutral_angle" else SCHEMAS[name]
-        if set(key) <= cols:
-            missing = [c for c in SCHEMAS[name] if c not in cols]
+    for name, kind in MEASURED.items():
+        if set(kind.columns[: kind.signature]) <= cols:
+            missing = [c for c in kind.columns if c not in cols]
             if missing:
                 raise DiscoveryInputError(
                     f"{path}: looks like a {name} table but column(s) {missing} are missing; "
-                    f"expected columns {list(SCHEMAS[name])}")
+                    f"expected columns {list(kind.columns)}")
             return name
-    forms = "; ".join(f"{k}: {list(v)}" for k, v in SCHEMAS.items())
+    forms = "; ".join(f"{k}: {list(v.columns)}" for k, v in MEASURED.items())
     raise DiscoveryInputError(f"{path}: columns {sorted(cols)} match no experiment schema; expected one of {forms}")
-
-
-def _neutral_schema():
-    from .fsu import STAGES
-    from .io import Column, TableSchema
-    return TableSchema("neutral_angle", {
-        "stage": Column("str", allowed=frozenset(STAGES), description="reduction stage; the first row is the reference"),
-        "lordosis_deg": Column("float", min=-90.0, max=90.0, description="lordotic angle at 0 N*m [deg]"),
-        "lordosis_sd_deg": Column("float", required=False, nullable=True, min=0.0, max=90.0,
-                                  description="SD of the lordotic angle [deg], > 0; empty = discovery.neutral_sd_deg"),
-    })
-
-
-def _in_vivo_schema():
-    from .io import Column, TableSchema
-    return TableSchema("in_vivo", {
-        "activity": Column("str"),
-        "idp_sim_mpa": Column("float", nullable=True, min=0.0, max=100.0,
-                              description="simulated IDP [MPa]; empty only where converged is False"),
-        "idp_in_vivo_mpa": Column("float", min=0.0, max=100.0, description="in-vivo IDP [MPa]"),
-        "converged": Column("str", allowed=frozenset({"True", "False", "true", "false"})),
-    })
 
 
 def _check_ragged(p):
@@ -159,19 +137,12 @@ def read_measured(path) -> tuple[str, pd.DataFrame]:
         raise DiscoveryInputError(f"{p}: not a readable CSV table ({type(e).__name__}); expected a CSV file with a "
                                   f"header row") from e
     exp = detect_experiment(head.columns, p)
-    from .io import TableError, read_table
     _check_ragged(p)
     try:
         if exp == "stepwise_rom":
-            from .stepwise_reduction import read_experiment_table
             df = read_experiment_table(p)
-        elif exp == "idp_invitro":
-            from .l2s1 import IDP_TABLE_SCHEMA
-            df = read_table(p, IDP_TABLE_SCHEMA)
-        elif exp == "neutral_angle":
-            df = read_table(p, _neutral_schema())
         else:
-            df = read_table(p, _in_vivo_schema())
+            df = read_table(p, MEASURED[exp].schema)
     except TableError as e:
         raise DiscoveryInputError(str(e)) from e
     if len(df) == 0:
@@ -352,11 +323,8 @@ def solve_idp_model(config):
     sim, _ = run_set(geo, cs, derive_cables(l2.get("cables")), idp_formula=l2.get("idp_formula", "paper1"),
                      k_shear=(config.get("fsu") or {}).get("disc_shear_stiffness_n_per_m"),
                      moment_nm=l2.get("moment_nm", 3.75))
-    csa = geo.levels["L4-L5"].disc_csa
-    if l2.get("idp_formula", "paper1") == "paper1":
-        sim["idp_per_newton_pa"] = 1.68 / csa
-    else:
-        sim["idp_per_newton_pa"] = 0.85 / (l2.get("disc_area_m2", 18e-4) * 0.66)
+    sim["idp_per_newton_pa"] = idp_per_newton(l2.get("idp_formula", "paper1"), geo.levels["L4-L5"].disc_csa,
+                                               l2.get("disc_area_m2", DISC_AREA_M2))
     return sim
 
 
@@ -431,7 +399,7 @@ def in_vivo_problem(df, config, segment_loads=None) -> Problem:
     M = d["moment_nm"].to_numpy(float)
     F = d["compressive_n"].to_numpy(float)
     ok = F > 0
-    per_n = float(np.median(base[ok] / F[ok])) if ok.any() else 0.85 / (18e-4 * 0.66)
+    per_n = float(np.median(base[ok] / F[ok])) if ok.any() else idp_per_newton("paper2")
 
     def forward(values):
         return _idp_forward(values, base, M, per_n) / 1e6
@@ -674,7 +642,7 @@ def _identifiability(problem, cands, S, s, cache):
 def discover(problem: Problem, settings: dict | None = None, cache: dict | None = None) -> dict:
     """Rank the candidate effects, name the best one when its bootstrap p-value clears the level, refit
     (see module doc)."""
-    s = dict(DEFAULTS)
+    s = default_settings()
     s.update(settings or {})
     t0 = time.perf_counter()
     y, sig = problem.y, problem.sigma
@@ -1122,9 +1090,8 @@ def real_data_summary(paths) -> pd.DataFrame:
 
 # ------------------------------------------------------------------ benchmark with hidden effects (fixtures)
 def benchmark_settings(config) -> dict:
-    b = dict(effects=None, n_magnitudes=2, n_null=6, n_seeds=1, near_threshold_factors=[], n_specimens=8,
-             noise_sd_deg=0.3, noise_sd_mpa=0.02, moments_nm=[1.0, 2.5, 5.0, 7.5, 10.0], stages=None,
-             experiments=None, generator="batch")
+    """The ``discovery.benchmark`` settings: the schema's defaults updated by ``config``."""
+    b = schema_defaults("discovery", "benchmark")
     b.update(((config or {}).get("discovery") or {}).get("benchmark") or {})
     return b
 

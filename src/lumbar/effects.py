@@ -38,7 +38,9 @@ import numpy as np
 import pandas as pd
 
 from . import so3
+from .elements.ligament import rupp_shape, slack_length
 from .fsu import DIRECTIONS, STAGES, moment_loads
+from .idp import K_FLEXION_PA_PER_NM
 from .solve import solve
 
 EXPERIMENTS = ("stepwise_rom", "neutral_angle", "idp_invitro", "in_vivo")
@@ -102,7 +104,7 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in [
            ("idp_invitro", "in_vivo"), "idp",
            "axial compressive preload carried by the disc (follower-load-like): IDP += idp_per_newton * P",
            "paper 2 Sect. 4: in-vivo compression from body weight and muscles; in-vitro tests without preload"),
-    Effect("idp_moment_term", "k_moment", "Pa/(N*m)", (0.0, 0.2e6), (0.036e6, 0.072e6),
+    Effect("idp_moment_term", "k_moment", "Pa/(N*m)", (0.0, 0.2e6), (K_FLEXION_PA_PER_NM, 2 * K_FLEXION_PA_PER_NM),
            ("idp_invitro", "in_vivo"), "idp",
            "IDP += k * |M_sagittal| (the disc's bending moment raises the nucleus pressure)",
            "paper 2 Sect. 2.4: IDP formula with +0.036 MPa/(N*m) flexion, +0.018 extension moment term; "
@@ -191,7 +193,6 @@ class FsuVariants:
     """
 
     def __init__(self, fsu, itl_law=None):
-        from .elements.ligament import rupp_shape
 
         self.fsu = fsu
         m = copy.deepcopy(fsu.model)
@@ -206,7 +207,7 @@ class FsuVariants:
         itl = [lg for lg in lev.ligaments if lg.kind == "ITL"]
         shape = rupp_shape(itl_law.l_a_m, itl_law.l_b_m, itl_law.f_a_n, itl_law.f_b_n, itl_law.n_strands)
         g_itl = [m.add_fibre_group(lg.name + "_effect", "ITL", lev.name, up, lo, lg.upper, lg.lower,
-                                   lg.extra_length, "rupp", shape, prestrain_pct=itl_law.prestrain_pct,
+                                   lg.extra_length, "rupp", shape, prestrain=itl_law.prestrain,
                                    scale=itl_law.n_strands / lg.n_fibres) for lg in itl]
         extra["itl"] = g_itl
         c = np.asarray(lev.disc_centre, float)
@@ -251,7 +252,7 @@ class FsuVariants:
         params = {}
         if (v["ligament_prestrain"] != 0).any():
             sc = np.ones((G, S, m.nf))
-            sc[:, :, self.is_lig] = (1.0 / (1.0 + v["ligament_prestrain"]))[:, None, None]
+            sc[:, :, self.is_lig] = slack_length(1.0, v["ligament_prestrain"])[:, None, None]
             params["fibre_l0_scale"] = sc.reshape(G * S, m.nf)
         if (v["va_neutral_offset"] != 0).any():
             off = np.zeros((G, S, 3))

@@ -25,11 +25,12 @@ from .elements.facet import fit_surface
 from .elements.ligament import rupp_shape
 from .model import DiscSpec, SpineModel
 from .solve import solve
+from .tables import MAIN_DIRECTIONS, STAGES
 
 log = logging.getLogger(__name__)
 
-# reduction stages of the stepwise-reduction experiment (Heuer et al. 2007), in removal order
-STAGES = ("intact", "wo_ssl", "wo_isl", "wo_fl", "wo_cl", "wo_va", "wo_pll", "wo_all")
+# STAGES: reduction stages of the stepwise-reduction experiment (Heuer et al. 2007), in removal order, and
+# MAIN_DIRECTIONS: the four loading directions (vocabularies of the tables, owned by lumbar.tables)
 STAGE_LABELS = {"intact": "intact", "wo_ssl": "w/o SSL", "wo_isl": "w/o ISL", "wo_fl": "w/o FL",
                 "wo_cl": "w/o CL", "wo_va": "w/o VA", "wo_pll": "w/o PLL", "wo_all": "w/o ALL"}
 # what each stage removes in addition to the previous one; removing the vertebral arches (VA)
@@ -42,7 +43,6 @@ DIRECTIONS = {
     "lateral_bending": (0, 1.0), "lateral_bending_right": (0, 1.0), "lateral_bending_left": (0, -1.0),
     "axial_rotation": (2, 1.0), "axial_rotation_left": (2, 1.0), "axial_rotation_right": (2, -1.0),
 }
-MAIN_DIRECTIONS = ("flexion", "extension", "lateral_bending", "axial_rotation")
 
 
 def removed_structures(stage: str) -> set:
@@ -110,11 +110,11 @@ def add_level(model: SpineModel, level, charset, facet_stiffness=None, k_shear=N
         if hasattr(law, "a"):
             model.add_fibre_group(lig.name, lig.kind, level.name, up, lo, lig.upper, lig.lower,
                                   lig.extra_length, "softplus", (law.a, law.b, law.c, law.d),
-                                  prestrain_pct=law.prestrain_pct)
+                                  prestrain=law.prestrain)
         else:
             shape = rupp_shape(law.l_a_m, law.l_b_m, law.f_a_n, law.f_b_n, law.n_strands)
             model.add_fibre_group(lig.name, lig.kind, level.name, up, lo, lig.upper, lig.lower,
-                                  lig.extra_length, "rupp", shape, prestrain_pct=law.prestrain_pct,
+                                  lig.extra_length, "rupp", shape, prestrain=law.prestrain,
                                   scale=law.n_strands / lig.n_fibres)
         kinds.append(lig.kind)
     sides = []

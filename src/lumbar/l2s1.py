@@ -23,22 +23,19 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from . import resources
+from . import resources, tables
 from .fsu import DIRECTIONS, add_level
-from .io import Column, TableError, TableSchema, read_table, subplots
+from .io import TableError, read_table, subplots
 from .model import GROUND, SpineModel
 from .solve import solve
+from .tables import CABLES, IDP_INVITRO, L2S1_FREE, L2S1_MUSCLES, LOAD_CASES, MUSCLE_SETUPS
 
 log = logging.getLogger(__name__)
 
 LEVELS = ("L2-L3", "L3-L4", "L4-L5", "L5-S1")
-FREE = ("L2", "L3", "L4", "L5")
+FREE = L2S1_FREE
 IDP_LEVEL = "L4-L5"
-MUSCLES = ("multifidus_caudal", "iliocostalis_longissimus", "psoas_vertebral_bodies",
-           "psoas_transverse_processes", "multifidus_cranial")
-MUSCLE_SETUPS = ("none",) + MUSCLES + ("all",)
-LOAD_CASES = ("neutral", "flexion", "extension", "axial_rotation_left", "axial_rotation_right",
-              "lateral_bending_left", "lateral_bending_right")
+MUSCLES = L2S1_MUSCLES
 MOMENT_NM = 3.75
 CABLE_LENGTH_M = 1.0
 # Newton step limits for the L2-S1 chain: its vertebrae move up to ~2 cm under the cables, so the FSU
@@ -50,23 +47,6 @@ SIDES = {"left": "l", "right": "r"}
 
 def default_cable_table() -> Path:
     return resources.data_dir() / "cables" / "wilke1996_cables.csv"
-
-
-CABLE_SCHEMA = TableSchema("wilke1996_cables", {
-    "muscle_setup": Column("str", allowed=frozenset(MUSCLES)),
-    "label": Column("str"),
-    "vertebra": Column("str", allowed=frozenset(FREE)),
-    "attachment_fascicles": Column("str"),
-    "direction_fascicles": Column("str"),
-    "attachment_rule": Column("str", allowed=frozenset({"mean_site_on_vertebra"})),
-    "direction_rule": Column("str", allowed=frozenset({"mean_unit_from_vertebra_site_to_next_site",
-                                                       "mean_unit_from_caudal_site_to_cranial_site"})),
-    "tension_per_side": Column("float", min=0.0),
-    "unit": Column("str", allowed=frozenset({"N"})),
-    "kind": Column("str", allowed=frozenset({"derived_from_geometry"})),
-    "source": Column("str"),
-    "note": Column("str", required=False, nullable=True),
-})
 
 
 # ------------------------------------------------------------------ Christophy fascicles in myo-sim
@@ -123,7 +103,7 @@ def derive_cables(table=None, tension_scale=1.0) -> pd.DataFrame:
     from .geometry.myo_sim import BODY_OF
 
     path = Path(table) if table is not None else default_cable_table()
-    df = read_table(path, CABLE_SCHEMA)
+    df = read_table(path, CABLES)
     missing = sorted(set(MUSCLES) - set(df["muscle_setup"]))
     if missing or df["muscle_setup"].duplicated().any():
         raise TableError(path, f"need each muscle set-up once; missing {missing}", column="muscle_setup",
@@ -443,20 +423,9 @@ def run_set(geometry, charset, cables=None, idp_formula="paper1", idp_kwargs=Non
 
 
 # ------------------------------------------------------------------ reference (measured/surrogate) IDP table
-IDP_TABLE_SCHEMA = TableSchema("idp_table", {
-    "muscle_setup": Column("str", allowed=frozenset(MUSCLE_SETUPS)),
-    "load_case": Column("str", allowed=frozenset(LOAD_CASES)),
-    "idp_mean_mpa": Column("float"),
-    "idp_sd_mpa": Column("float", min=0.0, description="MPa, standard deviation over specimens"),
-    "n_specimens": Column("int", min=0),
-    "kind": Column("str"),
-    "source": Column("str"),
-})
-
-
 def read_idp_table(path) -> pd.DataFrame:
     """Validated measured/surrogate IDP table (schema in data/experiments/README.md)."""
-    df = read_table(path, IDP_TABLE_SCHEMA)
+    df = read_table(path, IDP_INVITRO)
     key = list(zip(df["muscle_setup"], df["load_case"]))
     dup = [i + 1 for i, k in enumerate(key) if key.index(k) != i]
     if dup:
@@ -502,22 +471,9 @@ PUBLISHED_KEY = {"calibrated": "outliers_idp_this_paper_model", "chazal1985": "o
 
 
 def versus_paper(counts: pd.DataFrame, published_csv=None) -> pd.DataFrame:
-    """Outlier counts beside the paper's (Table 5 / Sect. 3.2); empty paper columns if the file is absent."""
-    out = counts[["set", "outliers", "scenarios", "data_kind"]
-                 + [c for c in ("n_scenarios_real", "n_outliers_real") if c in counts.columns]].copy()
-    out["paper_outliers"] = np.nan
-    out["paper_source"] = ""
-    if published_csv is not None and Path(published_csv).is_file():
-        pub = pd.read_csv(published_csv).set_index("quantity")
-        for i, s in out["set"].items():
-            k = PUBLISHED_KEY.get(s)
-            if k in pub.index:
-                out.at[i, "paper_outliers"] = float(pub.at[k, "value"])
-                out.at[i, "paper_source"] = str(pub.at[k, "source"])
-    else:
-        log.warning("published model results %s not found: paper_outliers left empty", published_csv)
-    out["difference"] = out["outliers"] - out["paper_outliers"]
-    return out
+    """Outlier counts beside the paper's (Table 5 / Sect. 3.2), in the columns of
+    :data:`lumbar.tables.VS_PAPER_COLUMNS`; empty paper columns if the file is absent."""
+    return tables.versus_paper(counts, published_csv, PUBLISHED_KEY)
 
 
 # ------------------------------------------------------------------ figures (Table 5 grid, Fig. 7)

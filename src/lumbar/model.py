@@ -28,7 +28,7 @@ import numpy as np
 from . import so3
 from .elements.disc import disc_axial_force, disc_torque
 from .elements.facet import FacetSurface, contact_penalty
-from .elements.ligament import rupp_force, softplus_force
+from .elements.ligament import rupp_force, slack_length, softplus_force
 
 LAW_SOFTPLUS, LAW_RUPP, LAW_CABLE = 0, 1, 2
 GROUND = -1
@@ -82,12 +82,13 @@ class SpineModel:
         raise KeyError(f"unknown body {name!r}; bodies: {self.body_names + self.fixed_names}")
 
     def add_fibre_group(self, name, kind, level, upper, lower, s_upper, s_lower, extra_length,
-                        law, params, prestrain_pct=0.0, scale=None):
+                        law, params, prestrain=0.0, scale=None):
         """Add the fibres of one ligament (or one cable) as a group.
 
         ``law``: 'softplus' (params a, b, c, d [N, %]), 'rupp' (params l_a, dF0, nu, K_nl, K_l
         from ``elements.ligament.rupp_shape``; per-strand force times ``scale``) or 'cable'
-        (params (tension [N],)). Slack length of each fibre = reference length / (1 + prestrain).
+        (params (tension [N],)). Slack length of each fibre = reference length / (1 + prestrain), ``prestrain`` a
+        strain (fraction, e.g. ``law.prestrain`` of a characteristic set's law).
         ``scale`` multiplies each fibre's law force; default 1/n_fibres (a ligament's force is
         shared by its fibres).
         """
@@ -98,7 +99,7 @@ class SpineModel:
         l_ref = np.linalg.norm(s_upper - s_lower, axis=1) + extra
         if np.any(l_ref <= 0):
             raise ValueError(f"fibre group {name!r} at {level}: zero reference length")
-        l0 = l_ref / (1.0 + prestrain_pct / 100.0)
+        l0 = slack_length(l_ref, prestrain)
         gid = len(self.fibre_groups)
         self.fibre_groups.append((name, kind, level))
         code = {"softplus": LAW_SOFTPLUS, "rupp": LAW_RUPP, "cable": LAW_CABLE}[law]

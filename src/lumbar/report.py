@@ -36,6 +36,7 @@ import pandas as pd
 
 from lumbar import __version__
 from lumbar.io import atomic_writer, write_text_atomic
+from lumbar.tables import OUTLIER_COUNT_NAMES
 
 log = logging.getLogger(__name__)
 
@@ -168,14 +169,6 @@ def _flatten(d, prefix="") -> list[tuple[str, Any]]:
 
 def _read_csv(path) -> pd.DataFrame:
     return pd.read_csv(path)
-
-
-def _col(df, *patterns, exclude=()):
-    """First column whose name contains every pattern and none of ``exclude``."""
-    for c in df.columns:
-        if all(p in c for p in patterns) and not any(e in c for e in exclude):
-            return c
-    return None
 
 
 def _mentions_surrogate(path) -> bool:
@@ -337,11 +330,12 @@ class _Builder:
         rel = rel_vs if self.has(rel_vs) else rel_counts if self.has(rel_counts) else None
         if rel is None:
             return f"{what}: {NOT_BUILT}."
-        df = _read_csv(self.path(rel))
-        ours = _col(df, "outlier", exclude=("paper", "not_conv", "difference"))
-        scen = _col(df, "scenario", exclude=("paper",))
-        paper = _col(df, "paper", "outlier")
-        paper_scen = _col(df, "paper", "scenario")
+        # the vocabulary of lumbar.tables.VS_PAPER_COLUMNS; an outlier-count table (no vs-paper table built)
+        # has no paper columns, Table 5's names its counts outliers / scenarios (lumbar.l2s1.outlier_counts)
+        df = _read_csv(self.path(rel)).rename(columns=OUTLIER_COUNT_NAMES)
+        ours, scen = "n_outliers", ("n_scenarios" if "n_scenarios" in df.columns else None)
+        paper = "paper_n_outliers" if "paper_n_outliers" in df.columns else None
+        paper_scen = "paper_n_scenarios" if "paper_n_scenarios" in df.columns else None
         parts = []
         for _, r in df.iterrows():
             s = f"{SET_LABELS.get(r['set'], r['set'])} {fmt(r[ours])} of {fmt(r[scen])}" if scen else \
@@ -352,7 +346,7 @@ class _Builder:
             parts.append(s)
         ref = ("SURROGATE reference (virtual specimens; a method check, i.e. a round trip, not a reproduction of "
                "the paper's counts)") if surrogate else "the measured reference table"
-        real_o, real_n = _col(df, "n_outliers_real"), _col(df, "n_scenarios_real")
+        real_o, real_n = (c if c in df.columns else None for c in ("n_outliers_real", "n_scenarios_real"))
         if real_o and real_n and surrogate:
             parts_real = [f"{SET_LABELS.get(r['set'], r['set'])} {fmt(r[real_o])} of {fmt(r[real_n])}"
                           for _, r in df.iterrows() if fmt(r[real_n]) not in ("", "0")]
@@ -415,8 +409,7 @@ class _Builder:
         if not self.has(rel):
             return f"Calibration residuals: {NOT_BUILT}."
         df = _read_csv(self.path(rel))
-        res = _col(df, "residual", exclude=("unit",))
-        unit = _col(df, "residual_unit") or _col(df, "unit")
+        res, unit = "rms_residual", "residual_unit"        # lumbar.calibration's summary columns
         parts = []
         for u, g in df.groupby(unit, sort=False) if unit else [("", df)]:
             names = ", ".join(str(x) for x in g.get("structure", g.index))

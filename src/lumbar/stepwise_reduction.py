@@ -3,7 +3,7 @@
 160 scenarios = 8 reduction stages (``lumbar.fsu.STAGES``) x 5 pure moments x 4 directions, solved
 for one characteristic set in one batch, compared with a reference ROM table (mean, min, max).
 
-Reference ROM tables (schema ``EXPERIMENT_SCHEMA``, documented in ``data/experiments/README.md``):
+Reference ROM tables (schema ``lumbar.tables.STEPWISE_ROM``, documented in ``data/experiments/README.md``):
 one row per (stage, direction, moment_nm) with ``rom_mean_deg``, ``rom_min_deg``, ``rom_max_deg``,
 ``n_specimens``, ``kind``, ``source``. The measured table of Heuer et al. (2007) is not available to
 the project: the workflow uses a surrogate from virtual specimens
@@ -25,7 +25,6 @@ other effect needs a params form ``(fsu, value) -> dict`` of per-scenario solver
 from __future__ import annotations
 
 import logging
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -34,31 +33,14 @@ from . import so3
 from .effects import SOLVER_EFFECTS, FsuVariants, check_effect, effect_params
 from .effects import register_effect as register_effect  # re-export: the documented extension hook
 from .fsu import DIRECTIONS, MAIN_DIRECTIONS, STAGES, moment_loads
-from .io import Column, TableError, TableSchema, read_table, save_figure_atomic, subplots
+from .io import TableError, read_table, save_figure_atomic, subplots
 from .solve import solve
+from .tables import STEPWISE_ROM, versus_paper
 
 log = logging.getLogger(__name__)
 
 MOMENTS_NM = (1.0, 2.5, 5.0, 7.5, 10.0)
 REL_TOLERANCE = 0.25     # acceptance of a published value without a range (equal to lumbar.validation's)
-DATA_KINDS = frozenset({"measured", "original_text", "original_figure", "third_party",
-                        "derived_from_published_fit", "surrogate"})
-EXPERIMENT_COLUMNS = ("stage", "direction", "moment_nm", "rom_mean_deg", "rom_min_deg", "rom_max_deg",
-                      "n_specimens", "kind", "source")
-EXPERIMENT_SCHEMA = TableSchema("stepwise_reduction_rom", {
-    "stage": Column("str", allowed=frozenset(STAGES)),
-    "direction": Column("str", allowed=frozenset(MAIN_DIRECTIONS)),
-    "moment_nm": Column("float", min=0.0, max=50.0, description="pure moment [N*m]"),
-    "rom_mean_deg": Column("float", min=0.0, description="mean range of motion [deg]"),
-    "rom_min_deg": Column("float", min=0.0, nullable=True, finite=False, description="[deg], empty = no range"),
-    "rom_max_deg": Column("float", min=0.0, nullable=True, finite=False, description="[deg], empty = no range"),
-    "n_specimens": Column("int", min=1, description="specimens behind the row"),
-    "kind": Column("str", allowed=DATA_KINDS),
-    "source": Column("str"),
-    "note": Column("str", required=False, nullable=True),
-})
-
-
 # ------------------------------------------------------------------ simulation
 def scenario_grid(stages=STAGES, directions=MAIN_DIRECTIONS, moments_nm=MOMENTS_NM) -> pd.DataFrame:
     """All (stage, direction, moment_nm) combinations in table order."""
@@ -174,7 +156,7 @@ def simulate_stepwise_reduction(fsu, stages=STAGES, directions=MAIN_DIRECTIONS, 
 # ------------------------------------------------------------------ reference tables
 def read_experiment_table(path) -> pd.DataFrame:
     """Read and validate a stepwise-reduction ROM table (errors name file, row and column)."""
-    df = read_table(path, EXPERIMENT_SCHEMA)
+    df = read_table(path, STEPWISE_ROM)
     for i, r in enumerate(df.itertuples(index=False)):
         lo, hi, mean = r.rom_min_deg, r.rom_max_deg, r.rom_mean_deg
         if np.isnan(lo) != np.isnan(hi):
@@ -274,6 +256,7 @@ def outlier_counts(synopsis: pd.DataFrame) -> pd.DataFrame:
     return out.reset_index()
 
 
+PAPER_N_SCENARIOS = 160      # paper 1, Table 4: 8 stages x 4 directions x 5 moments
 PAPER_OUTLIER_KEYS = {"calibrated": "outliers_rom_this_paper_model", "chazal1985": "outliers_rom_chazal1985",
                       "shirazi_adl1986": "outliers_rom_shirazi_adl1986",
                       "white_panjabi1990": "outliers_rom_white_panjabi1990",
@@ -281,23 +264,9 @@ PAPER_OUTLIER_KEYS = {"calibrated": "outliers_rom_this_paper_model", "chazal1985
 
 
 def compare_with_paper(counts: pd.DataFrame, published_csv=None) -> pd.DataFrame:
-    """Our outlier counts beside the paper's (Sect. 3.1.2); empty paper column if the file is absent."""
-    out = counts[["set", "n_scenarios", "n_outliers"]
-                 + [c for c in ("n_scenarios_real", "n_outliers_real") if c in counts.columns]].copy()
-    out["paper_n_outliers"] = np.nan
-    out["paper_source"] = ""
-    if published_csv is not None and Path(published_csv).is_file():
-        pub = pd.read_csv(published_csv)
-        byq = pub.set_index("quantity")
-        for i, s in enumerate(out["set"]):
-            q = PAPER_OUTLIER_KEYS.get(s)
-            if q in byq.index:
-                out.loc[i, "paper_n_outliers"] = float(byq.loc[q, "value"])
-                out.loc[i, "paper_source"] = str(byq.loc[q, "source"])
-    else:
-        log.warning("published model results %s not found: paper_n_outliers left empty", published_csv)
-    out["paper_n_scenarios"] = 160
-    return out
+    """Our outlier counts beside the paper's (Sect. 3.1.2; 160 scenarios), in the columns of
+    :data:`lumbar.tables.VS_PAPER_COLUMNS`; empty paper columns if the file is absent."""
+    return versus_paper(counts, published_csv, PAPER_OUTLIER_KEYS, paper_n_scenarios=PAPER_N_SCENARIOS)
 
 
 # ------------------------------------------------------------------ figures (matplotlib object API, no pyplot)

@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .idp import idp_per_newton
+
 
 @dataclass(frozen=True)
 class SpecimenVariation:
@@ -248,13 +250,6 @@ def _without_survivor_bias(simulate_one, seed, n_specimens, log, max_redraws=Non
 
 
 # ---------------------------------------------------------------- in-vitro IDP surrogate (issue 4)
-def _fx_idp_per_newton(geometry, idp_formula, area_m2=18e-4):
-    """d IDP / d axial force [Pa/N] of the IDP formula (for the axial-preload effect)."""
-    if idp_formula == "paper1":
-        return 1.68 / geometry.levels["L4-L5"].disc_csa
-    return 0.85 / (area_m2 * 0.66)
-
-
 def idp_table(geometry, charset, seed, n_specimens=7, variation=None, noise_sd_mpa=0.02, effects=None,
               cables=None, idp_formula="paper1", k_shear=None, max_iter=50, tol=1e-7):
     """Surrogate L4-L5 IDP table (Wilke et al. 1996 layout: 7 muscle set-ups x 7 load cases, L2-S1).
@@ -298,9 +293,10 @@ def idp_table(geometry, charset, seed, n_specimens=7, variation=None, noise_sd_m
         idp = sim["idp_mpa"].to_numpy(float) + rng.normal(0.0, noise_sd_mpa, len(sim))
         for key, delta in (effects or {}).items():
             if key in _fx.EFFECTS:      # a discrepancy candidate acting on the IDP from the disc loads
+                per_n = idp_per_newton(idp_formula, geo_k.levels["L4-L5"].disc_csa)
                 idp = idp + _fx.idp_delta(key, float(delta), sim["idp_mpa"].to_numpy(float) * 1e6,
                                           sim["disc_moment_sagittal_nm"].to_numpy(float),
-                                          _fx_idp_per_newton(geo_k, idp_formula)) / 1e6 - sim["idp_mpa"].to_numpy(float)
+                                          per_n) / 1e6 - sim["idp_mpa"].to_numpy(float)
                 continue
             ms, lc = (str(key).split("/") + ["*"])[:2]
             hit = ((sim["muscle_setup"] == ms) | (ms == "*")) & ((sim["load_case"] == lc) | (lc == "*"))

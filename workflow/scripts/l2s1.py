@@ -87,8 +87,8 @@ elif rule == "table5":
     l2s1.plot_table5_grid(syn, out.grid)
     l2s1.plot_fig7(syn, out.fig7)
     for _, r in vs.iterrows():
-        log.info("set %s: %d outliers of %d (paper: %s) [reference %s]", r["set"], r["outliers"], r["scenarios"],
-                 r["paper_outliers"], r["data_kind"])
+        log.info("set %s: %d outliers of %d (paper: %s) [reference %s]", r["set"], r["n_outliers"],
+                 r["n_scenarios"], r["paper_n_outliers"], r["data_kind"])
 elif rule == "fig3_l2s1_cables":
     from lumbar.render_spine import render_spine
 

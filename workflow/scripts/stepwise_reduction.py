@@ -51,7 +51,6 @@ elif snakemake.rule == "table4":
     syn = pd.concat(parts, ignore_index=True)
     counts = sr_mod.outlier_counts(syn)
     vs = sr_mod.compare_with_paper(counts, snakemake.params.published)
-    vs["our_reference_data"] = counts["data_kinds"].to_numpy()
     for _, r in counts.iterrows():
         log.info("set %-18s %3d outliers of %d (%d not converged; reference %s)", r["set"], r["n_outliers"],
                  r["n_scenarios"], r["n_not_converged"], r["data_kinds"])

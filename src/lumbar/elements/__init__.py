@@ -5,10 +5,10 @@ solver can assemble an exact tangent stiffness. Units: see each function.
 """
 from .disc import disc_axial_force, disc_torque, torque_angle
 from .facet import FacetSurface, contact_penalty, fit_surface
-from .ligament import rupp_force, slack_ramp, softplus_force, softplus_law
+from .ligament import rupp_force, slack_length, slack_ramp, softplus_force, softplus_law
 
 __all__ = [
     "disc_axial_force", "disc_torque", "torque_angle",
     "FacetSurface", "contact_penalty", "fit_surface",
-    "rupp_force", "slack_ramp", "softplus_force", "softplus_law",
+    "rupp_force", "slack_length", "slack_ramp", "softplus_force", "softplus_law",
 ]
