@@ -1,10 +1,10 @@
-"""Benchmark: time per discrepancy-discovery run (lumbar.discover) on one core, with cached nominal solves.
+"""Benchmark: time per discrepancy-discovery run (lumbar.discovery) on one core, with cached nominal solves.
 
 On hidden-effect TEST FIXTURES of the default configuration (decision with the parametric bootstrap,
 ``discovery.n_bootstrap`` null datasets, and the identifiability step included):
 
 * IDP: one discovery on a 49-scenario in-vitro IDP fixture with the nominal L2-S1 model cached
-  (``lumbar.discover.idp_model_table`` solves it once per process), against the baseline measured in the same
+  (``lumbar.discovery.idp_model_table`` solves it once per process), against the baseline measured in the same
   run: the same discovery paying the nominal L2-S1 solve (what every IDP run cost before). Target < 2 s.
 * ROM: one discovery on a 160-scenario stepwise-reduction fixture with the nominal/coarse-grid batch cached (what
   a benchmark job pays per further case), against the uncached run as baseline. Target < 10 s.
@@ -27,7 +27,8 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from lumbar import discover as D  # noqa: E402
+from lumbar import discovery as D  # noqa: E402
+from lumbar.discovery import problems as discovery_problems  # noqa: E402
 from lumbar.config import load_config  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -45,11 +46,11 @@ def main(argv=None):
     t_build = time.perf_counter() - t0
     rom = D.make_hidden_effect_dataset(cfg, "stepwise_rom", "ligament_prestrain", 0.03, seed=1)
     # IDP baseline: the nominal L2-S1 solve + the discovery (uncached)
-    D._IDP_MODEL_CACHE.clear()
+    discovery_problems._IDP_MODEL_CACHE.clear()
     t = time.perf_counter()
     model = D.idp_model_table(cfg)
     idp = D.make_hidden_effect_dataset(cfg, "idp_invitro", "idp_moment_term", 0.036e6, seed=2, idp_model=model)
-    D._IDP_MODEL_CACHE.clear()
+    discovery_problems._IDP_MODEL_CACHE.clear()
     t = time.perf_counter()
     r = D.discover(D.build_problem("idp_invitro", idp, cfg), s)["result"]
     idp_base = time.perf_counter() - t

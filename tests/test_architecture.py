@@ -7,7 +7,7 @@
 
 The modules are found with ``pkgutil.walk_packages`` and imported with ``importlib`` (so every module is also
 importable); the graph is built from their source with ``ast``. Dynamic imports
-(``importlib.import_module(variable)``, as in ``lumbar.tables.schema_of``) are not seen.
+(``importlib.import_module(variable)``) are not seen; the library has none (``lumbar.tables`` holds its schemas).
 
 The checkers are tested on a tiny fake package, so that each rule can fail.
 """

@@ -1,6 +1,6 @@
-"""Discrepancy discovery (issue 6): candidate effects (lumbar.effects) and lumbar.discover.
+"""Discrepancy discovery (issue 6): candidate effects (lumbar.effects) and lumbar.discovery.
 
-Datasets with a planted effect are TEST FIXTURES made in the tests (lumbar.discover.make_hidden_effect_dataset,
+Datasets with a planted effect are TEST FIXTURES made in the tests (lumbar.discovery.make_hidden_effect_dataset,
 or the synthetic L2-S1 / muscle-model tables below), never data.
 """
 import json
@@ -10,7 +10,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lumbar import discover as D
+from lumbar import discovery as D
+from lumbar.discovery import benchmark as discovery_benchmark
+from lumbar.discovery import fit as discovery_fit
 from lumbar import effects as fx
 from lumbar import so3
 
@@ -255,7 +257,7 @@ def test_bootstrap_resampler_reproduces_the_generator_spread(idp_model_fixture):
     df = D.make_hidden_effect_dataset(cfg, "idp_invitro", "none", 0.0, seed=1, idp_model=idp_model_fixture)
     prob = D.build_problem("idp_invitro", df, cfg, idp_model=idp_model_fixture)
     center = prob.forward({})[0]
-    Y, S = D._resample(prob, center, 1.0, 400, np.random.default_rng(0))
+    Y, S = discovery_fit._resample(prob, center, 1.0, 400, np.random.default_rng(0))
     sd_gen = SMALL["noise_sd_mpa"] / np.sqrt(SMALL["n_specimens"])
     assert abs(np.std(Y - center) / sd_gen - 1) < 0.1
     gen = np.concatenate([D.build_problem("idp_invitro", D.make_hidden_effect_dataset(
@@ -295,7 +297,7 @@ def test_benchmark_summary_false_positive_rate_interval_and_power():
     assert np.isclose(pw[0.25]["median_param_rel_error"], 0.2)
     assert s["power_at_larger_magnitude"] == {"itl": 1.0}
     assert s["pass"] == {"false_positive_rate_max": False, "power_at_larger_magnitude_min": True}
-    assert D._interval(0, 50)[0] == 0 and 0.05 < D._interval(0, 50)[1] < 0.08
+    assert discovery_benchmark._interval(0, 50)[0] == 0 and 0.05 < discovery_benchmark._interval(0, 50)[1] < 0.08
 
 
 def test_virtual_specimens_without_equilibrium_are_redrawn_not_dropped():

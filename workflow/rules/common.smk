@@ -269,10 +269,10 @@ DISCOVERY_FILES = (
 
 
 def discovery_config(wildcards):
-    """The config sections lumbar.discover reads (canonical key order, see _sorted_keys)."""
+    """The config sections lumbar.discovery reads (canonical key order, see _sorted_keys)."""
     keys = ("geometry", "characteristics", "fsu", "solver", "l2s1", "discovery", "seed")
     cfg = {k: config[k] for k in keys if k in config}
-    # lumbar.discover reads only characteristics.data_dir: a changed list of sets must not re-run discovery
+    # lumbar.discovery reads only characteristics.data_dir: a changed list of sets must not re-run discovery
     cfg["characteristics"] = {"data_dir": config["characteristics"]["data_dir"]}
     return cfg
 
@@ -307,7 +307,7 @@ def discovery_benchmark_jobs():
 
 
 def discovery_benchmark_idp_model(wildcards):
-    """The nominal L2-S1 model table, for the benchmark jobs with in-vitro IDP cases (lumbar.discover.benchmark_cases:
+    """The nominal L2-S1 model table, for the benchmark jobs with in-vitro IDP cases (lumbar.discovery.benchmark_cases:
     the IDP effects, and the null datasets from the second one on, which alternate between the experiments).
     """
     b = config["discovery"]["benchmark"]

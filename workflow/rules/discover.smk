@@ -1,4 +1,4 @@
-# Discrepancy discovery (issue 6): lumbar.discover on the default stepwise-reduction table, the published
+# Discrepancy discovery (issue 6): lumbar.discovery on the default stepwise-reduction table, the published
 # vertebral-arch artefact and the in-vivo validation of the muscle model; the hidden-effect benchmark
 # (test fixtures) split into one job per hidden effect (+ one for the null datasets).
 

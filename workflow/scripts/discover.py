@@ -21,7 +21,8 @@ import time  # noqa: E402
 
 import pandas as pd  # noqa: E402
 
-from lumbar import discover  # noqa: E402
+from lumbar import discovery as discover  # noqa: E402
+from lumbar.plots.discovery import plot_benchmark  # noqa: E402
 from lumbar.io import write_json_atomic, write_table_atomic  # noqa: E402
 
 rule = snakemake.rule
@@ -39,7 +40,7 @@ if rule == "discovery_idp_model":
 elif rule in ("discovery_default", "discovery_va_artefact", "discovery_in_vivo", "discovery_intact_rom"):
     if rule == "discovery_in_vivo":
         cfg["discovery"]["in_vivo_segment_loads"] = str(snakemake.input.segment_loads)
-    out_dir = Path(snakemake.output.discovery).parent   # lumbar.discover.run writes the case's files there
+    out_dir = Path(snakemake.output.discovery).parent   # lumbar.discovery.run writes the case's files there
     r = discover.run(cfg, snakemake.input.measured, out_dir)
     log.info("%s on %s: named %s (estimate %s), gap %.2f -> %.2f; %s", rule, snakemake.input.measured,
              r["named_effect"], r["parameter_estimate"], r["gap_before"], r["gap_after"], r["decision"])
@@ -69,7 +70,7 @@ elif rule == "discovery_benchmark":
             "confidence", "fixture"]
     write_table_atomic(bench[cols], snakemake.output.table, float_format="%.6g")
     write_json_atomic(summary, snakemake.output.summary, allow_nan=True)
-    discover.plot_benchmark(bench, summary, snakemake.output.figure)
+    plot_benchmark(bench, summary, snakemake.output.figure)
     log.info("benchmark: %d nulls, false-positive rate %.3f (95%% CI %s), power at the larger magnitude %s, all "
              "targets met: %s", summary["n_null"], summary["false_positive_rate"], summary["false_positive_rate_95ci"],
              summary["power_at_larger_magnitude"], summary["all_pass"])

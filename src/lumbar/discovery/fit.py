@@ -1,0 +1,429 @@
+"""Fitting and scoring the candidate effects of a discovery problem: batched grid solves, splines, the
+bootstrap likelihood-ratio test, the naming rule, identifiability and cross-validation (:func:`discover`)."""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+from scipy.optimize import minimize_scalar
+
+from .. import effects as fx
+from .detect import default_settings
+from .problems import D2, Problem
+
+
+# ------------------------------------------------------------------ fitting and scoring
+def _batch(problem, plan):
+    """One forward batch: plan = [(effect, values array)], -> list of (len(values), n) predictions."""
+    if not plan:
+        return []
+    sizes = [len(v) for _, v in plan]
+    G = sum(sizes)
+    values, o = {}, 0
+    for name, v in plan:
+        arr = values.setdefault(name, np.zeros(G))
+        arr[o:o + len(v)] = v
+        o += len(v)
+    P = problem.forward(values)
+    return np.split(P, np.cumsum(sizes)[:-1], axis=0)
+
+
+def _spline_fit(theta, P, y, w, lo, hi, mask=None):
+    """argmin over [lo, hi] of sum w (spline(theta) - y)^2 (per-scenario cubic splines through the grid)."""
+    ok = np.isfinite(P).all(0) & (mask if mask is not None else True)
+    if ok.sum() == 0:
+        return np.nan, np.inf
+    cs = CubicSpline(theta, P[:, ok], axis=0)
+
+    def f(t):
+        return float((w[ok] * (cs(t) - y[ok]) ** 2).sum())
+
+    vals = [f(t) for t in theta]
+    k = int(np.argmin(vals))
+    a, b = theta[max(k - 1, 0)], theta[min(k + 1, len(theta) - 1)]
+    r = minimize_scalar(f, bounds=(max(a, lo), min(b, hi)), method="bounded", options={"xatol": 1e-6 * (hi - lo)})
+    return (float(r.x), float(r.fun)) if r.fun <= vals[k] else (float(theta[k]), float(vals[k]))
+
+
+def _qaicc(chi2, k, n, c):
+    pen = 2 * k + (2 * k * (k + 1) / (n - k - 1) if n - k - 1 > 0 else 0.0)
+    return chi2 / c + pen
+
+
+def _curve(theta_parts, P_parts, lo, hi):
+    """Merged, sorted, de-duplicated (theta, P) of a candidate's grids."""
+    th = np.concatenate(theta_parts)
+    P = np.vstack(P_parts)
+    o = np.argsort(th, kind="stable")
+    th, P = th[o], P[o]
+    keep = np.r_[True, np.diff(th) > 1e-12 * (hi - lo)]
+    return th[keep], P[keep]
+
+
+def _dense(th, P, lo, hi, n_dense=241):
+    """Predictions on a dense parameter grid (cubic spline per scenario; scenarios with a missing
+    equilibrium somewhere on the grid: nearest grid point, NaN stays NaN)."""
+    td = np.unique(np.r_[np.linspace(lo, hi, n_dense), th])
+    ok = np.isfinite(P).all(0)
+    D = np.full((len(td), P.shape[1]), np.nan)
+    if ok.any() and len(th) >= 2:
+        D[:, ok] = CubicSpline(th, P[:, ok], axis=0)(td)
+    if (~ok).any():
+        near = np.abs(td[:, None] - th[None, :]).argmin(1)
+        D[:, ~ok] = P[near][:, ~ok]
+    return td, D
+
+
+def _chi2_surface(D, Y, W, valid, penalty=100.0):
+    """chi2[d, b] = sum_i W[b,i] (D[d,i] - Y[b,i])^2 over valid scenarios; a missing prediction costs
+    ``penalty`` (a 10-sigma residual)."""
+    fin = np.isfinite(D) & valid[None, :]
+    Df = np.where(fin, D, 0.0)
+    Wv = np.where(valid[None, :], W, 0.0)
+    Yv = np.where(valid[None, :], Y, 0.0)
+    F = fin.astype(float)
+    chi = (Df ** 2) @ Wv.T - 2.0 * Df @ (Wv * Yv).T + F @ (Wv * Yv ** 2).T
+    chi += penalty * ((~np.isfinite(D)) & valid[None, :]).sum(1)[:, None]
+    return np.maximum(chi, 0.0)
+
+
+def _resample(problem, center, scale, B, rng):
+    """B null datasets of ``problem`` around ``center`` with the project's generator (lumbar.discovery.
+    make_hidden_effect_dataset): per row n virtual specimens, Gaussian noise of one per-specimen SD pooled over the
+    rows (RMS of sigma * sqrt(n), times ``scale``), summarised exactly as the experiment's table is (ROM:
+    mean, min, max -> sigma from the range, values below 0 deg set to 0; IDP: mean and SD). Rows with a fixed
+    uncertainty (no range, in vivo, neutral angle): mean + sigma * scale * N(0, 1). Returns (Y, SIG), (B, n)."""
+    y0 = np.where(np.isfinite(center), center, 0.0)
+    sig = problem.sigma
+    n = len(y0)
+    Y = y0[None, :] + scale * sig[None, :] * rng.standard_normal((B, n))
+    SIG = np.broadcast_to(sig, (B, n)).copy()
+    npr = problem.meta.get("n_per_row")
+    hr = problem.meta.get("has_range")
+    if npr is None or hr is None:
+        return Y, SIG
+    # the generator's noise is one SD for every specimen and row: pooled from the rows' spreads
+    pooled = float(np.sqrt(np.mean((sig[hr] * np.sqrt(npr[hr])) ** 2))) if hr.any() else 0.0
+    for k in np.unique(npr[hr]):
+        cols = np.flatnonzero(hr & (npr == k))
+        sd = np.full(len(cols), scale * pooled)
+        A = y0[cols][None, None, :] + sd[None, None, :] * rng.standard_normal((B, int(k), len(cols)))
+        if problem.experiment == "stepwise_rom":
+            A = np.maximum(A, 0.0)
+            Y[:, cols] = A.mean(1)
+            d2 = D2.get(int(k), 3.078)
+            SIG[:, cols] = np.maximum((A.max(1) - A.min(1)) / d2 / np.sqrt(k), problem.meta.get("sigma_floor", 0.0))
+        else:
+            Y[:, cols] = A.mean(1)
+            SIG[:, cols] = np.maximum(A.std(1, ddof=1) / np.sqrt(k), problem.meta.get("sigma_floor", 0.0))
+    return Y, SIG
+
+
+def _lr_statistics(curves, Y, W, valid, base):
+    """LR statistic of every candidate against "none" per dataset (rows of Y): T = (chi2_none - min chi2_c) / c,
+    c = max(1, chi2_none / (n - 1)) the overdispersion of the no-effect model. Returns ({c: T (B,)},
+    {c: argmin theta (B,)}, chi2_none (B,))."""
+    nv = int(valid.sum())
+    chi0 = _chi2_surface(base[None, :], Y, W, valid)[0]
+    c0 = np.maximum(1.0, chi0 / max(nv - 1, 1))
+    T, th = {}, {}
+    for c, (td, D) in curves.items():
+        chi = _chi2_surface(D, Y, W, valid)
+        k = chi.argmin(0)
+        T[c] = np.maximum(chi0 - chi[k, np.arange(chi.shape[1])], 0.0) / c0
+        th[c] = td[k]
+    return T, th, chi0
+
+
+def _sensitivities(curves, cands, sig, valid):
+    """Sensitivity vector of every candidate on the experiment: (prediction at its reference magnitude - no
+    effect) / sigma, from the candidate's grid spline."""
+    S = {}
+    for c in cands:
+        td, D = curves[c]
+        ref = float(np.clip(fx.EFFECTS[c].magnitudes[0] if fx.EFFECTS[c].magnitudes else 0.5 * fx.EFFECTS[c].bounds[1],
+                            *fx.EFFECTS[c].bounds))
+        i0, i1 = np.abs(td).argmin(), np.abs(td - ref).argmin()
+        v = (D[i1] - D[i0]) / sig
+        S[c] = np.where(valid & np.isfinite(v), v, 0.0)
+    return S
+
+
+def _identifiability(problem, cands, S, s, cache):
+    """Pairwise correlation (cosine) of the candidates' sensitivity vectors; for every pair above
+    ``max_correlation`` the load cases of the experiment's design space that separate them best: the second
+    effect is scaled to mimic the first on the given experiment (least squares), and the design's scenarios are
+    ranked by what is left, |s_a - alpha s_b| in units of the experiment's typical sigma."""
+    # a candidate that moves no compared row by 1e-3 standard errors at its reference magnitude acts on nothing here
+    S = {c: (v if np.linalg.norm(v) > 1e-3 else np.zeros_like(v)) for c, v in S.items()}
+    corr = {}
+    for i, a in enumerate(cands):
+        for b in cands[i + 1:]:
+            na, nb = np.linalg.norm(S[a]), np.linalg.norm(S[b])
+            corr[(a, b)] = float(S[a] @ S[b] / (na * nb)) if na > 0 and nb > 0 else float("nan")
+    thr = float(s["max_correlation"])
+    pairs = [(a, b) for (a, b), r in corr.items() if not (np.isfinite(r) and abs(r) < thr)]
+    out = {"correlation": {f"{a} | {b}": r for (a, b), r in corr.items()}, "max_correlation": thr,
+           "non_separable": []}
+    if not pairs:
+        return out
+    dk, dfwd = problem.meta.get("design_keys"), problem.meta.get("design_forward")
+    refs = {c: float(np.clip(fx.EFFECTS[c].magnitudes[0], *fx.EFFECTS[c].bounds)) for c in cands}
+    Dsens = None
+    if dk is not None and dfwd is not None:
+        key = ("design", problem.experiment, tuple(cands), len(dk))
+        if cache is not None and key in cache:
+            Dsens = cache[key]
+        else:
+            plan = [(cands[0], np.zeros(1))] + [(c, np.array([refs[c]])) for c in cands]
+            sizes = [1] * len(plan)
+            values = {}
+            for j, (name, v) in enumerate(plan):
+                arr = values.setdefault(name, np.zeros(len(plan)))
+                arr[j] = v[0]
+            P = dfwd(values)
+            Dsens = {c: P[j + 1] - P[0] for j, c in enumerate(cands)}
+            del sizes
+            if cache is not None:
+                cache[key] = Dsens
+    typ = float(np.nanmedian(problem.sigma))
+    measured = set(map(tuple, problem.keys[[c for c in dk.columns if c in problem.keys]].astype(str).to_numpy())) \
+        if dk is not None else set()
+    for a, b in pairs:
+        item = {"pair": [a, b], "correlation": corr[(a, b)], "measure_next": []}
+        inert = [c for c in (a, b) if not np.linalg.norm(S[c]) > 0]
+        if inert:
+            item["inert"] = inert
+            item["note"] = f"{' and '.join(inert)} change(s) no compared row of this experiment: not identifiable here"
+        if Dsens is not None:
+            sa, sb = S[a], S[b]
+            alpha = float(sa @ sb / (sb @ sb)) if sb @ sb > 0 else 0.0
+            beta = float(sa @ sb / (sa @ sa)) if sa @ sa > 0 else 0.0
+            # what is left after either effect mimics the other on the given experiment
+            r = np.fmax(np.abs(Dsens[a] - alpha * Dsens[b]), np.abs(Dsens[b] - beta * Dsens[a])) / typ
+            order = [i for i in np.argsort(-np.nan_to_num(np.abs(r), nan=-1.0)) if np.isfinite(r[i])]
+            for i in order[: int(s["n_next"])]:
+                row = {k: (v.item() if hasattr(v, "item") else v) for k, v in dk.iloc[i].items()}
+                row["separation_z"] = float(abs(r[i]))
+                row["already_measured"] = tuple(str(v) for k, v in dk.iloc[i].items()
+                                                if k in problem.keys.columns) in measured
+                item["measure_next"].append(row)
+            item["how"] = (f"each effect at its reference magnitude ({a} {refs[a]:g} {fx.EFFECTS[a].unit}, {b} "
+                           f"{refs[b]:g} {fx.EFFECTS[b].unit}) scaled by least squares to mimic the other on this "
+                           f"experiment; separation_z = the larger difference left at a load case of the experiment's "
+                           f"design space, in units of its median sigma ({typ:.3g} {problem.unit})")
+        out["non_separable"].append(item)
+    return out
+
+
+def discover(problem: Problem, settings: dict | None = None, cache: dict | None = None) -> dict:
+    """Rank the candidate effects, name the best one when its bootstrap p-value clears the level, refit
+    (see module doc)."""
+    s = default_settings()
+    s.update(settings or {})
+    t0 = time.perf_counter()
+    y, sig = problem.y, problem.sigma
+    w = 1.0 / sig**2
+    cands = list(problem.candidates)
+    n_batches = 0
+    # batch 1: no-effect model and the coarse grid of every candidate
+    grids = {c: np.unique(np.r_[np.linspace(*fx.EFFECTS[c].bounds, int(s["grid_points"])), 0.0]) for c in cands}
+    key = ("coarse", problem.experiment, tuple(map(tuple, problem.keys.astype(str).to_numpy())),
+           tuple(cands), int(s["grid_points"]))
+    if cache is not None and key in cache:
+        base, coarse = cache[key]
+    else:
+        if cands:
+            out = _batch(problem, [(cands[0], np.zeros(1))] + [(c, grids[c]) for c in cands])
+        else:
+            out = [problem.forward({})]
+        base, coarse = out[0][0], dict(zip(cands, out[1:]))
+        n_batches += 1
+        if cache is not None:
+            cache[key] = (base, coarse)
+    valid = np.isfinite(base) & np.isfinite(y) & np.isfinite(sig)
+    z0 = (base - y) / sig
+    chi0 = float((z0[valid] ** 2).sum())
+    nv = int(valid.sum())
+    gap_before = float(np.sqrt(np.mean(z0[valid] ** 2))) if nv else float("nan")
+    # coarse estimates, then batch 2: fine grid around each optimum
+    est, fine_theta, coarse_chi = {}, {}, {}
+    for c in cands:
+        lo, hi = fx.EFFECTS[c].bounds
+        est[c], coarse_chi[c] = _spline_fit(grids[c], coarse[c], y, w, lo, hi, valid)
+    # the fine grid only for the leading candidates (``fine_candidates`` lowest coarse chi2): it refines the
+    # estimate that can be named; the others keep their coarse-spline estimate
+    lead = sorted([c for c in cands if np.isfinite(est[c])], key=lambda c: coarse_chi[c])[: int(s["fine_candidates"])]
+    for c in lead:
+        lo, hi = fx.EFFECTS[c].bounds
+        step = (hi - lo) / (int(s["grid_points"]) - 1)
+        t = est[c]
+        fine_theta[c] = np.unique(np.clip(np.linspace(t - step, t + step, int(s["fine_points"])), lo, hi))
+    fine = dict(zip(fine_theta, _batch(problem, list(fine_theta.items()))))
+    n_batches += bool(fine_theta)
+    curves_raw = {}
+    for c in cands:
+        lo, hi = fx.EFFECTS[c].bounds
+        th, P = _curve([grids[c]] + ([fine_theta[c]] if c in fine else []),
+                       [coarse[c]] + ([fine[c]] if c in fine else []), lo, hi)
+        curves_raw[c] = (th, P)
+        if c in fine:
+            est[c], _ = _spline_fit(th, P, y, w, lo, hi, valid)
+    # batch 3: exact model at every estimate (the refit)
+    fin = [(c, np.array([est[c]])) for c in cands if np.isfinite(est[c])]
+    exact = {c: p[0] for (c, _), p in zip(fin, _batch(problem, fin))}
+    n_batches += bool(fin)
+    chi = {"none": chi0}
+    for c in exact:
+        ok = valid & np.isfinite(exact[c])
+        z = (exact[c] - y) / sig
+        # a scenario that loses its equilibrium under the effect counts as a large residual (10 sigma)
+        chi[c] = float((np.where(ok, z, 10.0)[valid] ** 2).sum())
+    # ---- decision statistic: LR vs "none", overdispersion of the no-effect model, parametric bootstrap
+    curves = {c: _dense(*curves_raw[c], *fx.EFFECTS[c].bounds) for c in cands}
+    T_obs, _, _ = _lr_statistics(curves, y[None, :], w[None, :], valid, base)
+    T_obs = {c: float(v[0]) for c, v in T_obs.items()}
+    too_few = nv < int(s["min_rows"])
+    B = int(s["n_bootstrap"])
+    c_hat0 = max(1.0, chi0 / max(nv - 1, 1))
+    p_adj, p_raw, Tmax_null = {}, {}, np.array([])
+    if cands and not too_few and B > 0:
+        rng = np.random.default_rng([int(s.get("seed", 0)), 15])
+        Yb, Sb = _resample(problem, base, np.sqrt(c_hat0), B, rng)
+        Tb, _, _ = _lr_statistics(curves, Yb, 1.0 / Sb ** 2, valid, base)
+        Tmax_null = np.max(np.vstack([Tb[c] for c in cands]), axis=0)
+        for c in cands:
+            p_raw[c] = float((1 + np.sum(Tb[c] >= T_obs[c] - 1e-12)) / (B + 1))
+            p_adj[c] = float((1 + np.sum(Tmax_null >= T_obs[c] - 1e-12)) / (B + 1))
+    # ---- ranking (by the LR statistic), confidence among the candidates, diagnostics
+    cand_rank = sorted(cands, key=lambda c: -T_obs[c])
+    best = cand_rank[0] if cand_rank else None
+    chat = max(1.0, min(chi.values()) / max(nv - 1, 1))
+    score = {m: _qaicc(v, 0 if m == "none" else 1, nv, chat) for m, v in chi.items()}
+    c_best = max(1.0, chi[best] / max(nv - 1, 1)) if best in chi else 1.0
+    cw = {c: np.exp(-0.5 * (chi[c] - min(chi[k] for k in exact)) / c_best) for c in exact}
+    tot = sum(cw.values())
+    cw = {c: float(v / tot) for c, v in cw.items()} if tot > 0 else {}
+    cv = _cross_validate(problem, cands, grids, coarse, fine_theta, fine, exact, y, w, sig, valid, gap_before) \
+        if nv >= 3 else {"none": gap_before}
+    gap_after_best = float("nan")
+    if best is not None and best in exact:
+        zb = (exact[best] - y) / sig
+        gap_after_best = float(np.sqrt(np.mean(np.where(np.isfinite(zb), zb, 10.0)[valid] ** 2)))
+    reasons = []
+    alpha = float(s["alpha"])
+    if best is None:
+        reasons.append("no candidate effect acts on this experiment")
+    elif too_few:
+        reasons.append(f"too few rows: {nv} scenario(s) compared, at least {int(s['min_rows'])} needed to test "
+                       f"{len(cands)} candidate(s) against the measurement noise; nothing can be named from these data")
+    else:
+        if not gap_before > s["min_gap"]:
+            reasons.append(f"gap_before {gap_before:.2f} <= min_gap {s['min_gap']:g}: model and data agree within "
+                           f"the measurement uncertainty")
+        if not p_adj.get(best, 1.0) < alpha:
+            reasons.append(f"p = {p_adj.get(best, float('nan')):.3g} for {best} (max-T over {len(cands)} candidates, "
+                           f"{B} bootstrap null datasets) is not below alpha {alpha:g}")
+        red = 1 - gap_after_best / gap_before if gap_before > 0 else 0.0
+        if not red >= s["min_gap_reduction"]:
+            reasons.append(f"refit reduces the gap by {100 * red:.0f}% < {100 * s['min_gap_reduction']:.0f}%")
+    named = best if best is not None and not reasons else None
+    after = exact[named] if named else base
+    z1 = (after - y) / sig
+    gap_after = gap_after_best if named else gap_before
+    rms_phys0 = float(np.sqrt(np.mean((base - y)[valid] ** 2))) if nv else float("nan")
+    dev1 = np.where(np.isfinite(after), after - y, np.nan)[valid]
+    rms_phys1 = float(np.sqrt(np.mean(dev1 ** 2))) if nv else float("nan")
+    scen = problem.keys.copy()
+    scen["measured"] = y
+    scen["sigma"] = sig
+    scen["model_before"] = base
+    scen["z_before"] = z0
+    scen["model_after"] = after
+    scen["z_after"] = z1
+    scen["unit"] = problem.unit
+    eff = fx.EFFECTS.get(named) if named else None
+
+    def at_bound(c):
+        lo, hi = fx.EFFECTS[c].bounds
+        return bool(np.isfinite(est[c]) and min(est[c] - lo, hi - est[c]) <= 1e-3 * (hi - lo))
+
+    ident = _identifiability(problem, cands, _sensitivities(curves, cands, sig, valid), s, cache) \
+        if len(cands) >= 2 and nv >= 1 else {"correlation": {}, "max_correlation": float(s["max_correlation"]),
+                                             "non_separable": []}
+    ranking = [["none", 0.0]] + [[c, T_obs[c]] for c in cand_rank]
+    ranking = sorted(ranking, key=lambda kv: -kv[1])
+    res = {
+        "experiment": problem.experiment,
+        "n_scenarios": nv,
+        "unit": problem.unit,
+        "named_effect": named,
+        "parameter_estimate": ({"effect": named, "parameter": eff.parameter, "value": est[named], "unit": eff.unit,
+                                "at_bound": at_bound(named)} if named else None),
+        "p_value": p_adj.get(best) if best is not None and not too_few else None,
+        "p_value_method": (f"single-step max-T (Westfall-Young): share of {B} parametric-bootstrap null datasets "
+                           f"(no effect, the project's generator around the nominal model, noise x sqrt(c) with "
+                           f"c = {c_hat0:.3g} the no-effect model's overdispersion) whose largest LR statistic over "
+                           f"the {len(cands)} candidates reaches the observed one, (1 + k) / (B + 1); corrected for "
+                           f"the number of candidates"),
+        "alpha": alpha,
+        "null_distribution_size": int(len(Tmax_null)),
+        "null_lr_quantiles": ({q: float(np.quantile(Tmax_null, float(q))) for q in ("0.5", "0.95", "0.99")}
+                              if len(Tmax_null) else None),
+        "lr_statistic": T_obs,
+        "p_values_adjusted": p_adj,
+        "p_values_unadjusted": p_raw,
+        "gap_before": gap_before, "gap_after": gap_after,
+        "gap_after_above_threshold": bool(np.isfinite(gap_after) and gap_after > s["min_gap"]),
+        "gap_before_rms": rms_phys0, "gap_after_rms": rms_phys1,
+        "gap_reduction": (1 - gap_after / gap_before) if gap_before > 0 else 0.0,
+        "ranking": ranking,
+        "confidence": cw.get(named) if named else None,
+        "confidence_definition": ("probability of the named effect among the candidates: weights exp(-chi2_c / "
+                                  "(2 c_best)) normalised over the candidates (each has one parameter); null when "
+                                  "nothing is named"),
+        "candidate_weights": cw,
+        "best_candidate": best,
+        "best_candidate_estimate": est.get(best) if best else None,
+        "best_candidate_gap_after": gap_after_best,
+        "estimates": {c: est[c] for c in cands},
+        "at_bound": {c: at_bound(c) for c in cands},
+        "bounds": {c: list(fx.EFFECTS[c].bounds) for c in cands},
+        "too_few_rows": bool(too_few),
+        "identifiability": ident,
+        "qaicc": score,
+        "cv_rms_z": cv,
+        "overdispersion_none": c_hat0,
+        "decision": ("named: p below alpha, gap above min_gap, refit reduces it by min_gap_reduction" if named
+                     else "nothing named: " + "; ".join(reasons)),
+        "criterion": ("LR statistic T_c = (chi2_none - chi2_c) / c, c = max(1, chi2_none / (n - 1)); p-value by "
+                      "parametric bootstrap (max-T over candidates); gap = RMS of z"),
+        "margins": {k: s[k] for k in ("alpha", "min_gap", "min_gap_reduction", "min_rows", "n_bootstrap")},
+        "forward_batches": n_batches,
+        "seconds": time.perf_counter() - t0,
+    }
+    return {"result": res, "scenarios": scen, "problem": problem}
+
+
+def _cross_validate(problem, cands, grids, coarse, fine_theta, fine, exact, y, w, sig, valid, gap_before):
+    """Grouped cross-validation of the RMS z (held-out folds; on the coarse + fine splines). Diagnostic only."""
+    cv = {"none": gap_before}
+    folds = problem.folds
+    if len(np.unique(folds[valid])) < 2:
+        return cv
+    for c in exact:
+        zc = np.full(len(y), np.nan)
+        lo, hi = fx.EFFECTS[c].bounds
+        th, P = _curve([grids[c], fine_theta.get(c, np.empty(0))],
+                       [coarse[c], fine.get(c, np.empty((0, len(y))))], lo, hi)
+        okc = np.isfinite(P).all(0)
+        for f in np.unique(folds[valid]):
+            tr, te = valid & (folds != f), valid & (folds == f)
+            t, _ = _spline_fit(th, P, y, w, lo, hi, tr)
+            pred = np.full(len(y), np.nan)
+            if np.isfinite(t):
+                pred[okc] = CubicSpline(th, P[:, okc], axis=0)(t)
+            zc[te] = np.where(np.isfinite(pred[te]), (pred[te] - y[te]) / sig[te], 10.0)
+        cv[c] = float(np.sqrt(np.nanmean(zc[valid] ** 2)))
+    return cv

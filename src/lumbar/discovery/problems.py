@@ -1,0 +1,288 @@
+"""Discovery problems: measured data, their uncertainty and a batched forward model per experiment
+(stepwise-reduction ROM, neutral angle, in-vitro IDP, in-vivo IDP)."""
+from __future__ import annotations
+
+import functools
+import json
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import pandas as pd
+
+from .. import effects as fx
+from ..characteristics import resolve_characteristic_set
+from ..fsu import MAIN_DIRECTIONS, STAGES, build_fsu
+from ..geometry import load_geometry
+from ..idp import DISC_AREA_M2, idp_per_newton
+from ..l2s1 import LEVELS, derive_cables, run_set
+from ..stepwise_reduction import scenario_grid
+from ..tables import SEGMENT_LOAD_COLUMNS
+from .detect import DiscoveryInputError, benchmark_settings, discovery_settings
+
+log = logging.getLogger(__name__)
+
+
+# expected range of n normal samples in SDs (d2 of quality control), n = 2..10
+D2 = {2: 1.128, 3: 1.693, 4: 2.059, 5: 2.326, 6: 2.534, 7: 2.704, 8: 2.847, 9: 2.970, 10: 3.078}
+
+
+# ------------------------------------------------------------------ problems (measured data + batched forward model)
+@dataclass
+class Problem:
+    experiment: str
+    keys: pd.DataFrame                       # scenario labels
+    y: np.ndarray                            # measured (physical unit)
+    sigma: np.ndarray                        # uncertainty of the measured value
+    unit: str
+    forward: Callable                        # forward({effect: (G,)}) -> (G, n) predictions (one batch)
+    candidates: list
+    row_key: str
+    col_keys: list
+    folds: np.ndarray                        # CV fold per scenario
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def n(self):
+        return len(self.y)
+
+
+def _rom_sigma(df, s):
+    n = df["n_specimens"].to_numpy(int)
+    lo, hi = df["rom_min_deg"].to_numpy(float), df["rom_max_deg"].to_numpy(float)
+    d2 = np.array([D2.get(int(k), 3.078 if k > 10 else np.nan) for k in n])
+    sd = (hi - lo) / d2
+    sig = np.where(np.isfinite(sd) & (n > 1), sd / np.sqrt(np.maximum(n, 1)), s["no_range_sd_deg"])
+    return np.maximum(sig, s["sigma_floor_deg"])
+
+
+@functools.lru_cache(maxsize=4)
+def _fsu_variants(geometry_kind, geometry_path, level, set_name, data_dir, facet_k, k_shear, calibrated_dir=None):
+    geo = load_geometry(geometry_kind, path=geometry_path if geometry_kind == "visible_human" else None, levels=[level])
+    cs = resolve_charset(set_name, data_dir, calibrated_dir)
+    return fx.FsuVariants(build_fsu(geo, cs, level, facet_stiffness=facet_k, k_shear=k_shear))
+
+
+def fsu_variants_from_config(config):
+    g, f = config.get("geometry", {}), config.get("fsu", {})
+    s = discovery_settings(config)
+    return _fsu_variants(g.get("kind", "default"), g.get("path"), f.get("level", "L4-L5"), s["characteristic_set"],
+                         (config.get("characteristics") or {}).get("data_dir"), f.get("facet_stiffness_n_per_m"),
+                         f.get("disc_shear_stiffness_n_per_m"),
+                         (config.get("characteristics") or {}).get("calibrated_dir"))
+
+
+def resolve_charset(name, data_dir, calibrated_dir):
+    """The one resolver (lumbar.characteristics.resolve_characteristic_set): "calibrated" from the workflow's
+    calibration output when it exists, else the published tables."""
+    return resolve_characteristic_set(name, data_dir=data_dir, calibrated_dir=calibrated_dir)
+
+
+def _grouped_folds(labels, k):
+    cats = list(dict.fromkeys(labels))
+    idx = {c: i % max(1, min(k, len(cats))) for i, c in enumerate(cats)}
+    return np.array([idx[c] for c in labels])
+
+
+def _candidates(s, experiment):
+    names = fx.effect_names(experiment)
+    if s.get("effects"):
+        names = [n for n in s["effects"] if n in names]
+    return names
+
+
+def rom_problem(df, config, solver_kw=None) -> Problem:
+    s = discovery_settings(config)
+    fv = fsu_variants_from_config(config)
+    keys = df[["stage", "direction", "moment_nm"]].reset_index(drop=True)
+    kw = solver_kw or {}
+
+    def forward(values):
+        rom, conv, _, _ = fv.simulate(keys, values, **kw)
+        return np.where(conv, rom, np.nan)
+
+    cells = [f"{a}/{b}" for a, b in zip(keys["stage"], keys["direction"])]
+    d0 = df.reset_index(drop=True)
+    has_range = (np.isfinite(d0["rom_max_deg"].to_numpy(float) - d0["rom_min_deg"].to_numpy(float))
+                 & (d0["n_specimens"].to_numpy(int) > 1))
+    moments = sorted(set(map(float, keys["moment_nm"])) | set(map(float, benchmark_settings(config)["moments_nm"])))
+    design = scenario_grid(STAGES, MAIN_DIRECTIONS, moments).reset_index(drop=True)
+
+    def design_forward(values):
+        rom, conv, _, _ = fv.simulate(design, values, **kw)
+        return np.where(conv, rom, np.nan)
+
+    return Problem("stepwise_rom", keys, d0["rom_mean_deg"].to_numpy(float), _rom_sigma(d0, s),
+                   "deg", forward, _candidates(s, "stepwise_rom"), "stage", ["direction", "moment_nm"],
+                   _grouped_folds(cells, s["cv_folds"]),
+                   meta={"n_per_row": d0["n_specimens"].to_numpy(int), "has_range": has_range,
+                         "sigma_floor": float(s["sigma_floor_deg"]),
+                         "design_keys": design, "design_forward": design_forward})
+
+
+def neutral_problem(df, config) -> Problem:
+    s = discovery_settings(config)
+    fv = fsu_variants_from_config(config)
+    stages = list(df["stage"])
+    y = df["lordosis_deg"].to_numpy(float)
+    sd = df["lordosis_sd_deg"].to_numpy(float) if "lordosis_sd_deg" in df else np.full(len(df), np.nan)
+    sd = np.where(np.isfinite(sd), sd, s["neutral_sd_deg"])
+    # the first stage is the reference: changes relative to it are compared (the model has no absolute
+    # lordosis of the specimens); sigma of a difference of two independent values
+    ref_sd = sd[0]
+
+    def forward(values):
+        lord, conv = fv.neutral_lordosis(stages, values)
+        d = lord[:, 1:] - lord[:, :1]
+        return np.where(conv[:, 1:] & conv[:, :1], d, np.nan)
+
+    keys = pd.DataFrame({"stage": stages[1:], "reference_stage": stages[0]})
+    dstages = [stages[0]] + [x for x in STAGES if x != stages[0]]
+
+    def design_forward(values):
+        lord, conv = fv.neutral_lordosis(dstages, values)
+        d = lord[:, 1:] - lord[:, :1]
+        return np.where(conv[:, 1:] & conv[:, :1], d, np.nan)
+
+    return Problem("neutral_angle", keys, y[1:] - y[0], np.hypot(sd[1:], ref_sd), "deg", forward,
+                   _candidates(s, "neutral_angle"), "reference_stage", ["stage"], np.arange(len(stages) - 1),
+                   meta={"design_keys": pd.DataFrame({"stage": dstages[1:], "reference_stage": stages[0]}),
+                         "design_forward": design_forward})
+
+
+_IDP_MODEL_CACHE: dict = {}
+
+
+def idp_model_table(config):
+    """Internal loads + IDP of the nominal L2-S1 model (49 scenarios): the configured file, else solved once per
+    process and configuration (cached: the nominal solve dominates an IDP discovery's time)."""
+    s = discovery_settings(config)
+    p = s.get("idp_model_table")
+    if p and Path(p).is_file():
+        return pd.read_csv(p)
+    key = json.dumps({k: (config or {}).get(k) for k in ("geometry", "characteristics", "fsu", "l2s1")}
+                     | {"set": s["characteristic_set"]}, sort_keys=True, default=str)
+    if key not in _IDP_MODEL_CACHE:
+        _IDP_MODEL_CACHE[key] = solve_idp_model(config)
+    return _IDP_MODEL_CACHE[key].copy()
+
+
+def solve_idp_model(config):
+    s = discovery_settings(config)
+    g, l2 = config.get("geometry", {}), config.get("l2s1", {})
+    geo = load_geometry(g.get("kind", "default"), path=g.get("path") if g.get("kind") == "visible_human" else None,
+                        levels=list(LEVELS))
+    data_dir = (config.get("characteristics") or {}).get("data_dir")
+    cs = resolve_charset(s["characteristic_set"], data_dir, (config.get("characteristics") or {}).get("calibrated_dir"))
+    sim, _ = run_set(geo, cs, derive_cables(l2.get("cables")), idp_formula=l2.get("idp_formula", "paper1"),
+                     k_shear=(config.get("fsu") or {}).get("disc_shear_stiffness_n_per_m"),
+                     moment_nm=l2.get("moment_nm", 3.75))
+    sim["idp_per_newton_pa"] = idp_per_newton(l2.get("idp_formula", "paper1"), geo.levels["L4-L5"].disc_csa,
+                                               l2.get("disc_area_m2", DISC_AREA_M2))
+    return sim
+
+
+def idp_problem(df, config, model=None) -> Problem:
+    s = discovery_settings(config)
+    model = idp_model_table(config) if model is None else model
+    d = df.reset_index(drop=True).merge(model, on=["muscle_setup", "load_case"], how="left", validate="one_to_one")
+    miss = d["idp_mpa"].isna() & ~d["disc_axial_force_n"].isna()
+    base = d["idp_mpa"].to_numpy(float) * 1e6
+    M = d["disc_moment_sagittal_nm"].to_numpy(float)
+    per_n = float(np.nanmedian(d["idp_per_newton_pa"])) if "idp_per_newton_pa" in d else float(
+        np.nanmedian(base / d["disc_axial_force_n"].to_numpy(float)))
+    if miss.any():
+        log.warning("%d scenario(s) without model equilibrium", int(miss.sum()))
+
+    def forward(values):
+        return idp_forward(values, base, M, per_n) / 1e6
+
+    n = d["n_specimens"].to_numpy(float)
+    sig = np.maximum(d["idp_sd_mpa"].to_numpy(float) / np.sqrt(np.maximum(n, 1)), s["sigma_floor_mpa"])
+    mk = model[np.isfinite(model["idp_mpa"].to_numpy(float))].reset_index(drop=True)
+    dbase, dM = mk["idp_mpa"].to_numpy(float) * 1e6, mk["disc_moment_sagittal_nm"].to_numpy(float)
+
+    def design_forward(values):
+        return idp_forward(values, dbase, dM, per_n) / 1e6
+
+    return Problem("idp_invitro", d[["muscle_setup", "load_case"]], d["idp_mean_mpa"].to_numpy(float), sig, "MPa",
+                   forward, _candidates(s, "idp_invitro"), "muscle_setup", ["load_case"],
+                   _grouped_folds(list(d["muscle_setup"]), s["cv_folds"]),
+                   meta={"idp_per_newton_pa": per_n, "n_per_row": n.astype(int), "has_range": n > 1,
+                         "sigma_floor": float(s["sigma_floor_mpa"]),
+                         "design_keys": mk[["muscle_setup", "load_case"]], "design_forward": design_forward})
+
+
+def idp_forward(values, base, M, per_n):
+    G = len(next(iter(values.values()))) if values else 1
+    out = np.broadcast_to(base, (G, len(base))).copy()
+    for name, v in values.items():
+        v = np.asarray(v, float)[:, None]
+        # effects act one at a time per variant row (the others are 0 there), so applying them in turn is exact
+        out = fx.idp_delta(name, v, out, M[None, :], per_n)
+    return out
+
+
+def read_segment_loads(path, level):
+    p = Path(path)
+    if not p.is_file():
+        raise DiscoveryInputError(f"segment-load table not found: {p} (config discovery.in_vivo_segment_loads); "
+                                  f"the in-vivo discovery needs the muscle model's segment loads with columns "
+                                  f"{list(SEGMENT_LOAD_COLUMNS)}")
+    sl = pd.read_csv(p)
+    miss = [c for c in SEGMENT_LOAD_COLUMNS if c not in sl.columns]
+    if miss:
+        raise DiscoveryInputError(f"{p}: column(s) {miss} missing; expected columns {list(SEGMENT_LOAD_COLUMNS)}")
+    sl = sl[sl["level"] == level]
+    if sl.empty:
+        raise DiscoveryInputError(f"{p}: no rows with level {level!r} (config discovery.in_vivo_level)")
+    return sl
+
+
+def in_vivo_problem(df, config, segment_loads=None) -> Problem:
+    s = discovery_settings(config)
+    sl = read_segment_loads(s["in_vivo_segment_loads"], s["in_vivo_level"]) if segment_loads is None else \
+        segment_loads[segment_loads["level"] == s["in_vivo_level"]]
+    conv = df["converged"].astype(str).str.lower().isin(["true", "1"])   # read_measured: bool
+    d = df[conv].reset_index(drop=True).merge(sl[["activity", "compressive_n", "moment_nm"]], on="activity", how="left")
+    if d["moment_nm"].isna().any():
+        a = d["activity"][d["moment_nm"].isna()].iat[0]
+        raise DiscoveryInputError(f"segment loads: no {s['in_vivo_level']} row for activity {a!r}; expected one row "
+                                  f"per activity of the in-vivo table")
+    base = d["idp_sim_mpa"].to_numpy(float) * 1e6
+    M = d["moment_nm"].to_numpy(float)
+    F = d["compressive_n"].to_numpy(float)
+    ok = F > 0
+    per_n = float(np.median(base[ok] / F[ok])) if ok.any() else idp_per_newton("paper2")
+
+    def forward(values):
+        return idp_forward(values, base, M, per_n) / 1e6
+
+    # design space: every activity of the segment-load table (IDP of activities without a simulated value from
+    # the force part, per_n * F: an approximation used only to rank where to measure next)
+    sim = dict(zip(d["activity"], base))
+    dsl = sl.drop_duplicates("activity").reset_index(drop=True)
+    dbase = np.array([sim.get(a, per_n * f) for a, f in zip(dsl["activity"], dsl["compressive_n"].to_numpy(float))])
+    dM = dsl["moment_nm"].to_numpy(float)
+
+    def design_forward(values):
+        return idp_forward(values, dbase, dM, per_n) / 1e6
+
+    return Problem("in_vivo", d[["activity"]], d["idp_in_vivo_mpa"].to_numpy(float),
+                   np.full(len(d), float(s["in_vivo_sd_mpa"])), "MPa", forward, _candidates(s, "in_vivo"),
+                   "experiment", ["activity"], np.arange(len(d)),
+                   meta={"idp_per_newton_pa": per_n, "design_keys": dsl[["activity"]], "design_forward": design_forward})
+
+
+def build_problem(experiment, df, config, **kw) -> Problem:
+    if experiment == "stepwise_rom":
+        return rom_problem(df, config, kw.get("solver_kw"))
+    if experiment == "neutral_angle":
+        return neutral_problem(df, config)
+    if experiment == "idp_invitro":
+        return idp_problem(df, config, kw.get("idp_model"))
+    if experiment == "in_vivo":
+        return in_vivo_problem(df, config, kw.get("segment_loads"))
+    raise ValueError(f"unknown experiment {experiment!r}")
