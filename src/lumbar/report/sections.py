@@ -1,42 +1,24 @@
-"""Paper-style report of the workflow's results: one self-contained HTML file and a PDF.
-
-Every number in the report is read from a result or data file; nothing is typed in. Methods are generated
-from the configuration. A section, figure or table whose file is not among the given inputs (for example the
-muscle study or the discrepancy workflow in a small configuration) is replaced by a one-line
-"not built in this configuration" note instead of failing. Results computed against surrogate reference data
-say "surrogate" in their caption and table title.
-
-Usage (the workflow's rule ``paper_report`` calls it with the rule's inputs)::
-
-    from lumbar.report import build_report
-    build_report(inputs, config, "results/report/paper.html", "results/report/paper.pdf",
-                 captions_dir="workflow/report")
-
-The HTML embeds every figure as base64 (``<img data-source="../figures/x.png" src="data:image/png;base64,...">``;
-``data-source`` is the figure file relative to the HTML file) and every table carries ``data-source`` with the
-CSV it was drawn from. The PDF is drawn with reportlab (pure Python) with ``invariant=1``: no time stamp, a fixed
-document id, so the same inputs give the same bytes.
-"""
+"""The report's sections: :class:`ReportBuilder` reads the result files and the configuration and writes the
+document (:mod:`lumbar.report.document`): summary, methods, results per stage, discrepancy workflow, provenance and
+the configuration appendix. Every number comes from a result or data file; nothing is typed in."""
 from __future__ import annotations
 
-import base64
 import hashlib
-import html
-import io
 import json
 import logging
 import math
 import os
 import re
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any, Mapping
 
+import numpy as np
 import pandas as pd
 
 from lumbar import __version__
-from lumbar.io import atomic_writer, write_text_atomic
 from lumbar.tables import OUTLIER_COUNT_NAMES
+
+from .document import CHECK, CROSS, NC, Bullets, Doc, Figure, Heading, Para, Table
 
 log = logging.getLogger(__name__)
 
@@ -53,7 +35,6 @@ SET_LABELS = {"calibrated": "calibrated (this model)", "chazal1985": "Chazal et 
               "shirazi_adl1986": "Shirazi-Adl et al. (1986)", "white_panjabi1990": "White and Panjabi (1990)",
               "nolte1990": "Nolte et al. (1990)", "rupp2015": "Rupp et al. (2015)"}
 DIRECTION_ABBR = {"flexion": "F", "extension": "E", "lateral_bending": "L", "axial_rotation": "A"}
-CHECK, CROSS, NC = "\u2713", "\u2717", "n.c."
 MAX_ROWS = 60          # generic CSV tables: at most this many rows are drawn, the rest is referenced
 
 T = "results/tables/"
@@ -63,50 +44,6 @@ D = "results/discrepancy/"
 DISCOVERY_CASES = (("default", "stepwise reduction (default case)"), ("in_vivo", "in-vivo intradiscal pressure"),
                    ("va_artefact", "vertebral-arch removal artefact"),
                    ("intact_rom", "intact L4-L5 range of motion (Yamamoto et al. 1989)"))
-
-
-# ----------------------------------------------------------------------------------------------- document model
-@dataclass
-class Heading:
-    text: str
-    level: int = 1
-
-
-@dataclass
-class Para:
-    text: str
-    style: str = "p"          # p | note | abstract | small
-
-
-@dataclass
-class Bullets:
-    items: list
-
-
-@dataclass
-class Figure:
-    path: str
-    caption: str
-    label: str
-
-
-@dataclass
-class Table:
-    title: str
-    header: list
-    rows: list
-    source: str | None = None
-    note: str = ""
-    group_header: list | None = None     # [(text, colspan), ...] drawn above the header
-    marks: bool = False                   # cells are check / cross marks
-
-
-@dataclass
-class Doc:
-    blocks: list = field(default_factory=list)
-
-    def add(self, *blocks):
-        self.blocks.extend(blocks)
 
 
 # ----------------------------------------------------------------------------------------------- small helpers
@@ -128,16 +65,12 @@ def fmt(v, digits: int = 4) -> str:
         if v == int(v) and abs(v) < 1e6:
             return str(int(v))
         return f"{v:.{digits}g}"
-    try:
-        import numpy as np
-        if isinstance(v, np.bool_):
-            return "yes" if bool(v) else "no"
-        if isinstance(v, np.integer):
-            return str(int(v))
-        if isinstance(v, np.floating):
-            return fmt(float(v), digits)
-    except ImportError:  # pragma: no cover
-        pass
+    if isinstance(v, np.bool_):
+        return "yes" if bool(v) else "no"
+    if isinstance(v, np.integer):
+        return str(int(v))
+    if isinstance(v, np.floating):
+        return fmt(float(v), digits)
     if isinstance(v, Mapping):
         return ", ".join(f"{k}={fmt(x, digits)}" for k, x in v.items())
     if isinstance(v, (list, tuple)):
@@ -191,7 +124,10 @@ def _render_caption(text: str, config: Mapping) -> str:
 
 
 # ----------------------------------------------------------------------------------------------- the builder
-class _Builder:
+class ReportBuilder:
+    """Reads the result files and writes the report's sections into a :class:`~lumbar.report.document.Doc`
+    (prose from the configuration and the files, figure and table numbering, what was not built)."""
+
     def __init__(self, inputs, config, html_path, captions_dir=None, published=None):
         self.config = config
         self.html_dir = Path(html_path).resolve().parent
@@ -866,227 +802,3 @@ class _Builder:
                 rows.append([rel, f"({NOT_BUILT})", ""])
         self.table_block("Input files of this report (SHA-256, first 16 hex digits)", ["file", "bytes", "sha256"],
                          rows)
-
-
-# ----------------------------------------------------------------------------------------------- HTML
-CSS = """
-body{font-family:Georgia,'Times New Roman',serif;max-width:60em;margin:2em auto;padding:0 1em;line-height:1.45;
-color:#111}
-h1.title{font-size:1.6em;text-align:center} h1{font-size:1.3em;border-bottom:1px solid #999;margin-top:2em}
-h2{font-size:1.1em} p.abstract{background:#f4f4f4;padding:.4em .8em;margin:.3em 0} p.small{font-size:.9em;color:#333}
-p.note{color:#777;font-style:italic} figure{margin:1.2em 0;text-align:center} figure img{max-width:100%}
-figcaption{text-align:left;font-size:.9em} table{border-collapse:collapse;margin:.5em 0 1.5em;font-size:.8em}
-caption{caption-side:top;text-align:left;font-weight:bold;padding:.3em 0}
-th,td{border:1px solid #bbb;padding:.15em .4em}
-th{background:#eee} td.ok{color:#080;text-align:center} td.out{color:#c00;text-align:center;font-weight:bold}
-td.nc{color:#c60;text-align:center} div.tnote{font-size:.8em;color:#333;margin-top:-1.2em;margin-bottom:1.5em}
-"""
-
-
-def _h(s) -> str:
-    return html.escape(str(s), quote=True)
-
-
-def render_html(doc: Doc, builder: _Builder) -> str:
-    out = ["<!DOCTYPE html>", '<html lang="en">', "<head>", '<meta charset="utf-8">',
-           f"<title>{_h(TITLE)}</title>", f"<style>{CSS}</style>", "</head>", "<body>"]
-    for b in doc.blocks:
-        if isinstance(b, Heading):
-            out.append(f'<h1 class="title">{_h(b.text)}</h1>' if b.level == 0 else
-                       f"<h{b.level}>{_h(b.text)}</h{b.level}>")
-        elif isinstance(b, Para):
-            out.append(f'<p class="{b.style}">{_h(b.text)}</p>')
-        elif isinstance(b, Bullets):
-            out.append("<ul>" + "".join(f"<li>{_h(i)}</li>" for i in b.items) + "</ul>")
-        elif isinstance(b, Figure):
-            data = base64.b64encode(builder.path(b.path).read_bytes()).decode("ascii")
-            out.append(f'<figure><img data-source="{_h(builder.rel_to_html(b.path))}" alt="{_h(b.label)}" '
-                       f'src="data:image/png;base64,{data}">'
-                       f"<figcaption><b>{_h(b.label)}</b> {_h(b.caption)}</figcaption></figure>")
-        elif isinstance(b, Table):
-            src = f' data-source="{_h(builder.rel_to_html(b.source))}"' if b.source else ""
-            rows = [f"<table{src}>", f"<caption>{_h(b.title)}</caption>", "<thead>"]
-            if b.group_header:
-                rows.append("<tr>" + "".join(f'<th colspan="{n}">{_h(t)}</th>' for t, n in b.group_header) + "</tr>")
-            rows.append("<tr>" + "".join(f"<th>{_h(h)}</th>" for h in b.header) + "</tr></thead><tbody>")
-            for r in b.rows:
-                cells = []
-                for v in r:
-                    cls = {CHECK: "ok", CROSS: "out", NC: "nc"}.get(v) if b.marks else None
-                    cells.append(f'<td class="{cls}">{_h(v)}</td>' if cls else f"<td>{_h(v)}</td>")
-                rows.append("<tr>" + "".join(cells) + "</tr>")
-            rows.append("</tbody></table>")
-            out.append("\n".join(rows))
-            if b.note:
-                out.append(f'<div class="tnote">{_h(b.note)}</div>')
-    out += ["</body>", "</html>", ""]
-    return "\n".join(out)
-
-
-# ----------------------------------------------------------------------------------------------- PDF
-_FONT = {"regular": "Helvetica", "bold": "Helvetica-Bold", "italic": "Helvetica-Oblique"}
-
-
-def _register_fonts() -> bool:
-    """Use matplotlib's DejaVu Sans (a pinned dependency) in the PDF: it has the check and cross marks and
-    every character of the captions; falls back to the standard Helvetica (Latin-1 only)."""
-    if _FONT["regular"] == "DejaVuSans":
-        return True
-    try:
-        import matplotlib
-        from reportlab.lib.fonts import addMapping
-        from reportlab.pdfbase import pdfmetrics
-        from reportlab.pdfbase.ttfonts import TTFont
-
-        ttf = Path(matplotlib.get_data_path()) / "fonts" / "ttf"
-        faces = {"DejaVuSans": "DejaVuSans.ttf", "DejaVuSans-Bold": "DejaVuSans-Bold.ttf",
-                 "DejaVuSans-Oblique": "DejaVuSans-Oblique.ttf", "DejaVuSans-BoldOblique": "DejaVuSans-BoldOblique.ttf"}
-        for name, file in faces.items():
-            pdfmetrics.registerFont(TTFont(name, str(ttf / file)))
-        addMapping("DejaVuSans", 0, 0, "DejaVuSans")
-        addMapping("DejaVuSans", 1, 0, "DejaVuSans-Bold")
-        addMapping("DejaVuSans", 0, 1, "DejaVuSans-Oblique")
-        addMapping("DejaVuSans", 1, 1, "DejaVuSans-BoldOblique")
-    except Exception as e:  # noqa: BLE001 - the PDF is still written with the standard fonts
-        log.warning("DejaVu Sans not available for the PDF (%s): Helvetica, marks drawn as text", e)
-        return False
-    _FONT.update(regular="DejaVuSans", bold="DejaVuSans-Bold", italic="DejaVuSans-Oblique")
-    return True
-
-
-def _pdf_text(s: str) -> str:
-    s = str(s)
-    if _FONT["regular"] == "Helvetica":
-        s = s.replace(CHECK, "ok").replace(CROSS, "x")
-        s = s.encode("cp1252", "replace").decode("cp1252")
-    return html.escape(s, quote=False)
-
-
-def render_pdf(doc: Doc, builder: _Builder) -> bytes:
-    from reportlab.lib import colors
-    from reportlab.lib.pagesizes import A4
-    from reportlab.lib.styles import ParagraphStyle, getSampleStyleSheet
-    from reportlab.lib.units import mm
-    from reportlab.platypus import Image, KeepTogether, Paragraph, SimpleDocTemplate, Spacer
-    from reportlab.platypus import Table as RLTable
-    from reportlab.platypus import TableStyle
-    from PIL import Image as PILImage
-
-    unicode_font = _register_fonts()
-    reg, bold, ital = _FONT["regular"], _FONT["bold"], _FONT["italic"]
-    ss = getSampleStyleSheet()
-    body = ParagraphStyle("body", parent=ss["BodyText"], fontName=reg)
-    st = {
-        "title": ParagraphStyle("t", parent=ss["Title"], fontName=bold, fontSize=15, leading=18),
-        1: ParagraphStyle("h1", parent=ss["Heading1"], fontName=bold, fontSize=14, keepWithNext=1),
-        2: ParagraphStyle("h2", parent=ss["Heading2"], fontName=bold, fontSize=11.5, keepWithNext=1),
-        3: ParagraphStyle("h3", parent=ss["Heading3"], fontName=bold, fontSize=10, keepWithNext=1),
-        "p": ParagraphStyle("p", parent=body, fontSize=9, leading=11.5),
-        "abstract": ParagraphStyle("a", parent=body, fontSize=9, leading=11.5, backColor="#f2f2f2",
-                                   borderPadding=3, spaceAfter=6),
-        "small": ParagraphStyle("s", parent=body, fontSize=8, leading=10),
-        "note": ParagraphStyle("n", parent=body, fontSize=8.5, textColor="#777777", fontName=ital),
-        "cap": ParagraphStyle("c", parent=body, fontSize=8, leading=10, keepWithNext=1),
-        "cell": ParagraphStyle("cell", parent=body, fontSize=6.5, leading=7.5),
-        "cellb": ParagraphStyle("cellb", parent=body, fontSize=6.5, leading=7.5, fontName=bold),
-    }
-    buf = io.BytesIO()
-    pdf = SimpleDocTemplate(buf, pagesize=A4, leftMargin=16 * mm, rightMargin=16 * mm, topMargin=16 * mm,
-                            bottomMargin=16 * mm, title="lumbar workflow report", author="lumbar workflow",
-                            subject="paper-style report", creator=f"lumbar {__version__}", invariant=1)
-    width = A4[0] - 32 * mm
-    story = []
-    marks = {CHECK: f'<font color="#008800">{CHECK if unicode_font else "ok"}</font>',
-             CROSS: f'<font color="#cc0000"><b>{CROSS if unicode_font else "x"}</b></font>',
-             NC: '<font color="#cc6600">n.c.</font>'}
-    for b in doc.blocks:
-        if isinstance(b, Heading):
-            story.append(Paragraph(_pdf_text(b.text), st["title"] if b.level == 0 else st[min(b.level, 3)]))
-        elif isinstance(b, Para):
-            story.append(Paragraph(_pdf_text(b.text), st.get(b.style, st["p"])))
-        elif isinstance(b, Bullets):
-            for i in b.items:
-                story.append(Paragraph("- " + _pdf_text(i), st["p"]))
-        elif isinstance(b, Figure):
-            p = builder.path(b.path)
-            with PILImage.open(p) as im:
-                w, h = im.size
-            scale = min(width / w, 150 * mm / h)
-            story.append(KeepTogether([Spacer(1, 4), Image(str(p), width=w * scale, height=h * scale),
-                                       Paragraph(f"<b>{_pdf_text(b.label)}</b> {_pdf_text(b.caption)}", st["cap"]),
-                                       Spacer(1, 6)]))
-        elif isinstance(b, Table):
-            ncol = max(len(b.header), max((len(r) for r in b.rows), default=0))
-            cell = st["cell"]
-            data = []
-            spans = []
-            if b.group_header:
-                row, c0 = [], 0
-                for t, n in b.group_header:
-                    row += [Paragraph(_pdf_text(t), st["cellb"])] + [""] * (n - 1)
-                    if n > 1:
-                        spans.append(("SPAN", (c0, 0), (c0 + n - 1, 0)))
-                    c0 += n
-                data.append(row)
-            data.append([Paragraph(_pdf_text(h), st["cellb"]) for h in b.header])
-            for r in b.rows:
-                data.append([Paragraph(marks[v] if (b.marks and v in marks) else _pdf_text(v), cell)
-                             for v in list(r) + [""] * (ncol - len(r))])
-            nhead = 2 if b.group_header else 1
-            if b.marks:
-                first = 2
-                rest = (width - 2 * 22 * mm) / max(ncol - first, 1)
-                colw = [22 * mm, 22 * mm] + [rest] * (ncol - first)
-            else:
-                lens = [max([len(str(b.header[i])) if i < len(b.header) else 1] +
-                            [len(str(r[i])) for r in b.rows if i < len(r)]) for i in range(ncol)]
-                lens = [min(max(n, 4), 60) for n in lens]
-                colw = [width * n / sum(lens) for n in lens]
-            t = RLTable(data, colWidths=colw, repeatRows=nhead)
-            t.setStyle(TableStyle([("GRID", (0, 0), (-1, -1), 0.25, colors.grey),
-                                   ("BACKGROUND", (0, 0), (-1, nhead - 1), colors.HexColor("#eeeeee")),
-                                   ("VALIGN", (0, 0), (-1, -1), "TOP"),
-                                   ("LEFTPADDING", (0, 0), (-1, -1), 2), ("RIGHTPADDING", (0, 0), (-1, -1), 2),
-                                   ("TOPPADDING", (0, 0), (-1, -1), 1), ("BOTTOMPADDING", (0, 0), (-1, -1), 1)]
-                                  + spans))
-            story += [Spacer(1, 4), Paragraph(f"<b>{_pdf_text(b.title)}</b>", st["cap"]), t]
-            if b.note:
-                story.append(Paragraph(_pdf_text(b.note), st["small"]))
-            story.append(Spacer(1, 8))
-
-    def _page(canvas, _doc):
-        canvas.saveState()
-        canvas.setFont(reg, 7)
-        canvas.drawRightString(A4[0] - 16 * mm, 9 * mm, f"lumbar workflow report - page {canvas.getPageNumber()}")
-        canvas.restoreState()
-
-    pdf.build(story, onFirstPage=_page, onLaterPages=_page)
-    return buf.getvalue()
-
-
-# ----------------------------------------------------------------------------------------------- entry point
-def build_document(inputs: Iterable, config: Mapping, html_path, captions_dir=None, published=None):
-    """The report as a document model (``Doc``) and its builder, without writing anything."""
-    b = _Builder(inputs, config, html_path, captions_dir=captions_dir, published=published)
-    return b.build(), b
-
-
-def build_report(inputs: Iterable, config: Mapping, html_path, pdf_path, captions_dir=None,
-                 published=None) -> dict:
-    """Write the paper-style report as HTML (self-contained) and PDF.
-
-    ``inputs``: paths (relative to the working directory, or absolute) of every result and data file the report
-    may show; a file that is not among them is reported as "not built in this configuration".
-    ``config``: the validated workflow configuration (methods, labels). ``captions_dir``: directory of the
-    ``<output stem>.rst`` captions (workflow/report). ``published``: the published-results CSV (paper values,
-    optional). Returns a summary: figure and table counts and which inputs were not built.
-    """
-    inputs = list(inputs)
-    doc, b = build_document(inputs, config, html_path, captions_dir, published)
-    write_text_atomic(render_html(doc, b), html_path)
-    pdf = render_pdf(doc, b)
-    with atomic_writer(pdf_path, "wb") as f:
-        f.write(pdf)
-    notes = [x.text for x in doc.blocks if isinstance(x, Para) and x.style == "note"]
-    return {"figures": b.n_fig, "tables": b.n_tab, "not_built": notes,
-            "surrogate": {"stepwise_reduction": b.sr_surrogate, "idp": b.idp_surrogate}}

@@ -1,0 +1,52 @@
+"""The report's document model: the blocks (headings, paragraphs, bullet lists, figures, tables) that the
+sections write (:mod:`lumbar.report.sections`) and the renderers draw (:mod:`lumbar.report.html_renderer`,
+:mod:`lumbar.report.pdf_renderer`)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+#: the marks of the check/cross grids (within the reference, outlier, no equilibrium)
+CHECK, CROSS, NC = "\u2713", "\u2717", "n.c."
+
+
+@dataclass
+class Heading:
+    text: str
+    level: int = 1
+
+
+@dataclass
+class Para:
+    text: str
+    style: str = "p"          # p | note | abstract | small
+
+
+@dataclass
+class Bullets:
+    items: list
+
+
+@dataclass
+class Figure:
+    path: str
+    caption: str
+    label: str
+
+
+@dataclass
+class Table:
+    title: str
+    header: list
+    rows: list
+    source: str | None = None
+    note: str = ""
+    group_header: list | None = None     # [(text, colspan), ...] drawn above the header
+    marks: bool = False                   # cells are check / cross marks
+
+
+@dataclass
+class Doc:
+    blocks: list = field(default_factory=list)
+
+    def add(self, *blocks):
+        self.blocks.extend(blocks)
