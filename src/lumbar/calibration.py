@@ -50,10 +50,11 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from scipy.optimize import least_squares
+from scipy.optimize import brentq, least_squares
 
 from .characteristics import SoftplusLaw, load_characteristic_set
 from .elements.facet import fit_surface
+from .elements.ligament import softplus_force
 from .fsu import build_fsu
 from .io import save_figure_atomic, subplots, write_table_atomic
 from .stepwise_reduction import MAIN_DIRECTIONS, StageSolver
@@ -556,7 +557,6 @@ def table3(result: CalibrationResult, paper) -> pd.DataFrame:
 # ------------------------------------------------------------------ derived disc-only rows
 def invert_eq3(p, moment_nm):
     """Smallest phi >= 0 [rad] with Eq. 3 T(phi) = moment (before any torque peak); NaN if none."""
-    from scipy.optimize import brentq
 
     grid = np.linspace(0.0, math.radians(60.0), 60001)
     T = eq3(grid, p)
@@ -611,7 +611,6 @@ def plot_ligament_characteristics(points: pd.DataFrame, table: pd.DataFrame, pat
         lo = min(-5.0, pts["strain_pct"].min() - 2) if len(pts) else -5.0
         hi = max(25.0, pts["strain_pct"].max() + 2) if len(pts) else 25.0
         eps = np.linspace(lo, hi, 300)
-        from .elements.ligament import softplus_force
         F, _ = softplus_force(eps, row["a_n"], row["b_pct"], row["c_n"], row["d_pct"])
         ax.plot(eps, F, "-", color="C0", label="Eq. 7 fit (tension-only)")
         for g, gp in pts.groupby("group") if len(pts) else []:

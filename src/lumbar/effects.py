@@ -38,6 +38,7 @@ import numpy as np
 import pandas as pd
 
 from . import so3
+from .characteristics import load_characteristic_set
 from .elements.ligament import rupp_shape, slack_length
 from .fsu import DIRECTIONS, STAGES, moment_loads
 from .idp import K_FLEXION_PA_PER_NM
@@ -202,7 +203,6 @@ class FsuVariants:
         up, lo = 0, -1
         extra = {}
         if itl_law is None:
-            from .characteristics import load_characteristic_set
             itl_law = load_characteristic_set("rupp2015").ligaments["ITL"]
         itl = [lg for lg in lev.ligaments if lg.kind == "ITL"]
         shape = rupp_shape(itl_law.l_a_m, itl_law.l_b_m, itl_law.f_a_n, itl_law.f_b_n, itl_law.n_strands)

@@ -16,13 +16,17 @@ import argparse
 import logging
 import sys
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from . import so3
+from .characteristics import CHARACTERISTIC_SETS, resolve_characteristic_set
+from .config import default_geometry_path
 from .elements.facet import fit_surface
 from .elements.ligament import rupp_shape
+from .geometry import load_geometry
 from .model import DiscSpec, SpineModel
 from .solve import solve
 from .tables import MAIN_DIRECTIONS, STAGES
@@ -228,8 +232,6 @@ def range_of_motion(fsu: FSU, moments_nm=(1, 2.5, 5, 7.5, 10), directions=MAIN_D
 
 
 def main(argv=None) -> int:
-    from .characteristics import CHARACTERISTIC_SETS, resolve_characteristic_set
-    from .geometry import load_geometry
     p = argparse.ArgumentParser(prog="python -m lumbar.fsu", description=__doc__.split("\n\n")[0])
     p.add_argument("--moment", type=float, nargs="+", default=[10.0], help="pure moment(s) [N*m]")
     p.add_argument("--direction", default="all",
@@ -259,7 +261,6 @@ def main(argv=None) -> int:
             p.error(f"--moment must be finite and >= 0 N*m, got {m}")
     geometry_dir = a.geometry_dir
     if a.geometry == "visible_human" and geometry_dir is None:
-        from .config import default_geometry_path
         geometry_dir = default_geometry_path()
         if not geometry_dir.is_dir():
             p.error(f"--geometry visible_human: no --geometry-dir given and the configuration's geometry.path "
@@ -274,7 +275,6 @@ def main(argv=None) -> int:
         return 2
     cols = ["stage", "direction", "moment_nm", "rom_deg", "rot_x_deg", "rot_y_deg", "rot_z_deg",
             "trans_x_mm", "trans_y_mm", "trans_z_mm", "disc_compression_mm", "converged", "valid"]
-    from pathlib import Path  # noqa: PLC0415
     origin = (a.calibrated_dir if a.set == "calibrated" and (Path(a.calibrated_dir) / "disc.csv").is_file()
               else "data/characteristics (as published)")
     print(f"# geometry={geo.name} set={cs.name} ({origin}) level={a.level}")

@@ -22,10 +22,16 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import trimesh
+import matplotlib
 
 from . import resources, tables
 from .fsu import DIRECTIONS, add_level
-from .io import TableError, read_table, subplots
+from .geometry import load_geometry
+from .geometry import myo_sim as M
+from .geometry.myo_sim import BODY_OF
+from .idp import FORMULAS, idp_from_disc
+from .io import TableError, atomic_writer, read_table, subplots
 from .model import GROUND, SpineModel
 from .solve import solve
 from .tables import CABLES, IDP_INVITRO, L2S1_FREE, L2S1_MUSCLES, LOAD_CASES, MUSCLE_SETUPS
@@ -57,7 +63,6 @@ def christophy_sites(chain_xml: str | None = None):
     Read from the myo-sim torso MJCF at qpos0 with the same frame conversion as the meshes
     (:mod:`lumbar.geometry.myo_sim`). Wrapping side-sites (inside ``<geom>``) are not path points.
     """
-    from .geometry import myo_sim as M
 
     p = Path(chain_xml) if chain_xml else M.chain_path()
     root = ET.parse(p).getroot()
@@ -99,8 +104,6 @@ def derive_cables(table=None, tension_scale=1.0) -> pd.DataFrame:
     unit vectors from that site to the next path point (``..._to_next_site``), or from each fascicle's
     caudal path point to its cranial one (``..._caudal_site_to_cranial_site``), normalised.
     """
-    from .geometry import myo_sim as M
-    from .geometry.myo_sim import BODY_OF
 
     path = Path(table) if table is not None else default_cable_table()
     df = read_table(path, CABLES)
@@ -151,14 +154,12 @@ def derive_cables(table=None, tension_scale=1.0) -> pd.DataFrame:
 
 @functools.lru_cache(maxsize=1)
 def _myo_centroids():
-    from .geometry import load_geometry
     g = load_geometry("default", levels=list(LEVELS))
     return {v: np.asarray(g.vertebrae[v].centroid, float) for v in FREE}
 
 
 @functools.lru_cache(maxsize=1)
 def _myo_meshes():
-    from .geometry import load_geometry
     g = load_geometry("myo_sim", levels=list(LEVELS))
     return {v: g.vertebrae[v].mesh for v in FREE}
 
@@ -168,7 +169,6 @@ def register_vertebra(source_mesh, target_mesh, source_centroid, target_centroid
     target geometry's vertebra: ICP (trimesh.registration.icp, scale allowed, no reflection) from every k-th
     source vertex, started at the translation of the body centroids. Returns (matrix, rms [m]).
     Deterministic (no random sampling)."""
-    import trimesh  # noqa: PLC0415
     v = np.asarray(source_mesh.vertices)
     pts = v[:: max(1, len(v) // n_points)]
     T0 = np.eye(4)
@@ -404,7 +404,6 @@ def internal_loads(sol: Solution, level=IDP_LEVEL) -> pd.DataFrame:
 def run_set(geometry, charset, cables=None, idp_formula="paper1", idp_kwargs=None, facet_stiffness=None,
             k_shear=None, load_steps=1, max_iter=50, tol=1e-7, moment_nm=MOMENT_NM):
     """Build, solve the 49 scenarios, and return (internal-loads table with idp_mpa, Solution)."""
-    from .idp import FORMULAS, idp_from_disc
     if idp_formula not in FORMULAS:
         raise ValueError(f"unknown IDP formula {idp_formula!r} (config key l2s1.idp_formula); expected one of {FORMULAS}")
     sp = build_l2s1(geometry, charset, cables, facet_stiffness=facet_stiffness, k_shear=k_shear)
@@ -491,7 +490,6 @@ def _kind_note(syn):
 
 def plot_table5_grid(syn: pd.DataFrame, path):
     """Check/cross grid: rows = set-up x load case, columns = characteristic sets."""
-    from .io import atomic_writer
     sets = list(dict.fromkeys(syn["set"]))
     rows = scenario_grid()
     idx = syn.set_index(["set", "muscle_setup", "load_case"])
@@ -522,9 +520,7 @@ def plot_table5_grid(syn: pd.DataFrame, path):
 
 def plot_fig7(syn: pd.DataFrame, path, set_name="calibrated"):
     """Fig. 7: bars = reference mean with SD, circles = simulated IDP, red crosses = outliers."""
-    import matplotlib
 
-    from .io import atomic_writer
     if set_name not in set(syn["set"]):
         set_name = syn["set"].iloc[0]
     d = syn[syn["set"] == set_name].set_index(["muscle_setup", "load_case"])

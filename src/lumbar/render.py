@@ -19,7 +19,11 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from matplotlib.figure import Figure
+from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+from PIL import Image
 
+from .elements.facet import fit_surface
 from .io import atomic_writer
 
 __all__ = ["render_fsu", "offscreen_available", "facet_surfaces"]
@@ -69,11 +73,6 @@ def facet_surfaces(lev, n: int = 12) -> dict[str, np.ndarray]:
     Uses ``lumbar.elements.facet.fit_surface(superior, inferior)`` (the mean of the fits to
     both articular processes); returns {} (and logs why) if that function is missing or fails.
     """
-    try:
-        from lumbar.elements.facet import fit_surface  # optional: written by the elements layer
-    except ImportError as exc:
-        log.info("no facet regression surface drawn (%s)", exc)
-        return {}
     out = {}
     for side, lm in sorted(lev.facets.items()):
         try:
@@ -128,8 +127,6 @@ def _views(items):
 
 
 def _atomic_png(path: Path, rgb: np.ndarray) -> None:
-    from PIL import Image
-
     with atomic_writer(path, "wb") as f:
         Image.fromarray(np.ascontiguousarray(rgb[..., :3]).astype(np.uint8)).save(f, format="PNG")
 
@@ -137,7 +134,7 @@ def _atomic_png(path: Path, rgb: np.ndarray) -> None:
 def pyvista_views(path: Path, title: str, views, draw) -> None:
     """Off-screen pyvista figure of one row of views (label, camera): ``draw(plotter)`` adds the scene to
     each; a title per view; the PNG is written atomically, and a blank render raises."""
-    import pyvista as pv
+    import pyvista as pv  # noqa: PLC0415 - optional engine; without GL the module imports, matplotlib draws
 
     p = pv.Plotter(off_screen=True, window_size=WINDOW_SIZE, shape=(1, len(views)), border=False)
     try:
@@ -157,7 +154,7 @@ def pyvista_views(path: Path, title: str, views, draw) -> None:
 
 
 def _render_pyvista(items, path: Path) -> None:
-    import pyvista as pv
+    import pyvista as pv  # noqa: PLC0415 - optional engine; without GL the module imports, matplotlib draws
 
     def draw(p):
         for name, v, f, colour in items["meshes"]:
@@ -184,9 +181,6 @@ def _render_pyvista(items, path: Path) -> None:
 
 
 def _render_matplotlib(items, path: Path) -> None:
-    from matplotlib.figure import Figure
-    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
-
     fig = Figure(figsize=(WINDOW_SIZE[0] / 100, WINDOW_SIZE[1] / 100), dpi=100)
     for col, (label, (pos, focal, _up)) in enumerate(_views(items)):
         ax = fig.add_subplot(1, 2, col + 1, projection="3d")
@@ -235,7 +229,7 @@ def save_png_closing(fig, path):
             fig.savefig(f, format="png", metadata={"Software": None})
     finally:
         if getattr(fig.canvas, "manager", None) is not None:
-            import matplotlib.pyplot as plt
+            import matplotlib.pyplot as plt  # noqa: PLC0415 - only to close a figure pyplot manages (the caller's)
             plt.close(fig)
 
 

@@ -11,6 +11,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from matplotlib.figure import Figure
+from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
 from .render import (LIGAMENT_COLOUR, MM, WINDOW_SIZE, check_backend, mpl_view, pyvista_views, render_with,
                      save_png_closing)
@@ -63,7 +65,7 @@ def _lines(pairs):
 
 
 def _render_pyvista(items, path):
-    import pyvista as pv
+    import pyvista as pv  # noqa: PLC0415 - optional engine; without GL the module imports, matplotlib draws
 
     def draw(p):
         for _, v, f in items["meshes"]:
@@ -82,8 +84,6 @@ def _render_pyvista(items, path):
 
 
 def _render_matplotlib(items, path):
-    from matplotlib.figure import Figure
-    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
     fig = Figure(figsize=(WINDOW_SIZE[0] / 100, WINDOW_SIZE[1] / 100), dpi=100)
     allv = np.vstack([v for _, v, _ in items["meshes"]])

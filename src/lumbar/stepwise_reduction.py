@@ -28,6 +28,8 @@ import logging
 
 import numpy as np
 import pandas as pd
+import matplotlib
+from matplotlib.patches import Rectangle
 
 from . import so3
 from .effects import SOLVER_EFFECTS, FsuVariants, check_effect, effect_params
@@ -272,7 +274,6 @@ def compare_with_paper(counts: pd.DataFrame, published_csv=None) -> pd.DataFrame
 # ------------------------------------------------------------------ figures (matplotlib object API, no pyplot)
 def plot_table4_grid(synopsis: pd.DataFrame, path, sets=None) -> None:
     """Check/cross grid like the paper's Table 4: rows stage x moment, columns set x direction."""
-    from matplotlib.patches import Rectangle
 
     sets = list(dict.fromkeys(synopsis["set"])) if sets is None else list(sets)
     moments = sorted(synopsis["moment_nm"].unique())
@@ -307,7 +308,6 @@ def plot_table4_grid(synopsis: pd.DataFrame, path, sets=None) -> None:
 
 def plot_rom_stepwise_reduction(synopsis: pd.DataFrame, path, set_name="calibrated") -> None:
     """Fig. 6 analog: bars = reference mean with min-max whiskers per stage, circles = simulated, red x = outliers."""
-    import matplotlib
 
     syn = synopsis[synopsis["set"] == set_name]
     moments = sorted(syn["moment_nm"].unique())

@@ -12,11 +12,18 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import logging
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
+import pandas as pd
 
+from . import effects as fx
+from .fsu import MAIN_DIRECTIONS, STAGES, build_fsu
 from .idp import idp_per_newton
+from .l2s1 import LEVELS, derive_cables, run_set
+from .stepwise_reduction import simulate_stepwise_reduction
 
 
 @dataclass(frozen=True)
@@ -155,12 +162,8 @@ def stepwise_reduction_table(geometry, charset, seed, n_specimens=8, variation=N
     Deterministic for a seed. Columns: stage, direction, moment_nm, rom_mean_deg, rom_min_deg,
     rom_max_deg, n_specimens, kind (= "surrogate"), source.
     """
-    import logging
 
-    import pandas as pd
 
-    from .fsu import MAIN_DIRECTIONS, STAGES, build_fsu
-    from .stepwise_reduction import simulate_stepwise_reduction
 
     log = logging.getLogger(__name__)
     n_specimens = int(n_specimens)
@@ -192,7 +195,6 @@ def stepwise_reduction_table(geometry, charset, seed, n_specimens=8, variation=N
     n = np.isfinite(A).sum(axis=0)
     keys = sim[["stage", "direction", "moment_nm"]].reset_index(drop=True)
     with np.errstate(all="ignore"):
-        import warnings
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             mean, lo, hi = np.nanmean(A, 0), np.nanmin(A, 0), np.nanmax(A, 0)
@@ -264,12 +266,8 @@ def idp_table(geometry, charset, seed, n_specimens=7, variation=None, noise_sd_m
     equilibrium is dropped from that row with a log line and ``n_specimens`` reduced; a row no specimen reached is left out (logged).
     Columns: muscle_setup, load_case, idp_mean_mpa, idp_sd_mpa, n_specimens, kind (= "surrogate"), source.
     """
-    import logging
-    import warnings
 
-    import pandas as pd
 
-    from .l2s1 import LEVELS, derive_cables, run_set
 
     log = logging.getLogger(__name__)
     n_specimens = int(n_specimens)
@@ -277,13 +275,12 @@ def idp_table(geometry, charset, seed, n_specimens=7, variation=None, noise_sd_m
         raise ValueError(f"n_specimens must be >= 1, got {n_specimens}")
     if not np.isfinite(noise_sd_mpa) or noise_sd_mpa < 0:
         raise ValueError(f"noise_sd_mpa must be finite and >= 0 MPa, got {noise_sd_mpa}")
-    from . import effects as _fx
     for key, delta in (effects or {}).items():
-        if key in _fx.EFFECTS:
-            _fx.check_effect(key, delta)
-            if "idp_invitro" not in _fx.EFFECTS[key].experiments or key not in _fx.effect_names(kind="idp"):
+        if key in fx.EFFECTS:
+            fx.check_effect(key, delta)
+            if "idp_invitro" not in fx.EFFECTS[key].experiments or key not in fx.effect_names(kind="idp"):
                 raise ValueError(f"effect {key!r} does not act on the IDP from the disc loads; IDP effects: "
-                                 f"{_fx.effect_names(kind='idp')}")
+                                 f"{fx.effect_names(kind='idp')}")
     v = _variation(variation)
     cables = derive_cables() if cables is None else cables
     vals = []
@@ -292,9 +289,9 @@ def idp_table(geometry, charset, seed, n_specimens=7, variation=None, noise_sd_m
         sim, _ = run_set(geo_k, cs_k, cables, idp_formula=idp_formula, k_shear=k_shear, max_iter=max_iter, tol=tol)
         idp = sim["idp_mpa"].to_numpy(float) + rng.normal(0.0, noise_sd_mpa, len(sim))
         for key, delta in (effects or {}).items():
-            if key in _fx.EFFECTS:      # a discrepancy candidate acting on the IDP from the disc loads
+            if key in fx.EFFECTS:      # a discrepancy candidate acting on the IDP from the disc loads
                 per_n = idp_per_newton(idp_formula, geo_k.levels["L4-L5"].disc_csa)
-                idp = idp + _fx.idp_delta(key, float(delta), sim["idp_mpa"].to_numpy(float) * 1e6,
+                idp = idp + fx.idp_delta(key, float(delta), sim["idp_mpa"].to_numpy(float) * 1e6,
                                           sim["disc_moment_sagittal_nm"].to_numpy(float),
                                           per_n) / 1e6 - sim["idp_mpa"].to_numpy(float)
                 continue

@@ -2,7 +2,10 @@
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
+import shapely.geometry as sg
 import trimesh
+from scipy.spatial import ConvexHull
 
 EZ = np.array([0.0, 0.0, 1.0])
 
@@ -101,7 +104,6 @@ def section_area(mesh: trimesh.Trimesh, origin, normal, inside_point=None) -> fl
         return float("nan")
     if inside_point is None:
         return float(sum(p.area for p in polys))
-    import shapely.geometry as sg  # noqa: PLC0415
     q = trimesh.transform_points(np.atleast_2d(inside_point), np.linalg.inv(T))[0, :2]
     pt = sg.Point(q)
     best = min(polys, key=lambda p: p.distance(pt))
@@ -110,7 +112,6 @@ def section_area(mesh: trimesh.Trimesh, origin, normal, inside_point=None) -> fl
 
 def projected_area(points: np.ndarray, normal: np.ndarray) -> float:
     """Convex-hull area of ``points`` projected on the plane with the given normal."""
-    from scipy.spatial import ConvexHull  # noqa: PLC0415
     n = np.asarray(normal, float) / np.linalg.norm(normal)
     a = np.cross(n, [1.0, 0, 0] if abs(n[0]) < 0.9 else [0, 1.0, 0])
     a /= np.linalg.norm(a)
@@ -119,9 +120,8 @@ def projected_area(points: np.ndarray, normal: np.ndarray) -> float:
     return float(ConvexHull(q).volume)
 
 
-def summary_table(geo) -> "pd.DataFrame":  # noqa: F821 - pandas is imported in the body (lazily)
+def summary_table(geo) -> pd.DataFrame:
     """One row per level: disc centre/normal/CSA/height, facet landmarks, ligament fibres (mm)."""
-    import pandas as pd
 
     rows = []
     for name in sorted(geo.levels):
