@@ -75,7 +75,7 @@ def synthetic_geometry():
 
 
 def test_render_matplotlib_fallback_not_blank(tmp_path, synthetic_geometry):
-    from lumbar.render import render_fsu
+    from lumbar.plots.render import render_fsu
 
     out = tmp_path / "fig.png"
     assert render_fsu(synthetic_geometry, "L4-L5", out, backend="matplotlib") == "matplotlib"
@@ -84,7 +84,7 @@ def test_render_matplotlib_fallback_not_blank(tmp_path, synthetic_geometry):
 
 def test_render_auto_deterministic(tmp_path, synthetic_geometry):
     """Same input, same bytes (fixed cameras, no time metadata); pyvista when it can render here."""
-    from lumbar.render import offscreen_available, render_fsu
+    from lumbar.plots.render import offscreen_available, render_fsu
 
     a, b = tmp_path / "a.png", tmp_path / "b.png"
     used = render_fsu(synthetic_geometry, "L4-L5", a)
@@ -96,7 +96,7 @@ def test_render_auto_deterministic(tmp_path, synthetic_geometry):
 
 
 def test_render_unknown_level_names_available(tmp_path, synthetic_geometry):
-    from lumbar.render import render_fsu
+    from lumbar.plots.render import render_fsu
 
     with pytest.raises(KeyError, match="L4-L5"):
         render_fsu(synthetic_geometry, "L1-L2", tmp_path / "x.png", backend="matplotlib")
@@ -131,11 +131,11 @@ def test_geometry_rules_run(dag_workdir):
 
 def test_render_falls_back_when_offscreen_unavailable(tmp_path, synthetic_geometry, monkeypatch, caplog):
     """No EGL/OSMesa: auto mode logs a warning and still writes a non-blank PNG."""
-    import lumbar.render as render
+    import lumbar.plots.render as render
 
     monkeypatch.setattr(render, "_offscreen_cache", False)
     out = tmp_path / "fig.png"
-    with caplog.at_level("WARNING", logger="lumbar.render"):
+    with caplog.at_level("WARNING", logger="lumbar.plots.render"):
         assert render.render_fsu(synthetic_geometry, "L4-L5", out) == "matplotlib"
     assert "falling back to matplotlib" in caplog.text
     assert _png_std(out) > 5.0

@@ -30,7 +30,7 @@ if snakemake.rule == "fsu_geometry":
     write_table_atomic(table, snakemake.output[0])
     log.info("wrote %d levels x %d columns to %s", *table.shape, snakemake.output[0])
 elif snakemake.rule == "fig1_l4l5_model":
-    from lumbar.render import render_fsu
+    from lumbar.plots.render import render_fsu
 
     used = render_fsu(geo, snakemake.params.level, snakemake.output[0], backend=snakemake.params.backend)
     log.info("rendered %s with %s to %s", snakemake.params.level, used, snakemake.output[0])

@@ -90,7 +90,7 @@ elif rule == "table5":
         log.info("set %s: %d outliers of %d (paper: %s) [reference %s]", r["set"], r["n_outliers"],
                  r["n_scenarios"], r["paper_n_outliers"], r["data_kind"])
 elif rule == "fig3_l2s1_cables":
-    from lumbar.render_spine import render_spine
+    from lumbar.plots.render_spine import render_spine
 
     geo = _geometry(snakemake.params.geometry)
     cab = l2s1.build_l2s1(geo, load_characteristic_set("rupp2015"), l2s1.derive_cables(snakemake.input.cables)).cables

@@ -23,8 +23,8 @@ from matplotlib.figure import Figure
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 from PIL import Image
 
-from .elements.facet import fit_surface
-from .io import atomic_writer
+from ..elements.facet import fit_surface
+from ..io import atomic_writer
 
 __all__ = ["render_fsu", "offscreen_available", "facet_surfaces"]
 

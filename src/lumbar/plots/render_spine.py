@@ -1,5 +1,5 @@
 """3D figure of a multi-level spine model with its cables (Fig. 3 of paper 1): pyvista off-screen,
-matplotlib fallback, the same conventions as :mod:`lumbar.render` (fixed cameras, millimetres, PNG
+matplotlib fallback, the same conventions as :mod:`lumbar.plots.render` (fixed cameras, millimetres, PNG
 without time metadata).
 
 ``render_spine(geometry, levels, path, cables=None)`` draws the vertebra meshes of ``levels``
