@@ -318,7 +318,6 @@ class RedundancySolver:
         a further model evaluation. Returns (x, R, state)."""
         x, R = x.copy(), R.copy()
         m = self.m
-        n = 6 * m.nb
         live = np.arange(len(x))
         st = None
         for it in range(self.restore_iter + 1):
