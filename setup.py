@@ -2,8 +2,8 @@
 
 ``data/`` and ``workflow/schemas/config.schema.yaml`` stay at the repository root, where the Snakemake
 workflow reads them. A wheel gets copies under ``lumbar/_resources/`` with the same relative layout, which
-``lumbar.resources`` finds when the package is not running from a checkout. An editable install needs no
-copy (it runs from ``src/``, and ``lumbar.resources`` finds the checkout).
+``lumbar.inputs.resources`` finds when the package is not running from a checkout. An editable install needs no
+copy (it runs from ``src/``, and ``lumbar.inputs.resources`` finds the checkout).
 """
 from pathlib import Path
 
@@ -12,7 +12,7 @@ from setuptools.command.build_py import build_py
 
 ROOT = Path(__file__).resolve().parent
 RESOURCES = ("data", "workflow/schemas/config.schema.yaml")   # repository-relative; a directory = all its files
-TARGET = Path("lumbar") / "_resources"                      # inside the package (lumbar.resources._BUNDLED)
+TARGET = Path("lumbar") / "_resources"                      # inside the package (lumbar.inputs.resources._BUNDLED)
 
 
 def resource_files() -> list[Path]:

@@ -20,12 +20,12 @@ import time  # noqa: E402
 
 from pathlib import Path  # noqa: E402
 
-from lumbar.calibration import calibrate, fit_real_targets  # noqa: E402
-from lumbar.characteristics import CHARACTERISTIC_SETS, load_characteristic_set  # noqa: E402
-from lumbar.fsu import build_fsu  # noqa: E402
+from lumbar.experiments.calibration import calibrate, fit_real_targets  # noqa: E402
+from lumbar.inputs.characteristics import CHARACTERISTIC_SETS, load_characteristic_set  # noqa: E402
+from lumbar.experiments.fsu import build_fsu  # noqa: E402
 from lumbar.geometry import load_geometry  # noqa: E402
-from lumbar.stepwise_reduction import read_experiment_table, reference_table, simulate_stepwise_reduction  # noqa: E402
-from lumbar.virtual_experiment import SpecimenVariation, stepwise_reduction_table  # noqa: E402
+from lumbar.experiments.stepwise_reduction import read_experiment_table, reference_table, simulate_stepwise_reduction  # noqa: E402
+from lumbar.experiments.virtual_experiment import SpecimenVariation, stepwise_reduction_table  # noqa: E402
 
 
 def main():

@@ -29,7 +29,7 @@ import numpy as np  # noqa: E402
 
 from lumbar import discovery as D  # noqa: E402
 from lumbar.discovery import problems as discovery_problems  # noqa: E402
-from lumbar.config import load_config  # noqa: E402
+from lumbar.inputs.config import load_config  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -21,10 +21,10 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.optimize import root  # noqa: E402
 
-from lumbar import so3  # noqa: E402
-from lumbar.characteristics import load_characteristic_set  # noqa: E402
-from lumbar.fsu import MAIN_DIRECTIONS, build_fsu, moment_loads  # noqa: E402
-from lumbar.solve import solve  # noqa: E402
+from lumbar.mechanics import so3  # noqa: E402
+from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
+from lumbar.experiments.fsu import MAIN_DIRECTIONS, build_fsu, moment_loads  # noqa: E402
+from lumbar.mechanics.solve import solve  # noqa: E402
 
 
 def scenarios(n, seed=0):

@@ -15,8 +15,8 @@ import argparse  # noqa: E402
 import json  # noqa: E402
 import time  # noqa: E402
 
-from lumbar import l2s1  # noqa: E402
-from lumbar.characteristics import CHARACTERISTIC_SETS, load_characteristic_set  # noqa: E402
+from lumbar.experiments import l2s1  # noqa: E402
+from lumbar.inputs.characteristics import CHARACTERISTIC_SETS, load_characteristic_set  # noqa: E402
 from lumbar.geometry import load_geometry  # noqa: E402
 
 

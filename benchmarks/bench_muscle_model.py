@@ -34,7 +34,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 import yaml  # noqa: E402
 
-from lumbar import muscle_model as mm  # noqa: E402
+from lumbar.muscles import muscle_model as mm  # noqa: E402
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "config.yaml"
 SETTINGS = {

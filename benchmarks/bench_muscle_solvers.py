@@ -24,7 +24,7 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from lumbar import muscle_model as mm  # noqa: E402
+from lumbar.muscles import muscle_model as mm  # noqa: E402
 
 
 def _idp(model, x, R):

@@ -27,7 +27,7 @@ Pure moment = ``PrescribedForce`` torque on L4 in the ground frame. OpenSim has 
 this, so each equilibrium is reached by forward dynamics from the 0 N*m rest state until all speeds
 fall below ``--speed-tol``; L4's mass and inertia (0.1 kg, 1e-4 kg m^2) and the damping only shape
 the transient, not the equilibrium. ROM = rotation vector of L4 relative to the rest state (project
-axes), component about the loading axis - the same quantity ``lumbar.fsu.range_of_motion`` reports.
+axes), component about the loading axis - the same quantity ``lumbar.experiments.fsu.range_of_motion`` reports.
 
 Usage (OpenSim lives in its own venv, see benchmarks/requirements-opensim.txt)::
 
@@ -51,13 +51,13 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.spatial.transform import Rotation  # noqa: E402
 
-from lumbar import so3  # noqa: E402
-from lumbar.characteristics import load_characteristic_set  # noqa: E402
-from lumbar.elements.ligament import slack_length  # noqa: E402
-from lumbar.fsu import (DIRECTIONS, MAIN_DIRECTIONS, build_fsu, disc_frame, moment_loads,  # noqa: E402
+from lumbar.mechanics import so3  # noqa: E402
+from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
+from lumbar.mechanics.elements.ligament import slack_length  # noqa: E402
+from lumbar.experiments.fsu import (DIRECTIONS, MAIN_DIRECTIONS, build_fsu, disc_frame, moment_loads,  # noqa: E402
                         range_of_motion, removed_structures)
 from lumbar.geometry import load_geometry  # noqa: E402
-from lumbar.solve import solve  # noqa: E402
+from lumbar.mechanics.solve import solve  # noqa: E402
 
 MOMENTS_NM = (2.5, 10.0)
 # comparison cases: name -> (lumbar stage, what OpenSim models)

@@ -1,4 +1,4 @@
-"""Shared fixtures: the real characteristic sets (``lumbar.characteristics``) with overrides, paths, and
+"""Shared fixtures: the real characteristic sets (``lumbar.inputs.characteristics``) with overrides, paths, and
 ``dag_workdir``: the whole default DAG run once per session on config/test in a copy of the repository.
 
 Markers (pyproject.toml): every test that uses the session DAG (``dag_workdir``, ``dag_second_workdir`` or a
@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from lumbar.characteristics import load_characteristic_set
+from lumbar.inputs.characteristics import load_characteristic_set
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared"
@@ -38,7 +38,7 @@ SLOW_ELSEWHERE = {
                                        "test_intra_abdominal_pressure_unloads_the_spine",
                                        "test_unreachable_posture_is_flagged_not_silent",
                                        "test_in_situ_standing_gives_in_situ_sarcomere_lengths_in_standing"}},
-    # one `python -m lumbar.fsu` subprocess per case (2-15 s each)
+    # one `python -m lumbar.cli fsu` subprocess per case (2-15 s each)
     "test_fsu_cli.py": {"fixtures": set(),
                         "names": {"test_cli_exits_one_and_says_so_when_a_solve_does_not_converge",
                                   "test_reject_bad_cli_input_with_a_message_naming_it"}},
@@ -57,7 +57,7 @@ def pytest_collection_modifyitems(config, items):
 
 def make_charset(name="calibrated", torque=None, ligaments=True, facet_stiffness=None, overrides=None,
                  **disc_fields):
-    """The real :class:`lumbar.characteristics.CharacteristicSet` ``name`` (paper 1, Tables 1-3 for
+    """The real :class:`lumbar.inputs.characteristics.CharacteristicSet` ``name`` (paper 1, Tables 1-3 for
     ``calibrated``) with ``overrides`` (dotted keys, see ``load_characteristic_set``). What the loader's
     overrides cannot express is replaced on the dataclasses: ``torque`` (Eq. 3 parameters per direction),
     ``ligaments=False`` (no ligaments at all), ``facet_stiffness`` (0 allowed: facets present, no force) and
@@ -219,9 +219,9 @@ def dag_second_workdir(dag_workdir, tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session", name="model")
 def muscle_model():
-    """``model``: the default muscle-driven L1-S1 model (lumbar.muscle_model.LumbarMuscleModel), built once per
+    """``model``: the default muscle-driven L1-S1 model (lumbar.muscles.muscle_model.LumbarMuscleModel), built once per
     session for test_muscles, test_muscle_model and test_nlp; read-only for tests (solvers take their settings
     from their own fixtures)."""
-    from lumbar.muscle_model import LumbarMuscleModel
+    from lumbar.muscles.muscle_model import LumbarMuscleModel
     return LumbarMuscleModel()
 

@@ -7,7 +7,7 @@
 
 The modules are found with ``pkgutil.walk_packages`` and imported with ``importlib`` (so every module is also
 importable); the graph is built from their source with ``ast``. Dynamic imports
-(``importlib.import_module(variable)``) are not seen; the library has none (``lumbar.tables`` holds its schemas).
+(``importlib.import_module(variable)``) are not seen; the library has none (``lumbar.inputs.tables`` holds its schemas).
 
 The checkers are tested on a tiny fake package, so that each rule can fail.
 """
@@ -146,8 +146,8 @@ def lumbar_analysis():
 # ------------------------------------------------------------------ the package
 def test_every_module_is_found_and_imports(lumbar_analysis):
     nodes = set(lumbar_analysis.graph)
-    for name in ("lumbar", "lumbar.effects", "lumbar.stepwise_reduction", "lumbar.geometry.loader",
-                 "lumbar.geometry.visible_human", "lumbar.l2s1"):
+    for name in ("lumbar", "lumbar.experiments.effects", "lumbar.experiments.stepwise_reduction", "lumbar.geometry.loader",
+                 "lumbar.geometry.visible_human", "lumbar.experiments.l2s1"):
         assert name in nodes
     assert lumbar_analysis.graph.number_of_edges() > 20          # the graph sees the package's imports
 
@@ -168,8 +168,47 @@ def test_library_never_switches_the_matplotlib_backend(lumbar_analysis):
     assert not hits, "backend switches in the library:\n" + "\n".join(f"{m}:{ln} {c}" for m, ln, c in hits)
 
 
+#: the subpackages by layer (docs/design.md, "Layers"): a module imports only from its own subpackage and from
+#: lower layers; `lumbar` itself (``__version__``) is below all
+LAYERS = {
+    "lumbar": -1,
+    "lumbar.mechanics": 0,
+    "lumbar.inputs": 1,
+    "lumbar.geometry": 2,
+    "lumbar.experiments": 3,
+    "lumbar.muscles": 4, "lumbar.plots": 4, "lumbar.report": 4,
+    "lumbar.discovery": 5,
+    "lumbar.cli": 6,
+}
+
+
+def layer_violations(graph: nx.DiGraph, layers: dict[str, int]) -> list[str]:
+    """Edges (module -> module) into a higher or same-layer other subpackage; every module must have a layer."""
+    def group(name):
+        parts = name.split(".")
+        return ".".join(parts[:2]) if len(parts) > 1 else parts[0]
+
+    out = [f"{n}: no layer" for n in graph if group(n) not in layers]
+    for u, v in graph.edges:
+        gu, gv = group(u), group(v)
+        if gu != gv and gu in layers and gv in layers and layers[gv] >= layers[gu]:
+            out.append(f"{u} -> {v} (layer {layers[gu]} -> {layers[gv]})")
+    return sorted(out)
+
+
+def test_modules_import_only_from_lower_layers(lumbar_analysis):
+    bad = layer_violations(lumbar_analysis.graph, LAYERS)
+    assert not bad, "imports against the layers of docs/design.md:\n" + "\n".join(bad)
+
+
+def test_layer_checker_detects_an_upward_import():
+    g = nx.DiGraph([("lumbar.mechanics.model", "lumbar.inputs.io"), ("lumbar.inputs.io", "lumbar.inputs.tables")])
+    assert layer_violations(g, LAYERS) == ["lumbar.mechanics.model -> lumbar.inputs.io (layer 0 -> 1)"]
+    assert layer_violations(nx.DiGraph([("lumbar.new.x", "lumbar.mechanics.so3")]), LAYERS) == ["lumbar.new.x: no layer"]
+
+
 def test_one_effect_registry():
-    from lumbar import effects, stepwise_reduction
+    from lumbar.experiments import effects, stepwise_reduction
     assert "disc_tension" in effects.EFFECTS
     for name in ("EFFECTS", "register_effect", "effect_params"):
         if hasattr(stepwise_reduction, name):                   # a re-export, never a second registry

@@ -275,7 +275,7 @@ TABLE5_OUT = ["table5_idp_synopsis.csv", "table5_outlier_counts.csv", "table5_vs
 
 
 def _idp_table():
-    from lumbar import l2s1
+    from lumbar.experiments import l2s1
     rows = [dict(muscle_setup=m, load_case=c, idp_mean_mpa="0.5", idp_sd_mpa="0.1", n_specimens="7",
                  kind="measured", source="test") for m, c in l2s1.scenario_grid()]
     return pd.DataFrame(rows)
@@ -425,7 +425,7 @@ def test_reject_spine_not_stacked_along_z():
     assert_message(e.value, "L4 is not above L5 along +z", "expected the project frame")
 
 
-# ---------------------------------------------------------------- landmarks and the other data tables (lumbar.tables)
+# ---------------------------------------------------------------- landmarks and the other data tables (lumbar.inputs.tables)
 LANDMARK_CSV = DATA / "landmarks" / "myo_sim_landmarks.csv"
 
 
@@ -481,8 +481,8 @@ TABLE_CASES = [
 
 @pytest.mark.parametrize("fname,kind,column,value,parts", [c[1:] for c in TABLE_CASES], ids=[c[0] for c in TABLE_CASES])
 def test_bad_data_table_rejected_with_file_row_column(tmp_path, fname, kind, column, value, parts):
-    from lumbar.io import TableError
-    from lumbar.tables import read_kind
+    from lumbar.inputs.io import TableError
+    from lumbar.inputs.tables import read_kind
     bad = tmp_path / Path(fname).name
     row = set_cell(DATA / fname, bad, column, value)
     with pytest.raises(TableError) as e:
@@ -493,7 +493,7 @@ def test_bad_data_table_rejected_with_file_row_column(tmp_path, fname, kind, col
 @pytest.mark.parametrize("rel", sorted(str(p.relative_to(ROOT)) for p in DATA.rglob("*.csv")))
 def test_data_tables_valid(rel):
     """Every registered data table passes its schema; an unregistered one is at least well-formed CSV."""
-    from lumbar.tables import DATA_FILES, read_kind
+    from lumbar.inputs.tables import DATA_FILES, read_kind
     if rel in DATA_FILES:
         read_kind(ROOT / rel, DATA_FILES[rel])
         return
@@ -743,7 +743,7 @@ DUP_CASES = [
 @pytest.mark.parametrize("set_name,fname,match,change,parts", [c[1:] for c in DUP_CASES], ids=[c[0] for c in DUP_CASES])
 def test_duplicate_characteristic_rows_are_errors(tmp_path, set_name, fname, match, change, parts):
     """Was: last row wins (a duplicated SSL row turned -6 % prestrain into 50 %)."""
-    from lumbar.characteristics import CharacteristicsError, load_characteristic_set
+    from lumbar.inputs.characteristics import CharacteristicsError, load_characteristic_set
     data = tmp_path / "characteristics"
     shutil.copytree(DATA / "characteristics", data)
     df = read_rows(DATA / "characteristics" / fname)
@@ -771,7 +771,7 @@ BOUND_CASES = [
 @pytest.mark.parametrize("set_name,fname,column,value,match,parts", [c[1:] for c in BOUND_CASES],
                          ids=[c[0] for c in BOUND_CASES])
 def test_characteristic_outside_physical_bounds_rejected(tmp_path, set_name, fname, column, value, match, parts):
-    from lumbar.characteristics import CharacteristicsError, load_characteristic_set
+    from lumbar.inputs.characteristics import CharacteristicsError, load_characteristic_set
     data = tmp_path / "characteristics"
     shutil.copytree(DATA / "characteristics", data)
     if fname == "ligaments_rupp2015.csv":       # keep value_as_printed consistent with the new value
@@ -791,7 +791,7 @@ def test_characteristic_outside_physical_bounds_rejected(tmp_path, set_name, fna
 
 def test_duplicate_yaml_key_in_config_rejected_by_library(tmp_path):
     """Was: a second `fsu:` section silently replaced the first."""
-    from lumbar.config import ConfigError, load_config
+    from lumbar.inputs.config import ConfigError, load_config
     f = tmp_path / "c.yaml"
     f.write_text("fsu:\n  moments_nm: [1]\nsolver:\n  max_iter: 3\nfsu:\n  level: L4-L5\n")
     with pytest.raises(ConfigError) as e:
@@ -818,22 +818,22 @@ def test_duplicate_yaml_key_in_config_rejected_by_snakemake(tmp_path):
                                   "set l2s1.beyond_experiment true"]),
 ], ids=["tolerances_1e6", "fsu_moment_50", "stepwise_moment_12", "l2s1_moment_7_5"])
 def test_config_bounds_tolerances_and_moments(section, values, parts):
-    from lumbar.config import ConfigError, load_config
+    from lumbar.inputs.config import ConfigError, load_config
     with pytest.raises(ConfigError) as e:
         load_config({section: values})
     assert_message(e.value, *parts)
 
 
 def test_moments_beyond_experiment_need_explicit_opt_in():
-    from lumbar.config import load_config
+    from lumbar.inputs.config import load_config
     assert load_config({"fsu": {"moments_nm": [20], "beyond_experiment": True}})["fsu"]["moments_nm"] == [20]
 
 
 def test_loose_tolerance_never_reports_unloaded_state_converged(caplog):
     """Was: tolerances 1e6 -> every ROM 0 deg, converged=True, residual moments up to 20 N*m in the table."""
-    from lumbar import solve as S
-    from lumbar.characteristics import load_characteristic_set
-    from lumbar.fsu import build_fsu, range_of_motion
+    from lumbar.mechanics import solve as S
+    from lumbar.inputs.characteristics import load_characteristic_set
+    from lumbar.experiments.fsu import build_fsu, range_of_motion
     from lumbar.geometry import load_geometry
     fsu = build_fsu(load_geometry("default", levels=["L4-L5"]), load_characteristic_set("calibrated"))
     df = range_of_motion(fsu, [10.0], ["flexion"], tol=1.0e6)
@@ -846,7 +846,7 @@ def test_loose_tolerance_never_reports_unloaded_state_converged(caplog):
 
 def test_fsu_cli_flags_states_outside_force_law_validity(capsys):
     """Was: 122.9 deg at 50 N*m, the upper vertebra 30.8 mm lower, converged=True, rc 0."""
-    from lumbar.fsu import main
+    from lumbar.experiments.fsu import main
     rc = main(["--moment", "10", "20", "50", "--direction", "lateral_bending"])
     out, err = capsys.readouterr()
     assert rc == 1
@@ -859,8 +859,8 @@ def test_fsu_cli_flags_states_outside_force_law_validity(capsys):
 
 def test_fsu_cli_visible_human_defaults_to_config_geometry_path(capsys, monkeypatch, tmp_path):
     """Was: a message about a library argument (path=)."""
-    from lumbar.config import default_geometry_path
-    from lumbar.fsu import main
+    from lumbar.inputs.config import default_geometry_path
+    from lumbar.experiments.fsu import main
     monkeypatch.chdir(tmp_path)                 # the config path resolves from the repository too
     if not default_geometry_path().is_dir():
         pytest.skip("the configuration's geometry.path is not present")
@@ -871,14 +871,14 @@ def test_fsu_cli_visible_human_defaults_to_config_geometry_path(capsys, monkeypa
 
 
 def test_fsu_cli_level_has_help(capsys):
-    from lumbar.fsu import main
+    from lumbar.experiments.fsu import main
     with pytest.raises(SystemExit):
         main(["--help"])
     assert "motion segment to load" in capsys.readouterr().out
 
 
 def test_output_path_that_is_a_file_or_folder_is_a_clear_error(tmp_path):
-    from lumbar.io import OutputError, write_table_atomic
+    from lumbar.inputs.io import OutputError, write_table_atomic
     blocker = tmp_path / "out"
     blocker.write_text("")
     with pytest.raises(OutputError) as e:
@@ -891,7 +891,7 @@ def test_output_path_that_is_a_file_or_folder_is_a_clear_error(tmp_path):
 
 @pytest.mark.skipif(hasattr(os, "geteuid") and os.geteuid() == 0, reason="root ignores read-only permissions")
 def test_read_only_output_folder_is_a_clear_error(tmp_path):
-    from lumbar.io import OutputError, write_table_atomic
+    from lumbar.inputs.io import OutputError, write_table_atomic
     ro = tmp_path / "ro"
     ro.mkdir()
     ro.chmod(0o555)
@@ -909,7 +909,7 @@ def test_measured_rom_table_sharing_no_scenario_with_config_is_an_error(tmp_path
     config_file(tmp_path, stepwise_reduction={"measured_table": str(path), "moments_nm": [3, 4, 6]})
     sims = tmp_path / "sims"
     sims.mkdir()
-    from lumbar import stepwise_reduction as sr
+    from lumbar.experiments import stepwise_reduction as sr
     sim = sr.scenario_grid(moments_nm=(3.0, 4.0, 6.0)).assign(rom_deg=1.0, converged=True, set="calibrated")
     with pytest.raises(ValueError) as e:
         sr.assess(sim, sr.read_experiment_table(path), "calibrated")

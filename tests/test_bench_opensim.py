@@ -46,8 +46,8 @@ def test_flexion_10nm_agrees_within_0p1_deg(bench):
 
 def test_exact_disc_mapping_reproduces_lumbar_torque(bench):
     """The OpenSim rotation bushing applies lumbar's disc torque -T(log R) at a multi-axis pose."""
-    from lumbar import so3
-    from lumbar.elements.disc import disc_torque
+    from lumbar.mechanics import so3
+    from lumbar.mechanics.elements.disc import disc_torque
     geo, cs = bench.load_case()
     f = bench.OpenSimFSU(osim, geo, cs, "wo_va", disc_mapping="exact")
     s = osim.State(f.state)

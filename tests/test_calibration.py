@@ -1,4 +1,4 @@
-"""Backward calibration (lumbar.calibration): round trip on a noise-free surrogate started away from the
+"""Backward calibration (lumbar.experiments.calibration): round trip on a noise-free surrogate started away from the
 truth, round trip with specimen variation and noise (which parameters the experiment identifies), the
 disc-only stage, the written characteristic directory and its loader."""
 import dataclasses
@@ -8,14 +8,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lumbar import calibration as cal
-from lumbar.characteristics import SoftplusLaw, load_characteristic_set
-from lumbar.elements.ligament import softplus_force
-from lumbar.fsu import build_fsu
-from lumbar.stepwise_reduction import (read_experiment_table, reference_table,
+from lumbar.experiments import calibration as cal
+from lumbar.inputs.characteristics import SoftplusLaw, load_characteristic_set
+from lumbar.mechanics.elements.ligament import softplus_force
+from lumbar.experiments.fsu import build_fsu
+from lumbar.experiments.stepwise_reduction import (read_experiment_table, reference_table,
                                        simulate_stepwise_reduction)
-from lumbar.tables import STEPWISE_ROM
-from lumbar.virtual_experiment import SpecimenVariation, stepwise_reduction_table
+from lumbar.inputs.tables import STEPWISE_ROM
+from lumbar.experiments.virtual_experiment import SpecimenVariation, stepwise_reduction_table
 
 from conftest import ROOT
 

@@ -1,11 +1,11 @@
-"""Tests for lumbar.characteristics: paper values, physics checks, bad input."""
+"""Tests for lumbar.inputs.characteristics: paper values, physics checks, bad input."""
 import shutil
 
 import numpy as np
 import pandas as pd
 import pytest
 
-from lumbar.characteristics import (CHARACTERISTIC_SETS, CharacteristicsError, RuppLaw, SoftplusLaw,
+from lumbar.inputs.characteristics import (CHARACTERISTIC_SETS, CharacteristicsError, RuppLaw, SoftplusLaw,
                                     load_characteristic_set, load_shape_check, rupp_shape_parameters,
                                     default_data_dir)
 

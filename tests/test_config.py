@@ -1,4 +1,4 @@
-"""lumbar.config: the workflow schema validates, fills defaults and names the bad key."""
+"""lumbar.inputs.config: the workflow schema validates, fills defaults and names the bad key."""
 import copy
 import re
 from pathlib import Path
@@ -7,7 +7,7 @@ import pytest
 import yaml
 from jsonschema import Draft202012Validator
 
-from lumbar.config import ConfigError, default_schema_path, load_config
+from lumbar.inputs.config import ConfigError, default_schema_path, load_config
 
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMA = ROOT / "workflow" / "schemas" / "config.schema.yaml"

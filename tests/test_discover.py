@@ -1,4 +1,4 @@
-"""Discrepancy discovery (issue 6): candidate effects (lumbar.effects) and lumbar.discovery.
+"""Discrepancy discovery (issue 6): candidate effects (lumbar.experiments.effects) and lumbar.discovery.
 
 Datasets with a planted effect are TEST FIXTURES made in the tests (lumbar.discovery.make_hidden_effect_dataset,
 or the synthetic L2-S1 / muscle-model tables below), never data.
@@ -13,8 +13,8 @@ import pytest
 from lumbar import discovery as D
 from lumbar.discovery import benchmark as discovery_benchmark
 from lumbar.discovery import fit as discovery_fit
-from lumbar import effects as fx
-from lumbar import so3
+from lumbar.experiments import effects as fx
+from lumbar.mechanics import so3
 
 ROOT = Path(__file__).resolve().parents[1]
 VA_FILE = ROOT / "data" / "experiments" / "heuer2007_va_artefact_original_text.csv"
@@ -39,7 +39,7 @@ def fv():
 def idp_model_fixture():
     """TEST FIXTURE in the schema of the nominal L2-S1 model table (rule discovery_idp_model): 49 scenarios
     with a disc force and sagittal moment pattern like the solved model's (not data)."""
-    from lumbar.l2s1 import scenario_grid
+    from lumbar.experiments.l2s1 import scenario_grid
     grid = scenario_grid()
     rng = np.random.default_rng(3)
     F = 150 + 250 * rng.random(len(grid))
@@ -120,10 +120,10 @@ def test_effect_jacobian_matches_finite_differences(fv, name):
 
 
 def test_generator_switches_an_effect_on():
-    """lumbar.virtual_experiment.stepwise_reduction_table(effects=...) makes data with a hidden effect."""
-    from lumbar.characteristics import load_characteristic_set
+    """lumbar.experiments.virtual_experiment.stepwise_reduction_table(effects=...) makes data with a hidden effect."""
+    from lumbar.inputs.characteristics import load_characteristic_set
     from lumbar.geometry import load_geometry
-    from lumbar.virtual_experiment import stepwise_reduction_table
+    from lumbar.experiments.virtual_experiment import stepwise_reduction_table
     geo = load_geometry("default", levels=["L4-L5"])
     cs = load_characteristic_set("calibrated")
     kw = dict(n_specimens=1, noise_sd_deg=0.0, moments_nm=(5.0,))
@@ -136,7 +136,7 @@ def test_generator_switches_an_effect_on():
 
 
 def test_idp_generator_rejects_an_effect_without_idp_form():
-    from lumbar.virtual_experiment import idp_table
+    from lumbar.experiments.virtual_experiment import idp_table
     with pytest.raises(ValueError, match="effect 'itl' does not act on the IDP from the disc loads"):
         idp_table(None, None, 1, effects={"itl": 0.1})
 
@@ -304,7 +304,7 @@ def test_virtual_specimens_without_equilibrium_are_redrawn_not_dropped():
     """Survivor bias (issue 15): a specimen that fails a scenario is replaced as a whole by a seeded reserve
     specimen; a scenario most specimens fail is a model limit and reported as such."""
     import logging
-    from lumbar.virtual_experiment import _without_survivor_bias
+    from lumbar.experiments.virtual_experiment import _without_survivor_bias
     sim = pd.DataFrame({"stage": ["intact"] * 3, "direction": ["flexion"] * 3, "moment_nm": [1.0, 5.0, 10.0]})
 
     def one(rng):

@@ -4,9 +4,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lumbar.elements import (contact_penalty, disc_axial_force, disc_torque, fit_surface, rupp_force,
+from lumbar.mechanics.elements import (contact_penalty, disc_axial_force, disc_torque, fit_surface, rupp_force,
                              softplus_force, torque_angle)
-from lumbar.elements.ligament import rupp_shape
+from lumbar.mechanics.elements.ligament import rupp_shape
 
 from conftest import TABLE1
 

@@ -1,12 +1,39 @@
-"""The `python -m lumbar.fsu` command line: exit codes and messages."""
+"""The `lumbar fsu` command line (`python -m lumbar.cli fsu`, lumbar.experiments.fsu.main): exit codes and messages;
+the `lumbar` entry point's dispatch (lumbar.cli)."""
 import subprocess
 import sys
 
 import pytest
 
+from lumbar import cli
 
-def run(*args):
-    return subprocess.run([sys.executable, "-m", "lumbar.fsu", *args], capture_output=True, text=True, timeout=120)
+
+def run(*args, module=("lumbar.cli", "fsu")):
+    return subprocess.run([sys.executable, "-m", *module, *args], capture_output=True, text=True, timeout=120)
+
+
+def test_fsu_module_runs_as_a_script_too():
+    r = run("--help", module=("lumbar.experiments.fsu",))
+    assert r.returncode == 0, r.stderr
+    assert "--moment" in r.stdout
+
+
+@pytest.mark.parametrize("command,needle", [("fsu", "--moment"), ("discovery", "--measured")])
+def test_entry_point_delegates_to_the_command_main(command, needle, capsys):
+    with pytest.raises(SystemExit) as e:
+        cli.main([command, "--help"])
+    assert e.value.code == 0
+    out = capsys.readouterr().out
+    assert needle in out and f"lumbar {command}" in out
+
+
+def test_entry_point_lists_commands_and_rejects_unknown_ones(capsys):
+    assert cli.main(["--help"]) == 0
+    out = capsys.readouterr().out
+    assert "fsu" in out and "discovery" in out
+    assert cli.main([]) == 2
+    assert cli.main(["nonsense"]) == 2
+    assert "unknown command 'nonsense'" in capsys.readouterr().err
 
 
 def test_cli_prints_rom_and_exits_zero_when_all_converge():

@@ -1,8 +1,8 @@
-"""lumbar.idp: the two IDP formulas, analytically."""
+"""lumbar.mechanics.idp: the two IDP formulas, analytically."""
 import numpy as np
 import pytest
 
-from lumbar.idp import FORMULAS, idp_from_disc, idp_paper1, idp_paper2
+from lumbar.mechanics.idp import FORMULAS, idp_from_disc, idp_paper1, idp_paper2
 
 
 def test_paper1_is_1p68_force_over_csa():

@@ -1,4 +1,4 @@
-"""Tests for lumbar.io: schema validation and atomic writers."""
+"""Tests for lumbar.inputs.io: schema validation and atomic writers."""
 import json
 import os
 
@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lumbar.io import (Column, TableError, TableSchema, atomic_writer, read_table, write_json_atomic,
+from lumbar.inputs.io import (Column, TableError, TableSchema, atomic_writer, read_table, write_json_atomic,
                        write_table_atomic, write_text_atomic)
 
 SCHEMA = TableSchema("demo", {
@@ -138,7 +138,7 @@ def test_save_figure_atomic_deterministic_bytes(tmp_path, suffix):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from lumbar.io import save_figure_atomic
+    from lumbar.inputs.io import save_figure_atomic
 
     def draw(p):
         fig, ax = plt.subplots(figsize=(2, 2))

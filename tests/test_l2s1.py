@@ -5,10 +5,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lumbar import l2s1
-from lumbar.characteristics import CHARACTERISTIC_SETS, load_characteristic_set
+from lumbar.experiments import l2s1
+from lumbar.inputs.characteristics import CHARACTERISTIC_SETS, load_characteristic_set
 from lumbar.geometry import load_geometry
-from lumbar.io import TableError
+from lumbar.inputs.io import TableError
 
 from conftest import synthetic_l2s1_chain
 
@@ -66,7 +66,7 @@ def test_every_free_vertebra_in_force_and_moment_balance(all_sets):
 
 
 def _neutral_idp(geo, cs, cables, setups):
-    from lumbar.idp import idp_from_disc
+    from lumbar.mechanics.idp import idp_from_disc
     sol = l2s1.solve_scenarios(l2s1.build_l2s1(geo, cs, cables), setups=setups, load_cases=("neutral",))
     assert sol.converged.all()
     d = l2s1.internal_loads(sol)
@@ -170,7 +170,7 @@ def test_bad_cable_table_names_file_and_column(tmp_path):
 
 
 def test_surrogate_idp_table_schema_and_determinism(geo):
-    from lumbar.virtual_experiment import idp_table
+    from lumbar.experiments.virtual_experiment import idp_table
 
     cs = load_characteristic_set("rupp2015")
     a = idp_table(geo, cs, seed=3, n_specimens=2, noise_sd_mpa=0.01)

@@ -8,13 +8,13 @@ from hypothesis import strategies as st
 
 from scipy.optimize import brentq
 
-from lumbar import so3
-from lumbar.elements.disc import torque_angle
-from lumbar.elements.ligament import rupp_shape
-from lumbar.fsu import add_level, build_fsu, moment_loads, range_of_motion
+from lumbar.mechanics import so3
+from lumbar.mechanics.elements.disc import torque_angle
+from lumbar.mechanics.elements.ligament import rupp_shape
+from lumbar.experiments.fsu import add_level, build_fsu, moment_loads, range_of_motion
 from lumbar.geometry.synthetic import mirror_check, symmetric_fsu
-from lumbar.model import SpineModel
-from lumbar.solve import solve
+from lumbar.mechanics.model import SpineModel
+from lumbar.mechanics.solve import solve
 
 from conftest import TABLE1, make_charset
 

@@ -6,19 +6,19 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lumbar import so3
+from lumbar.mechanics import so3
 
 
 @pytest.fixture(scope="module")
 def solver(model):
-    from lumbar.muscle_model import make_solver
+    from lumbar.muscles.muscle_model import make_solver
     return make_solver(model, {"max_iter": 40, "multistart": False})
 
 
 @pytest.fixture(scope="module")
 def baseline(model, solver):
     """Upright standing and 36 deg flexion with baseline parameters (one batch)."""
-    from lumbar.muscle_model import solve_postures
+    from lumbar.muscles.muscle_model import solve_postures
     return dict(zip(("standing", "flexion"), solve_postures(model, solver, ["upright_standing", "flexion_36deg"])))
 
 
@@ -111,7 +111,7 @@ def test_mirror_average_makes_geometry_symmetric():
 def test_passive_levels_symmetric_only_when_mirror_averaged(model):
     """At the reference pose the raw (myo-sim landmark) passive levels push the vertebrae laterally; with
     ``symmetric_passive`` (default) every level's lateral force and lateral/axial moments vanish."""
-    from lumbar.muscle_model import LumbarMuscleModel
+    from lumbar.muscles.muscle_model import LumbarMuscleModel
     assert model.symmetric_passive
     x, R = model.reference_state()
     F, _ = model.level_loads(x, R)
@@ -139,7 +139,7 @@ def test_activations_left_right_symmetric(model, baseline, posture):
 def test_trial_point_correction_returns_to_equilibrium(model, solver, standing):
     """The second-order correction of an SQP trial point (activations changed, pose from the linear
     predictor) brings every free body back to equilibrium (Newton, quadratic: a few steps)."""
-    from lumbar.muscle_model import get_activity
+    from lumbar.muscles.muscle_model import get_activity
     F, P = model.load_arrays([get_activity("upright_standing")] * 2)
     params = {"force_vec": F, "force_pt": P}
     solver._B = 2
@@ -165,7 +165,7 @@ def test_final_polish_brings_an_off_equilibrium_posture_back(model, standing):
     """A posture the SQP leaves off the equilibrium manifold (here: the standing solution with L3 moved 3 mm,
     no SQP iterations) is brought back by the final Newton polish with capped steps (activations fixed): an
     equilibrium, reported ``reached`` with its thorax on target, never a silent out-of-equilibrium state."""
-    from lumbar.muscle_model import get_activity
+    from lumbar.muscles.muscle_model import get_activity
     from lumbar.muscles.redundancy import RedundancySolver
     F, P = model.load_arrays([get_activity("upright_standing")])
     x = standing.x.copy()
@@ -180,7 +180,7 @@ def test_final_polish_brings_an_off_equilibrium_posture_back(model, standing):
 def test_cold_standing_solve_starts_near_reference_and_converges(model):
     """Near the reference posture the cold solve skips the held start (it stalled under gravity alone)
     and still converges to the same equilibrium as the solve with the held start."""
-    from lumbar.muscle_model import make_solver, solve_postures
+    from lumbar.muscles.muscle_model import make_solver, solve_postures
     fast, held = make_solver(model, {"max_iter": 40, "multistart": False}), make_solver(model, {"max_iter": 40, "multistart": False})
     held.start_min_deg = -1.0
     s1, s2 = (solve_postures(model, s, ["upright_standing"])[0] for s in (fast, held))
@@ -192,7 +192,7 @@ def test_cold_standing_solve_starts_near_reference_and_converges(model):
 def test_in_situ_standing_gives_in_situ_sarcomere_lengths_in_standing():
     """in_situ_posture='standing': solved upright standing has every fascicle at its in-situ sarcomere
     length (to the small pose change of the second solve), unlike the as-segmented reference."""
-    from lumbar.muscle_model import LumbarMuscleModel, make_solver, solve_postures
+    from lumbar.muscles.muscle_model import LumbarMuscleModel, make_solver, solve_postures
     ratios = {}
     for where in ("reference", "standing"):
         m = LumbarMuscleModel(in_situ_posture=where)
@@ -209,7 +209,7 @@ def test_intra_abdominal_pressure_unloads_the_spine(model):
     """An IAP force on the thorax (upward, anterior to L1) takes load off the lumbar levels: with 200 N the
     L4-L5 compression in upright standing drops, and the solution balances the IAP force too (paper 2,
     Sect. 2.1 option)."""
-    from lumbar.muscle_model import LumbarMuscleModel, make_solver, solve_postures
+    from lumbar.muscles.muscle_model import LumbarMuscleModel, make_solver, solve_postures
     comp = []
     for iap in (0.0, 100.0):
         m = LumbarMuscleModel(iap_force_n=iap)
@@ -227,7 +227,7 @@ def test_intra_abdominal_pressure_unloads_the_spine(model):
 
 
 def test_reject_bad_in_situ_posture():
-    from lumbar.muscle_model import LumbarMuscleModel
+    from lumbar.muscles.muscle_model import LumbarMuscleModel
     with pytest.raises(ValueError, match="in_situ_posture must be one of"):
         LumbarMuscleModel(in_situ_posture="supine")
 
@@ -256,7 +256,7 @@ def test_kkt_residual_certifies_the_optimum_and_detects_a_perturbation(model, so
 
 def test_unreachable_posture_is_flagged_not_silent(model, solver):
     """Specific tension 5 N/cm2 on all muscles cannot hold a 190 N crate 55 cm in front: flagged."""
-    from lumbar.muscle_model import apply_parameter, solve_postures
+    from lumbar.muscles.muscle_model import apply_parameter, solve_postures
     props = apply_parameter(model.props, model.ms, "spt_n_per_cm2", 5.0, "ALL")
     sol = solve_postures(model, solver, ["crate_far"], [props])[0]
     assert not sol.converged and sol.message
@@ -269,7 +269,7 @@ def test_sensitivity_directions(model, solver, standing):
     passive multifidus force replaces active extensor force; the paper reports a doubling. On ALL muscles the
     exactly bilateral model's symmetric equilibrium becomes laterally unstable and the SQP does not certify
     stationarity, so that posture is flagged. See sensitivity_idp.csv.)"""
-    from lumbar.muscle_model import run_sensitivity, validation
+    from lumbar.muscles.muscle_model import run_sensitivity, validation
     rows = pd.DataFrame([{"parameter": "ssl_um", "value": 2.0, "ssl_um": np.nan, "group_scope": "EXT+PS",
                           "posture": "standing"},
                          {"parameter": "pennation_deg", "value": 0.0, "ssl_um": np.nan, "group_scope": "ALL",
@@ -294,7 +294,7 @@ def test_sensitivity_direction_classification():
     """Each paper statement gets the direction it asserts; a posture not reached counts as not reached, a
     reached one whose optimum is not certified keeps its direction (marked); an increase needs more than 5 %,
     "unchanged" statements use their own tolerance."""
-    from lumbar.muscle_model import paper_direction, sensitivity_directions
+    from lumbar.muscles.muscle_model import paper_direction, sensitivity_directions
     assert paper_direction("IDP doubled (Sect. 3.2.1)") == "increase"
     assert paper_direction("36 deg flexion not reached (Sect. 3.2.1)") == "not_reached"
     assert paper_direction("change <= 20% (Sect. 3.2.2)") == "unchanged"
@@ -320,7 +320,7 @@ def test_capacity_check_balances_and_scales(model, standing):
     active fascicles, the level's tissues) sum to zero; moving the 190 N crate 30 cm further forward adds
     190 N x 0.30 m at every level; doubling the specific tension doubles the active extension capacity and
     halves the demand ratio, leaving the needed specific tension unchanged."""
-    from lumbar.muscle_model import capacity_check
+    from lumbar.muscles.muscle_model import capacity_check
     c0 = capacity_check(model, standing.x, standing.R, "upright_standing", standing.a)
     assert np.abs(c0["balance_nm"]).max() < 1e-4
     assert (c0["extension_capacity_nm"] > 20).all() and (c0["flexion_capacity_nm"] > 20).all()
@@ -336,7 +336,7 @@ def test_capacity_check_balances_and_scales(model, standing):
 
 
 def test_reject_bad_in_vivo_table(tmp_path):
-    from lumbar.muscle_model import read_in_vivo
+    from lumbar.muscles.muscle_model import read_in_vivo
     p = tmp_path / "iv.csv"
     p.write_text("activity,idp_mpa,source,kind\nrelaxed_standing,-0.5,x,original_text\n")
     with pytest.raises(ValueError, match="idp_mpa"):
@@ -347,7 +347,7 @@ def test_reject_bad_in_vivo_table(tmp_path):
 
 
 def test_invalid_solver_settings_rejected(model):
-    from lumbar.muscle_model import sensitivity_rows
+    from lumbar.muscles.muscle_model import sensitivity_rows
     from lumbar.muscles.redundancy import RedundancySolver, Weights
     with pytest.raises(ValueError, match="activation"):
         Weights(activation=-1.0)
@@ -363,7 +363,7 @@ def test_validation_metrics_with_and_without_flagged_postures(model, baseline):
     """R2/RMSE are over converged activities only; r2_all/rmse_all_mpa add the IDP of flagged postures."""
     from dataclasses import replace
 
-    from lumbar.muscle_model import validation
+    from lumbar.muscles.muscle_model import validation
     st, fl = baseline["standing"], baseline["flexion"]
     sols = [st, fl, st, replace(fl, converged=False)]
     names = ["upright_standing", "flexion_36deg", "crate_close", "crate_far"]

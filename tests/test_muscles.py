@@ -133,7 +133,7 @@ def test_sites_lie_on_their_vertebrae(muscle_set):
 
 
 def _pose(model, seed=0):
-    from lumbar import so3
+    from lumbar.mechanics import so3
     rng = np.random.default_rng(seed)
     x, R = model.reference_state()
     x = x + rng.normal(0, 1e-3, x.shape)
@@ -142,7 +142,7 @@ def _pose(model, seed=0):
 
 
 def test_moment_arms_equal_minus_dlength_dangle(model):
-    from lumbar import so3
+    from lumbar.mechanics import so3
     x, R = _pose(model)
     L, G = model.paths.lengths(x, R)
     h = 1e-6
@@ -164,7 +164,7 @@ def test_moment_arms_equal_minus_dlength_dangle(model):
 
 
 def test_model_jacobian_matches_finite_differences(model):
-    from lumbar import so3
+    from lumbar.mechanics import so3
     x, R = _pose(model, 1)
     rng = np.random.default_rng(2)
     params = {"activation": rng.uniform(0, 0.3, (1, model.ms.n)), "forces": model.point_forces("crate_far")}
@@ -211,7 +211,7 @@ def test_reject_negative_pcsa(model):
 
 
 def test_reject_unknown_group(model):
-    from lumbar.muscle_model import group_mask
+    from lumbar.muscles.muscle_model import group_mask
     with pytest.raises(ValueError, match="groups"):
         group_mask(model.ms, ("MF", "XX"))
     with pytest.raises(ValueError, match="scenario"):
@@ -219,7 +219,7 @@ def test_reject_unknown_group(model):
 
 
 def test_bad_ssl_rejected(model):
-    from lumbar.muscle_model import apply_parameter
+    from lumbar.muscles.muscle_model import apply_parameter
     with pytest.raises(ValueError, match="ssl_um"):
         apply_parameter(model.props, model.ms, "ssl_um", 0.0, "MUL")
     with pytest.raises(ValueError, match="ssl_um"):
@@ -227,7 +227,7 @@ def test_bad_ssl_rejected(model):
 
 
 def test_reject_unknown_activity():
-    from lumbar.muscle_model import get_activity
+    from lumbar.muscles.muscle_model import get_activity
     with pytest.raises(ValueError, match="activity"):
         get_activity("jumping")
 
@@ -271,7 +271,7 @@ def test_model_evaluate_returns_the_muscle_state_it_used(model):
     rng = np.random.default_rng(1)
     x, R = model.reference_state(3)
     x = x + rng.normal(0, 1e-3, x.shape)
-    from lumbar import so3
+    from lumbar.mechanics import so3
     R = so3.exp(rng.normal(0, 0.02, (3, model.nb, 3))) @ R
     a = rng.uniform(0, 0.2, (3, model.ms.n))
     Q, J, mus = model.evaluate(x, R, params={"activation": a}, muscles=True)

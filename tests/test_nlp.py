@@ -6,18 +6,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lumbar import so3
+from lumbar.mechanics import so3
 
 
 @pytest.fixture(scope="module")
 def solver(model):
-    from lumbar.muscle_model import make_solver
+    from lumbar.muscles.muscle_model import make_solver
     return make_solver(model, {"max_iter": 60, "multistart": False})
 
 
 @pytest.fixture(scope="module")
 def standing(model, solver):
-    from lumbar.muscle_model import get_activity, solve_postures
+    from lumbar.muscles.muscle_model import get_activity, solve_postures
     s = solve_postures(model, solver, ["upright_standing"])[0]
     F, P = model.load_arrays([get_activity("upright_standing")])
     return s, {"force_vec": F, "force_pt": P}
@@ -134,7 +134,7 @@ def test_full_step_first_line_search_reaches_the_same_optimum(model):
     """The line search tries the full step alone first and the shorter ones only where it fails (issue 16,
     speed); evaluating every step length at once (``full_step_first`` False, the former search) chooses the same
     step, so both reach the same optimum from the same warm start (four standing Sobol samples, SQP alone)."""
-    from lumbar.muscle_model import POSTURES, make_solver, sobol_evaluate, solve_postures, sobol_samples
+    from lumbar.muscles.muscle_model import POSTURES, make_solver, sobol_evaluate, solve_postures, sobol_samples
     out = []
     X = sobol_samples(16, 20261123)
     for first in (True, False):

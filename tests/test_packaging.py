@@ -32,15 +32,15 @@ target, checkout_src = Path(sys.argv[1]).resolve(), Path(sys.argv[2]).resolve()
 sys.path[:] = [target.as_posix()] + [p for p in sys.path if p and Path(p).resolve() != checkout_src]
 
 import lumbar
-from lumbar import resources
-from lumbar.characteristics import default_data_dir, load_characteristic_set
-from lumbar.config import default_geometry_path, default_schema_path, load_config, resolve_path
+from lumbar.inputs import resources
+from lumbar.inputs.characteristics import default_data_dir, load_characteristic_set
+from lumbar.inputs.config import default_geometry_path, default_schema_path, load_config, resolve_path
 from lumbar.geometry import load_geometry
 from lumbar.geometry.analysis import summary_table
 from lumbar.geometry.landmarks import default_csv_path
-from lumbar.l2s1 import default_cable_table
+from lumbar.experiments.l2s1 import default_cable_table
 from lumbar.muscles.muscle_set import DATA_DIR as MUSCLE_DIR
-from lumbar.muscle_model import DATA as MODEL_DATA
+from lumbar.muscles.muscle_model import DATA as MODEL_DATA
 
 cfg = load_config({})
 cs = load_characteristic_set("calibrated", data_dir=resolve_path(cfg["characteristics"]["data_dir"]))

@@ -14,11 +14,13 @@ import math
 import numpy as np
 import pytest
 
-from lumbar import l2s1, so3
-from lumbar.fsu import build_fsu
+from lumbar.experiments import l2s1
+
+from lumbar.mechanics import so3
+from lumbar.experiments.fsu import build_fsu
 from lumbar.geometry.synthetic import symmetric_fsu
-from lumbar.idp import idp_from_disc
-from lumbar.solve import solve
+from lumbar.mechanics.idp import idp_from_disc
+from lumbar.mechanics.solve import solve
 
 from conftest import make_charset, synthetic_l2s1_chain
 
@@ -111,7 +113,7 @@ def test_paper2_idp_is_the_hand_formula_of_the_reported_loads(l2s1_paper2):
 def test_paper2_moment_term_sign_end_to_end(l2s1_paper2):
     """Paper-2 IDP end to end, L2-S1 without cables: a pure +3.75 N*m flexion moment on L2 is transmitted
     unchanged through every level (statics of a pure moment), so the L4-L5 FSU bears M_flexion = 3.75 N*m
-    (lumbar.l2s1.fsu_sagittal_moment: the whole unit, not the disc's own torque, which the prestressed
+    (lumbar.experiments.l2s1.fsu_sagittal_moment: the whole unit, not the disc's own torque, which the prestressed
     ligaments leave at -0.88 N*m in this case) and
     the moment term is + 0.036 MPa/(N*m) * 3.75 = +0.135 MPa; extension: + 0.018 * 3.75 = +0.0675 MPa. The
     unit flexes in flexion and extends in extension (relative to its neutral, prestressed posture)."""

@@ -1,7 +1,7 @@
 """Physiology of the default L4-L5 unit (issue: real-world validity).
 
 Fixture: the default geometry (embedded Visible Human L4-L5) with the paper's published characteristic set
-fitted on the real intact ROM of Yamamoto et al. 1989 (``lumbar.calibration.fit_real_targets``, the same
+fitted on the real intact ROM of Yamamoto et al. 1989 (``lumbar.experiments.calibration.fit_real_targets``, the same
 step that anchors the surrogate generator and ends the workflow's calibration). Every threshold below is a
 physiological statement with its source; a failing one is an xfail with the measured numbers, never a skip.
 """
@@ -11,12 +11,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lumbar.calibration import fit_real_targets
-from lumbar.characteristics import load_characteristic_set
-from lumbar.fsu import STAGES, build_fsu, range_of_motion
+from lumbar.experiments.calibration import fit_real_targets
+from lumbar.inputs.characteristics import load_characteristic_set
+from lumbar.experiments.fsu import STAGES, build_fsu, range_of_motion
 from lumbar.geometry import load_geometry
-from lumbar.solve import solve
-from lumbar.fsu import moment_loads
+from lumbar.mechanics.solve import solve
+from lumbar.experiments.fsu import moment_loads
 
 ROOT = Path(__file__).resolve().parents[1]
 YAMAMOTO = ROOT / "data" / "experiments" / "yamamoto1989_intact_rom_original_text.csv"
@@ -81,7 +81,7 @@ def test_removing_ssl_raises_flexion(rom):
     "attributes to the vertebral-arch artefact, Sect. 4.2); flexion w/o PLL 12.16 -> 11.52 and extension "
     "w/o ALL 14.25 -> 12.82 deg (the prestrained ALL/PLL, 8-10 %, carry tension at rest; removing it moves "
     "the stage's neutral position, from which ROM is measured). The workflow's own calibration fits monotone "
-    "laws with F(0) = 0 instead (lumbar.calibration)"))
+    "laws with F(0) = 0 instead (lumbar.experiments.calibration)"))
 def test_rom_does_not_fall_along_the_reduction(rom):
     """Heuer et al. 2007 (title): ROM increases with the stepwise reduction. Tolerance 0.05 deg."""
     bad = []

@@ -10,12 +10,12 @@ import numpy as np
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from lumbar.elements.disc import disc_axial_force, disc_torque
-from lumbar.elements.facet import contact_penalty
-from lumbar.elements.ligament import rupp_force, rupp_shape, softplus_force
-from lumbar.fsu import build_fsu
+from lumbar.mechanics.elements.disc import disc_axial_force, disc_torque
+from lumbar.mechanics.elements.facet import contact_penalty
+from lumbar.mechanics.elements.ligament import rupp_force, rupp_shape, softplus_force
+from lumbar.experiments.fsu import build_fsu
 from lumbar.geometry.synthetic import symmetric_fsu
-from lumbar.solve import solve
+from lumbar.mechanics.solve import solve
 
 from conftest import TABLE1, make_charset
 

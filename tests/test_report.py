@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from lumbar.config import load_config
+from lumbar.inputs.config import load_config
 from lumbar.report import NOT_BUILT, build_report
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,4 +1,4 @@
-"""One resolver of a characteristic set (lumbar.characteristics.resolve_characteristic_set), used by the
+"""One resolver of a characteristic set (lumbar.inputs.characteristics.resolve_characteristic_set), used by the
 workflow's FSU, stepwise-reduction (Table 4) and L2-S1 (Table 5) stages and by the FSU command line."""
 import re
 import shutil
@@ -9,7 +9,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from lumbar.characteristics import default_data_dir, load_characteristic_set, resolve_characteristic_set
+from lumbar.inputs.characteristics import default_data_dir, load_characteristic_set, resolve_characteristic_set
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -38,10 +38,10 @@ def test_literature_sets_ignore_the_calibration_output(calibrated_dir):
 
 
 def test_fsu_command_line_uses_the_same_calibrated_values(calibrated_dir):
-    out = subprocess.run([sys.executable, "-m", "lumbar.fsu", "--moment", "2.5", "--direction", "axial_rotation",
+    out = subprocess.run([sys.executable, "-m", "lumbar.cli", "fsu", "--moment", "2.5", "--direction", "axial_rotation",
                           "--calibrated-dir", str(calibrated_dir)], capture_output=True, text=True, cwd=ROOT)
     assert str(calibrated_dir) in out.stdout.splitlines()[0]
-    out_pub = subprocess.run([sys.executable, "-m", "lumbar.fsu", "--moment", "2.5", "--direction", "axial_rotation",
+    out_pub = subprocess.run([sys.executable, "-m", "lumbar.cli", "fsu", "--moment", "2.5", "--direction", "axial_rotation",
                               "--calibrated-dir", str(calibrated_dir / "nope")], capture_output=True, text=True,
                              cwd=ROOT)
     assert "as published" in out_pub.stdout.splitlines()[0]

@@ -1,14 +1,14 @@
-"""Forward stepwise reduction (lumbar.stepwise_reduction): reference tables, derived disc-only rows,
+"""Forward stepwise reduction (lumbar.experiments.stepwise_reduction): reference tables, derived disc-only rows,
 outlier rule, Table 4 on the default surrogate, and the workflow rules on config/test."""
 
 import numpy as np
 import pandas as pd
 import pytest
 
-from lumbar import stepwise_reduction as sr
-from lumbar.calibration import derived_disc_only_rows
-from lumbar.characteristics import load_characteristic_set
-from lumbar.io import TableError
+from lumbar.experiments import stepwise_reduction as sr
+from lumbar.experiments.calibration import derived_disc_only_rows
+from lumbar.inputs.characteristics import load_characteristic_set
+from lumbar.inputs.io import TableError
 
 from conftest import ROOT
 
@@ -137,7 +137,7 @@ def test_workflow_stepwise_reduction_rules_run(dag_workdir):
     # whatever the geometry. rupp2015 keeps the published disc law (data/characteristics/disc.csv, Table 1);
     # the calibrated set's disc is fitted to the derived rows (3 moments, 3 parameters: an exact interpolation)
     from scipy.optimize import brentq
-    from lumbar.elements.disc import torque_angle
+    from lumbar.mechanics.elements.disc import torque_angle
 
     disc = load_characteristic_set("rupp2015").disc.torque
     wo_all = syn[syn["stage"] == "wo_all"].set_index(["set", "direction", "moment_nm"])
@@ -158,7 +158,7 @@ def test_non_converged_scenario_flagged_with_residual_and_marked_in_table4(chars
     """A disc-only unit loaded beyond the Eq. 3 flexion peak (10.19 N*m) has no equilibrium: the simulation
     row says converged=False with its residual and NaN ROM; the Table 4 synopsis marks it as a
     not-converged outlier and the counts report it."""
-    from lumbar.fsu import build_fsu
+    from lumbar.experiments.fsu import build_fsu
     from lumbar.geometry.synthetic import symmetric_fsu
 
     sim = sr.simulate_stepwise_reduction(build_fsu(symmetric_fsu(), charset), stages=["wo_all"],

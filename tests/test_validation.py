@@ -1,10 +1,10 @@
-"""Validation on real data (lumbar.validation) and the split outlier counts of Tables 4 and 5."""
+"""Validation on real data (lumbar.experiments.validation) and the split outlier counts of Tables 4 and 5."""
 import numpy as np
 import pandas as pd
 import pytest
 
-from lumbar import l2s1, validation as V
-from lumbar.stepwise_reduction import outlier_counts
+from lumbar.experiments import l2s1, validation as V
+from lumbar.experiments.stepwise_reduction import outlier_counts
 
 
 def _synopsis():

@@ -1,12 +1,12 @@
-"""Surrogate stepwise-reduction tables from virtual specimens (lumbar.virtual_experiment)."""
+"""Surrogate stepwise-reduction tables from virtual specimens (lumbar.experiments.virtual_experiment)."""
 import logging
 import re
 
 import numpy as np
 import pytest
 
-from lumbar.characteristics import load_characteristic_set
-from lumbar.virtual_experiment import stepwise_reduction_table
+from lumbar.inputs.characteristics import load_characteristic_set
+from lumbar.experiments.virtual_experiment import stepwise_reduction_table
 
 
 @pytest.fixture(scope="module")
@@ -63,8 +63,8 @@ def test_bad_effect_name(geometry, cs):
 
 def test_disc_tension_effect_reaches_the_model(geometry, cs):
     """The effect's solver params change the disc force when the disc is distracted (paper disc: none)."""
-    from lumbar.fsu import build_fsu
-    from lumbar.stepwise_reduction import effect_params
+    from lumbar.experiments.fsu import build_fsu
+    from lumbar.experiments.stepwise_reduction import effect_params
 
     fsu = build_fsu(geometry, cs)
     params = effect_params(fsu, {"disc_tension": 5.0e6})
@@ -80,10 +80,10 @@ def test_disc_tension_effect_reaches_the_model(geometry, cs):
 
 
 def test_non_converged_specimen_dropped_and_logged(geometry, cs, caplog):
-    with caplog.at_level(logging.WARNING, logger="lumbar.virtual_experiment"):
+    with caplog.at_level(logging.WARNING, logger="lumbar.experiments.virtual_experiment"):
         t = stepwise_reduction_table(geometry, cs, 5, n_specimens=1, variation={"disc_sd": 0.0},
                                      moments_nm=(10.5, 1.0), noise_sd_deg=0.0)
     # the published flexion law peaks at 10.19 N*m: no disc-only equilibrium at 10.5 N*m
     assert not ((t["stage"] == "wo_all") & (t["direction"] == "flexion") & (t["moment_nm"] == 10.5)).any()
-    # the row is left out and a log line names the scenario (wording: lumbar.virtual_experiment)
+    # the row is left out and a log line names the scenario (wording: lumbar.experiments.virtual_experiment)
     assert re.search(r"equilibrium at wo_all flexion 10\.5", caplog.text), caplog.text

@@ -1,11 +1,11 @@
 from glob import glob
 from pathlib import Path
 
-from lumbar.config import ConfigError, check_unique_keys
+from lumbar.inputs.config import ConfigError, check_unique_keys
 from snakemake.utils import validate
 
 # Snakemake's YAML loading keeps the last of two equal keys (a second `fsu:` replaces the first): every config
-# file is re-read with a loader that rejects them (lumbar.config.check_unique_keys names file and line).
+# file is re-read with a loader that rejects them (lumbar.inputs.config.check_unique_keys names file and line).
 for _cf in workflow.configfiles:
     if Path(_cf).is_file() and str(_cf).endswith((".yaml", ".yml")):
         try:
@@ -113,7 +113,7 @@ CHARACTERISTIC_TABLES = {
 
 
 def characteristic_tables(data_dir, sets=None):
-    """The tables lumbar.characteristics.load_characteristic_set reads from ``data_dir`` for ``sets``
+    """The tables lumbar.inputs.characteristics.load_characteristic_set reads from ``data_dir`` for ``sets``
     (every *.csv of the folder when ``sets`` is None: calibrate copies them all, discovery may load any set).
     """
     d = Path(data_dir)
@@ -129,7 +129,7 @@ def characteristic_tables(data_dir, sets=None):
 
 def discovery_calibrated_tables():
     """The calibration output that discovery reads when discovery.characteristic_set is "calibrated"
-    (characteristics.calibrated_dir; lumbar.characteristics.resolve_characteristic_set).
+    (characteristics.calibrated_dir; lumbar.inputs.characteristics.resolve_characteristic_set).
     """
     if config["discovery"]["characteristic_set"] != "calibrated":
         return []

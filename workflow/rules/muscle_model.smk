@@ -2,8 +2,8 @@
 # flexion-relaxation), the one-at-a-time sensitivity sweep (Figs. 5-11; one job per Paramspace chunk)
 # and a variance-based (Sobol) sensitivity study (muscle_sobol_chunk: model solves of the polynomial chaos
 # training design per posture and sample chunk, so that --cores 2 keeps both cores busy; muscle_sobol fits
-# the expansion and computes the indices with bootstrap intervals, lumbar.pce). Long jobs log progress lines
-# (scenarios done / total, elapsed, remaining). Library: lumbar.muscle_model, lumbar.muscles.
+# the expansion and computes the indices with bootstrap intervals, lumbar.muscles.pce). Long jobs log progress lines
+# (scenarios done / total, elapsed, remaining). Library: lumbar.muscles.muscle_model, lumbar.muscles.
 import pandas as pd
 from snakemake.utils import Paramspace
 
@@ -36,7 +36,7 @@ rule muscle_validation:
     input:
         in_vivo=config["muscle_model"]["in_vivo_table"],
         landmarks=geometry_inputs,
-        # read by lumbar.muscle_model from the repository's data/ (its defaults), not from config paths
+        # read by lumbar.muscles.muscle_model from the repository's data/ (its defaults), not from config paths
         data=characteristic_tables(
             "data/characteristics", [config["muscle_model"]["characteristics"]]
         )

@@ -13,8 +13,8 @@ import _common  # noqa: E402
 
 snakemake, log = _common.start(globals())
 
-from lumbar import calibration as cal  # noqa: E402
-from lumbar.io import write_table_atomic  # noqa: E402
+from lumbar.experiments import calibration as cal  # noqa: E402
+from lumbar.inputs.io import write_table_atomic  # noqa: E402
 
 
 def _label(df):
@@ -23,9 +23,9 @@ def _label(df):
 
 
 if snakemake.rule == "calibrate":
-    from lumbar.characteristics import load_characteristic_set
+    from lumbar.inputs.characteristics import load_characteristic_set
     from lumbar.geometry import load_geometry
-    from lumbar.stepwise_reduction import read_experiment_table, reference_table
+    from lumbar.experiments.stepwise_reduction import read_experiment_table, reference_table
 
     g, f, s, sr = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solver, snakemake.params.sr
     exp = read_experiment_table(snakemake.input.experiment)

@@ -23,7 +23,7 @@ import pandas as pd  # noqa: E402
 
 from lumbar import discovery as discover  # noqa: E402
 from lumbar.plots.discovery import plot_benchmark  # noqa: E402
-from lumbar.io import write_json_atomic, write_table_atomic  # noqa: E402
+from lumbar.inputs.io import write_json_atomic, write_table_atomic  # noqa: E402
 
 rule = snakemake.rule
 cfg = copy.deepcopy(dict(snakemake.params.cfg))

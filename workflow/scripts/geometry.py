@@ -24,7 +24,7 @@ geo = load(snakemake.params.geometry)
 log.info("geometry %r: vertebrae %s, levels %s", geo.name, sorted(geo.vertebrae), sorted(geo.levels))
 
 if snakemake.rule == "fsu_geometry":
-    from lumbar.io import write_table_atomic
+    from lumbar.inputs.io import write_table_atomic
 
     table = summary_table(geo)
     write_table_atomic(table, snakemake.output[0])

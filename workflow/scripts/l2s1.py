@@ -15,10 +15,10 @@ import _common  # noqa: E402
 
 snakemake, log = _common.start(globals())
 
-from lumbar import l2s1  # noqa: E402
-from lumbar.characteristics import load_characteristic_set, resolve_characteristic_set  # noqa: E402
+from lumbar.experiments import l2s1  # noqa: E402
+from lumbar.inputs.characteristics import load_characteristic_set, resolve_characteristic_set  # noqa: E402
 from lumbar.geometry import load_geometry  # noqa: E402
-from lumbar.io import write_table_atomic  # noqa: E402
+from lumbar.inputs.io import write_table_atomic  # noqa: E402
 
 
 def _geometry(g):
@@ -32,7 +32,7 @@ def _chardir(p):
 
 rule = snakemake.rule
 if rule == "idp_surrogate":
-    from lumbar.virtual_experiment import idp_table
+    from lumbar.experiments.virtual_experiment import idp_table
 
     p = snakemake.params.l2s1
     cal = _common.as_list(snakemake.input.calibrated)

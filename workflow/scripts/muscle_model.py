@@ -1,7 +1,7 @@
 """Muscle-driven model stage (paper 2, issue 5): rules muscle_validation, muscle_sensitivity (one
 Paramspace chunk), muscle_sensitivity_table, muscle_sobol_chunk (one posture, one chunk of the PCE
 training samples) and muscle_sobol (indices and figure). The long jobs log progress lines through the library's
-logger (lumbar.muscle_model: scenarios done / total, elapsed, estimated remaining), which setup_logging sends
+logger (lumbar.muscles.muscle_model: scenarios done / total, elapsed, estimated remaining), which setup_logging sends
 to the rule's log and the console.
 
 By hand: python workflow/scripts/muscle_model.py muscle_validation --configfile config/test/config.yaml
@@ -28,8 +28,8 @@ import matplotlib  # noqa: E402
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from lumbar import muscle_model as mm  # noqa: E402
-from lumbar.io import write_table_atomic  # noqa: E402
+from lumbar.muscles import muscle_model as mm  # noqa: E402
+from lumbar.inputs.io import write_table_atomic  # noqa: E402
 from lumbar.muscles.redundancy import PostureSolution  # noqa: E402
 
 SAVE = dict(dpi=150, metadata={"Software": None})

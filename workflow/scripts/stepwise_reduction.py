@@ -15,12 +15,12 @@ import _common  # noqa: E402
 
 snakemake, log = _common.start(globals())
 
-from lumbar import stepwise_reduction as sr_mod  # noqa: E402
-from lumbar.io import write_table_atomic  # noqa: E402
+from lumbar.experiments import stepwise_reduction as sr_mod  # noqa: E402
+from lumbar.inputs.io import write_table_atomic  # noqa: E402
 
 if snakemake.rule == "stepwise_reduction_sim":
-    from lumbar.characteristics import load_characteristic_set
-    from lumbar.fsu import build_fsu
+    from lumbar.inputs.characteristics import load_characteristic_set
+    from lumbar.experiments.fsu import build_fsu
     from lumbar.geometry import load_geometry
 
     g, f, s, sr = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solver, snakemake.params.sr

@@ -1,5 +1,5 @@
 """Validation stage: rule validation_real_data, the scoreboard of comparisons with real data
-(lumbar.validation).
+(lumbar.experiments.validation).
 
 By hand: python workflow/scripts/validation.py validation_real_data --configfile config/test/config.yaml
 """
@@ -13,17 +13,17 @@ snakemake, log = _common.start(globals())
 
 import pandas as pd  # noqa: E402
 
-from lumbar import validation as V  # noqa: E402
-from lumbar.characteristics import resolve_characteristic_set  # noqa: E402
+from lumbar.experiments import validation as V  # noqa: E402
+from lumbar.inputs.characteristics import resolve_characteristic_set  # noqa: E402
 from lumbar.geometry import load_geometry  # noqa: E402
-from lumbar.io import write_table_atomic  # noqa: E402
+from lumbar.inputs.io import write_table_atomic  # noqa: E402
 
 g, f, sr = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.sr
 geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
 cal_dir = Path(_common.as_list(snakemake.input.calibrated)[0]).parent
 cs = resolve_characteristic_set("calibrated", calibrated_dir=cal_dir)
-from lumbar.characteristics import load_characteristic_set  # noqa: E402
-from lumbar.stepwise_reduction import read_experiment_table  # noqa: E402
+from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
+from lumbar.experiments.stepwise_reduction import read_experiment_table  # noqa: E402
 
 rows = V.rom_rows(pd.read_csv(snakemake.input.synopsis), sr["outlier_tolerance_deg"])
 for p in _common.as_list(snakemake.input.real_targets):

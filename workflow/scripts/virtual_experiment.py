@@ -12,10 +12,10 @@ import _common  # noqa: E402
 
 snakemake, log = _common.start(globals())
 
-from lumbar.characteristics import load_characteristic_set  # noqa: E402
+from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
 from lumbar.geometry import load_geometry  # noqa: E402
-from lumbar.io import write_table_atomic  # noqa: E402
-from lumbar.virtual_experiment import stepwise_reduction_table  # noqa: E402
+from lumbar.inputs.io import write_table_atomic  # noqa: E402
+from lumbar.experiments.virtual_experiment import stepwise_reduction_table  # noqa: E402
 
 g, f, s, sr = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solver, snakemake.params.sr
 geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
@@ -23,8 +23,8 @@ cs = load_characteristic_set(sr["generator_set"], data_dir=snakemake.input.chara
 if sr.get("anchor_generator") and sr.get("real_targets"):
     import pandas as pd  # noqa: E402
 
-    from lumbar.calibration import fit_real_targets  # noqa: E402
-    from lumbar.stepwise_reduction import read_experiment_table  # noqa: E402
+    from lumbar.experiments.calibration import fit_real_targets  # noqa: E402
+    from lumbar.experiments.stepwise_reduction import read_experiment_table  # noqa: E402
 
     targets = pd.concat([read_experiment_table(p) for p in sr["real_targets"]], ignore_index=True)
     fit = fit_real_targets(geo, cs, targets, level=f["level"], k_shear=f.get("disc_shear_stiffness_n_per_m"),

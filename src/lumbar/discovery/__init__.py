@@ -2,7 +2,7 @@
 
 ``python -m lumbar.discovery --config CONFIG --measured FILE.csv --out DIR``
 
-1. The experiment is detected from the table's columns (:data:`lumbar.tables.MEASURED`): stepwise-reduction ROM
+1. The experiment is detected from the table's columns (:data:`lumbar.inputs.tables.MEASURED`): stepwise-reduction ROM
    (``stage, direction, moment_nm, rom_mean_deg, ...``), L2-S1 IDP (``muscle_setup, load_case,
    idp_mean_mpa, idp_sd_mpa, ...``), in-vivo validation (``activity, idp_sim_mpa, idp_in_vivo_mpa, ...``;
    moments from the muscle model's segment loads) or the neutral lordotic angle per reduction stage
@@ -13,7 +13,7 @@
    without a range ``no_range_sd_deg``; IDP: SD / sqrt(n); in vivo and neutral angle: configured SDs
    (none published). ``gap`` = RMS of z. Disagreement map: z by stage x (direction, moment), set-up x
    load case, activity, or stage.
-3. Every candidate effect of :mod:`lumbar.effects` acting on the experiment is fitted (one bounded
+3. Every candidate effect of :mod:`lumbar.experiments.effects` acting on the experiment is fitted (one bounded
    parameter): one batched forward solve on a coarse parameter grid for all candidates together, a cubic
    spline per scenario, ``scipy.optimize.minimize_scalar`` (bounded), one batched solve on a fine grid
    around each optimum, and one exact solve at the estimates (3 batches in total).
@@ -42,7 +42,7 @@ Modules: :mod:`.detect` (settings, reading and recognising a measured table), :m
 batched forward model per experiment), :mod:`.fit` (:func:`discover`: fit, test, name, identifiability),
 :mod:`.report` (output files, :func:`run`, the summary of the real-data discoveries), :mod:`.benchmark`
 (hidden-effect fixtures), :mod:`.cli` (``python -m lumbar.discovery``); the candidate effects are
-:mod:`lumbar.effects`, the figures :mod:`lumbar.plots.discovery`. This package re-exports the public names.
+:mod:`lumbar.experiments.effects`, the figures :mod:`lumbar.plots.discovery`. This package re-exports the public names.
 """
 from __future__ import annotations
 

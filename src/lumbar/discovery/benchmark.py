@@ -11,12 +11,12 @@ import numpy as np
 import pandas as pd
 from scipy.stats import beta
 
-from .. import effects as fx
-from ..fsu import MAIN_DIRECTIONS, STAGES
+from ..experiments import effects as fx
+from ..experiments.fsu import MAIN_DIRECTIONS, STAGES
 from ..geometry import load_geometry
-from ..io import write_table_atomic
-from ..stepwise_reduction import scenario_grid
-from ..virtual_experiment import stepwise_reduction_table
+from ..inputs.io import write_table_atomic
+from ..experiments.stepwise_reduction import scenario_grid
+from ..experiments.virtual_experiment import stepwise_reduction_table
 from .detect import benchmark_settings, discovery_settings
 from .fit import discover
 from .problems import build_problem, fsu_variants_from_config, idp_forward, idp_model_table, resolve_charset
@@ -28,7 +28,7 @@ log = logging.getLogger(__name__)
 
 # ------------------------------------------------------------------ benchmark with hidden effects (fixtures)
 def benchmark_magnitudes(name, b) -> list[tuple[str, float]]:
-    """(label, magnitude) of one effect: the first n_magnitudes of lumbar.effects.EFFECTS[name].magnitudes
+    """(label, magnitude) of one effect: the first n_magnitudes of lumbar.experiments.effects.EFFECTS[name].magnitudes
     ("m1", "m2") and near-threshold ones, factor x the smallest ("near0.25")."""
     e = fx.check_effect(name)
     mags = [(f"m{j + 1}", float(m)) for j, m in enumerate(e.magnitudes[: int(b["n_magnitudes"])])]
@@ -67,7 +67,7 @@ def make_hidden_effect_dataset(config, experiment, effect, magnitude, seed, idp_
     of the calibration model with the effect switched on, measured on ``n_specimens`` virtual specimens
     that differ only by Gaussian measurement noise (``noise_sd_deg`` / ``noise_sd_mpa``); the table keeps
     the experiment's schema (mean, min/max or SD, n) with kind ``surrogate`` and a source naming it a
-    fixture. ``lumbar.virtual_experiment.stepwise_reduction_table(effects=...)`` /
+    fixture. ``lumbar.experiments.virtual_experiment.stepwise_reduction_table(effects=...)`` /
     ``idp_table(effects=...)`` make the same with full specimen variation.
     """
     b = benchmark_settings(config)
@@ -80,7 +80,7 @@ def make_hidden_effect_dataset(config, experiment, effect, magnitude, seed, idp_
     if experiment == "stepwise_rom" and b.get("generator") == "virtual_specimens":
         out = _virtual_specimen_rom(config, b, effect, magnitude, seed)
         out["source"] = src.replace("noisy measurements of the calibration model",
-                                    "virtual specimens (lumbar.virtual_experiment.stepwise_reduction_table)")
+                                    "virtual specimens (lumbar.experiments.virtual_experiment.stepwise_reduction_table)")
         return out
     if experiment == "stepwise_rom":
         scen = scenario_grid(b["stages"] or STAGES, MAIN_DIRECTIONS, b["moments_nm"])
@@ -224,6 +224,6 @@ def summarise_benchmark(bench: pd.DataFrame, generator="batch") -> dict:
                                "measurement noise per virtual specimen (no geometric/material specimen variation), "
                                "for speed",
                       "virtual_specimens": "ROM fixtures from virtual specimens with full variation "
-                                           "(lumbar.virtual_experiment.stepwise_reduction_table); IDP fixtures from "
+                                           "(lumbar.experiments.virtual_experiment.stepwise_reduction_table); IDP fixtures from "
                                            "the batch + noise"}[generator]
     return jsonable(m)

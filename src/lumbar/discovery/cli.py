@@ -7,7 +7,7 @@ import json
 import logging
 import sys
 
-from ..config import ConfigError, load_config
+from ..inputs.config import ConfigError, load_config
 from .detect import DiscoveryInputError
 from .report import run
 
@@ -16,8 +16,8 @@ DESCRIPTION = ("Discrepancy discovery (issue 6): where do model and measurement 
 
 
 # ------------------------------------------------------------------ command line
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m lumbar.discovery", description=DESCRIPTION)
+def main(argv=None, prog: str = "python -m lumbar.discovery") -> int:
+    ap = argparse.ArgumentParser(prog=prog, description=DESCRIPTION)
     ap.add_argument("--config", required=True, help="workflow config YAML (config/config.yaml)")
     ap.add_argument("--measured", required=True, help="measured table in a project experiment schema (CSV)")
     ap.add_argument("--out", required=True, help="output directory")

@@ -1,5 +1,5 @@
 """Discovery settings and reading a measured table: the experiment is recognised from its columns
-(:data:`lumbar.tables.MEASURED`) and the table validated against its schema before any computation."""
+(:data:`lumbar.inputs.tables.MEASURED`) and the table validated against its schema before any computation."""
 from __future__ import annotations
 
 import csv
@@ -8,13 +8,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..config import schema_defaults
-from ..io import TableError, read_table
-from ..stepwise_reduction import read_experiment_table
-from ..tables import MEASURED
+from ..inputs.config import schema_defaults
+from ..inputs.io import TableError, read_table
+from ..experiments.stepwise_reduction import read_experiment_table
+from ..inputs.tables import MEASURED
 
 #: discovery settings that are not configuration keys; every other setting and its default is owned by the
-#: ``discovery`` section of the configuration schema (:func:`lumbar.config.schema_defaults`)
+#: ``discovery`` section of the configuration schema (:func:`lumbar.inputs.config.schema_defaults`)
 INTERNAL_SETTINGS = dict(seed=0, fine_candidates=2)
 
 
@@ -47,7 +47,7 @@ def benchmark_settings(config) -> dict:
 
 # ------------------------------------------------------------------ reading and schema detection
 def detect_experiment(columns, path="<table>") -> str:
-    """The experiment of a table with ``columns`` (:data:`lumbar.tables.MEASURED`, in its order: the first one
+    """The experiment of a table with ``columns`` (:data:`lumbar.inputs.tables.MEASURED`, in its order: the first one
     whose signature columns are all present; then every column it uses must be)."""
     cols = set(columns)
     for name, kind in MEASURED.items():
@@ -80,7 +80,7 @@ def _check_ragged(p):
 def read_measured(path) -> tuple[str, pd.DataFrame]:
     """(experiment, validated table) of a measured/surrogate/fixture file; DiscoveryInputError if unusable.
 
-    Every schema goes through :func:`lumbar.io.read_table`: a bad cell names the file, the 1-based data row, the
+    Every schema goes through :func:`lumbar.inputs.io.read_table`: a bad cell names the file, the 1-based data row, the
     column and the expected form; ragged rows are rejected."""
     p = Path(path)
     if not p.is_file():

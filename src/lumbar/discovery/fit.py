@@ -8,7 +8,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.optimize import minimize_scalar
 
-from .. import effects as fx
+from ..experiments import effects as fx
 from .detect import default_settings
 from .problems import D2, Problem
 

@@ -12,14 +12,14 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from .. import effects as fx
-from ..characteristics import resolve_characteristic_set
-from ..fsu import MAIN_DIRECTIONS, STAGES, build_fsu
+from ..experiments import effects as fx
+from ..inputs.characteristics import resolve_characteristic_set
+from ..experiments.fsu import MAIN_DIRECTIONS, STAGES, build_fsu
 from ..geometry import load_geometry
-from ..idp import DISC_AREA_M2, idp_per_newton
-from ..l2s1 import LEVELS, derive_cables, run_set
-from ..stepwise_reduction import scenario_grid
-from ..tables import SEGMENT_LOAD_COLUMNS
+from ..mechanics.idp import DISC_AREA_M2, idp_per_newton
+from ..experiments.l2s1 import LEVELS, derive_cables, run_set
+from ..experiments.stepwise_reduction import scenario_grid
+from ..inputs.tables import SEGMENT_LOAD_COLUMNS
 from .detect import DiscoveryInputError, benchmark_settings, discovery_settings
 
 log = logging.getLogger(__name__)
@@ -75,7 +75,7 @@ def fsu_variants_from_config(config):
 
 
 def resolve_charset(name, data_dir, calibrated_dir):
-    """The one resolver (lumbar.characteristics.resolve_characteristic_set): "calibrated" from the workflow's
+    """The one resolver (lumbar.inputs.characteristics.resolve_characteristic_set): "calibrated" from the workflow's
     calibration output when it exists, else the published tables."""
     return resolve_characteristic_set(name, data_dir=data_dir, calibrated_dir=calibrated_dir)
 

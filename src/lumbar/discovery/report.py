@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from .. import effects as fx
-from ..io import write_json_atomic, write_table_atomic, write_text_atomic
+from ..experiments import effects as fx
+from ..inputs.io import write_json_atomic, write_table_atomic, write_text_atomic
 from ..plots.discovery import fmt, plot_before_after, plot_disagreement_map, plot_ranking
 from .detect import DiscoveryInputError, discovery_settings, read_measured
 from .fit import discover

@@ -27,7 +27,7 @@ class Vertebra:
 class FacetLandmarks:
     superior: np.ndarray           # (9,3) lower vertebra's superior articular process (medial face)
     inferior: np.ndarray           # (9,3) upper vertebra's inferior articular process (lateral face)
-    # where the contact surface sits (lumbar.elements.facet.fit_surface): "mean_surface" = the mean of the
+    # where the contact surface sits (lumbar.mechanics.elements.facet.fit_surface): "mean_surface" = the mean of the
     # two fitted surfaces (paper 1, Sect. 2.2.3; contact after closing about half the landmark gap), or
     # "touching" = the landmarks are the two subchondral faces of a cartilage-filled joint, whose cartilage
     # surfaces touch at rest (the CT joint space is cartilage): the surface passes through the nearest

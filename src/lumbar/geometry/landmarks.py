@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 import trimesh
 
-from .. import resources
+from ..inputs import resources
 from .analysis import EZ, facing_endplate, inferior_endplate, sagittal_split
 from .core import GeometryError, LEVEL_NAMES, level_vertebrae
 
@@ -287,8 +287,8 @@ def read_landmarks(path, meshes: dict) -> pd.DataFrame:
     missing = [c for c in COLUMNS if c not in header]
     if missing:
         raise GeometryError(f"{p}: missing column(s) {missing}; expected columns {COLUMNS}")
-    from ..io import TableError, read_table  # noqa: PLC0415
-    from ..tables import LANDMARKS  # noqa: PLC0415
+    from ..inputs.io import TableError, read_table  # noqa: PLC0415
+    from ..inputs.tables import LANDMARKS  # noqa: PLC0415
     try:   # every cell: file, 1-based data row, column and expected form (metres, project frame)
         df = read_table(p, LANDMARKS)
     except TableError as exc:

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from .. import resources
+from ..inputs import resources
 from . import analysis as A
 from .core import GeometryError, Level, SpineGeometry, Vertebra, level_vertebrae, levels_and_vertebrae
 
@@ -15,7 +15,7 @@ def embedded_visible_human_path():
     """The Visible Human geometry embedded in the repository (data/geometry/visible_human_lss, BSD-3).
 
     Found from ``$LUMBAR_DATA_DIR`` (the repository ``data`` directory), else the package data
-    (:func:`lumbar.resources.data_dir`: the checkout's or the wheel's copy), else ``./data``.
+    (:func:`lumbar.inputs.resources.data_dir`: the checkout's or the wheel's copy), else ``./data``.
     """
     import os  # noqa: PLC0415
     from pathlib import Path  # noqa: PLC0415

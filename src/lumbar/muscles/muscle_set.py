@@ -31,7 +31,7 @@ import numpy as np
 import pandas as pd
 from scipy.spatial.transform import Rotation
 
-from .. import resources
+from ..inputs import resources
 from ..geometry.myo_sim import R_PROJECT_FROM_WORLD, package_version
 
 GROUPS = ("MF", "IL", "LT", "QL", "Ps", "EO", "IO", "RA")
@@ -80,7 +80,7 @@ class MuscleSet:
 
 def read_group_table(path=None) -> pd.DataFrame:
     path = Path(path) if path is not None else DATA_DIR / "muscle_groups.csv"
-    from lumbar.tables import read_kind  # noqa: PLC0415
+    from lumbar.inputs.tables import read_kind  # noqa: PLC0415
     read_kind(path, "muscle_groups")   # schema: file, row, column and expected form of a bad cell
     df = pd.read_csv(path)
     need = {"prefix", "group", "in_situ_sl_um", "pennation_deg", "fibre_ratio"}

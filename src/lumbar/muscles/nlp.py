@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from .. import so3
+from ..mechanics import so3
 
 log = logging.getLogger(__name__)
 

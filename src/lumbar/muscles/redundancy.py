@@ -11,7 +11,7 @@ passive structures on its upper vertebra). Weights are fixed once (``Weights``),
 Method: sequential quadratic programming with exact first derivatives, in two phases.
 
 * Phase 0 (start): the thorax rotation is held at its target; the other DOFs are put in equilibrium by
-  :func:`lumbar.solve.solve`, then SQP steps balance the thorax moment (a heavily weighted least-squares
+  :func:`lumbar.mechanics.solve.solve`, then SQP steps balance the thorax moment (a heavily weighted least-squares
   row), so that phase 1 starts close to equilibrium.
 * Phase 1: all DOFs free. Each QP has the poses and activations as variables, the Gauss-Newton model of
   the cost, the linearised equilibrium ``J dq + B da = -Q`` as an equality (``J = dQ/dq`` exact from the
@@ -47,8 +47,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import lsq_linear
 
-from .. import so3
-from ..solve import solve
+from ..mechanics import so3
+from ..mechanics.solve import solve
 
 log = logging.getLogger(__name__)
 

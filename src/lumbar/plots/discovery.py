@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from .. import effects as fx
-from ..io import atomic_writer, subplots
+from ..experiments import effects as fx
+from ..inputs.io import atomic_writer, subplots
 
 
 def fmt(v, spec=".3g"):

@@ -3,7 +3,7 @@
 ``render_fsu(geometry, level, path)`` draws one functional spinal unit: the two vertebra
 meshes (semi-transparent), the disc centre (black sphere), the facet landmarks (red: the
 lower vertebra's superior articular process, blue: the upper vertebra's inferior articular
-process), the facet regression surfaces when ``lumbar.elements.facet.fit_surface`` exists,
+process), the facet regression surfaces when ``lumbar.mechanics.elements.facet.fit_surface`` exists,
 and the ligament fibres (blue), in a sagittal and an oblique view side by side.
 
 Rendering is deterministic: fixed cameras, fixed window size, PNG written without time
@@ -23,8 +23,8 @@ from matplotlib.figure import Figure
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 from PIL import Image
 
-from ..elements.facet import fit_surface
-from ..io import atomic_writer
+from ..mechanics.elements.facet import fit_surface
+from ..inputs.io import atomic_writer
 
 __all__ = ["render_fsu", "offscreen_available", "facet_surfaces"]
 
@@ -70,7 +70,7 @@ def offscreen_available(timeout: float = 120.0) -> bool:
 def facet_surfaces(lev, n: int = 12) -> dict[str, np.ndarray]:
     """Facet regression surfaces of one level as (n, n, 3) grids [m], keyed "left"/"right".
 
-    Uses ``lumbar.elements.facet.fit_surface(superior, inferior)`` (the mean of the fits to
+    Uses ``lumbar.mechanics.elements.facet.fit_surface(superior, inferior)`` (the mean of the fits to
     both articular processes); returns {} (and logs why) if that function is missing or fails.
     """
     out = {}
@@ -237,7 +237,7 @@ def render_fsu(geometry, level: str, path, surfaces=None, backend: str = "auto")
     """Render one motion segment of ``geometry`` (a ``lumbar.geometry.SpineGeometry``) to PNG.
 
     surfaces: optional {"left"|"right": (n, n, 3) grid [m]}; None = fit with
-    ``lumbar.elements.facet.fit_surface`` if available. backend: "auto" | "pyvista" |
+    ``lumbar.mechanics.elements.facet.fit_surface`` if available. backend: "auto" | "pyvista" |
     "matplotlib". Returns the backend actually used.
     """
     check_backend(backend)

@@ -105,7 +105,7 @@ def _render_matplotlib(items, path):
 
 
 def render_spine(geometry, levels, path, cables=None, cable_draw_m=0.04, backend="auto") -> str:
-    """Render the vertebrae of ``levels`` with ligaments and ``cables`` (a ``lumbar.l2s1`` cable table with
+    """Render the vertebrae of ``levels`` with ligaments and ``cables`` (a ``lumbar.experiments.l2s1`` cable table with
     model_x/y/z_m and dir_x/y/z) to PNG. Returns the backend used."""
     check_backend(backend)
     return render_with(backend, _items(geometry, list(levels), cables, cable_draw_m), Path(path), _render_pyvista,

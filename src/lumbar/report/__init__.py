@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from typing import Iterable, Mapping
 
-from lumbar.io import atomic_writer, write_text_atomic
+from lumbar.inputs.io import atomic_writer, write_text_atomic
 
 from .document import Doc, Para
 from .html_renderer import render_html

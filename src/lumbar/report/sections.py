@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 
 from lumbar import __version__
-from lumbar.tables import OUTLIER_COUNT_NAMES
+from lumbar.inputs.tables import OUTLIER_COUNT_NAMES
 
 from .document import CHECK, CROSS, NC, Bullets, Doc, Figure, Heading, Para, Table
 
@@ -266,8 +266,8 @@ class ReportBuilder:
         rel = rel_vs if self.has(rel_vs) else rel_counts if self.has(rel_counts) else None
         if rel is None:
             return f"{what}: {NOT_BUILT}."
-        # the vocabulary of lumbar.tables.VS_PAPER_COLUMNS; an outlier-count table (no vs-paper table built)
-        # has no paper columns, Table 5's names its counts outliers / scenarios (lumbar.l2s1.outlier_counts)
+        # the vocabulary of lumbar.inputs.tables.VS_PAPER_COLUMNS; an outlier-count table (no vs-paper table built)
+        # has no paper columns, Table 5's names its counts outliers / scenarios (lumbar.experiments.l2s1.outlier_counts)
         df = _read_csv(self.path(rel)).rename(columns=OUTLIER_COUNT_NAMES)
         ours, scen = "n_outliers", ("n_scenarios" if "n_scenarios" in df.columns else None)
         paper = "paper_n_outliers" if "paper_n_outliers" in df.columns else None
@@ -345,7 +345,7 @@ class ReportBuilder:
         if not self.has(rel):
             return f"Calibration residuals: {NOT_BUILT}."
         df = _read_csv(self.path(rel))
-        res, unit = "rms_residual", "residual_unit"        # lumbar.calibration's summary columns
+        res, unit = "rms_residual", "residual_unit"        # lumbar.experiments.calibration's summary columns
         parts = []
         for u, g in df.groupby(unit, sort=False) if unit else [("", df)]:
             names = ", ".join(str(x) for x in g.get("structure", g.index))

@@ -1,7 +1,7 @@
 """Muscle-driven lumbar spine (paper 2, Sect. 2.1-2.4): L1-L5 free, thorax fused to L1, sacrum/pelvis fixed.
 
 Passive intervertebral behaviour: the project's disc, facet and ligament elements at every level
-(:func:`lumbar.fsu.add_level`, characteristic set selectable). With ``symmetric_passive`` (default, config
+(:func:`lumbar.experiments.fsu.add_level`, characteristic set selectable). With ``symmetric_passive`` (default, config
 ``muscle_model.symmetric_passive``) the geometry is first mirror-averaged about y = 0
 (:func:`lumbar.geometry.symmetry.mirror_average`: left/right partner points averaged, midline points
 projected to y = 0, disc centres/normals and body centroids on the plane) and the segment COMs are put on
@@ -14,7 +14,7 @@ L5-S1 disc, applied to the L1+thorax body. The redundancy solver is :mod:`lumbar
 
 One passive model per level (same bodies) gives each level's intervertebral load and its exact
 derivative; their sum is the spine. Muscle forces are constant-tension cables per path segment (exact
-geometric stiffness from :class:`lumbar.model.SpineModel`, tension per scenario through ``fmask``) plus
+geometric stiffness from :class:`lumbar.mechanics.model.SpineModel`, tension per scenario through ``fmask``) plus
 the rank-one tension-stiffness term ``-dT/dL g g^T`` added here.
 """
 from __future__ import annotations
@@ -27,13 +27,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from . import resources, so3
-from .fsu import add_level, disc_frame
-from .geometry.core import LEVEL_NAMES
-from .model import SpineModel
-from .muscles.nlp import IpoptPostureSolver
-from .muscles.muscle_set import ABDOMINALS, EXTENSORS, GROUPS, SCENARIOS, MuscleSet, load_muscle_set
-from .muscles.paths import N_PER_CM2, MusclePaths, baseline_properties
+from ..inputs import resources
+from ..mechanics import so3
+from ..experiments.fsu import add_level, disc_frame
+from ..geometry.core import LEVEL_NAMES
+from ..mechanics.model import SpineModel
+from .nlp import IpoptPostureSolver
+from .muscle_set import ABDOMINALS, EXTENSORS, GROUPS, SCENARIOS, MuscleSet, load_muscle_set
+from .paths import N_PER_CM2, MusclePaths, baseline_properties
 
 log = logging.getLogger(__name__)
 
@@ -78,7 +79,7 @@ def get_activity(name) -> Activity:
 
 def read_anthropometry(path=None) -> pd.DataFrame:
     path = Path(path) if path is not None else DATA / "anthropometry" / "upper_body_segments.csv"
-    from lumbar.tables import read_kind  # noqa: PLC0415
+    from lumbar.inputs.tables import read_kind  # noqa: PLC0415
     read_kind(path, "anthropometry")   # schema: file, row, column and expected form of a bad cell
     df = pd.read_csv(path)
     for i, r in df.iterrows():
@@ -94,7 +95,7 @@ def read_anthropometry(path=None) -> pd.DataFrame:
 
 
 class PointForces:
-    """Opaque container (numpy treats it as a scalar, so it passes through ``lumbar.solve`` params)."""
+    """Opaque container (numpy treats it as a scalar, so it passes through ``lumbar.mechanics.solve`` params)."""
 
     def __init__(self, items):
         self.items = list(items)
@@ -109,9 +110,9 @@ class LumbarMuscleModel:
     def __init__(self, geometry=None, charset=None, muscle_set: MuscleSet | None = None, body_mass_kg=71.0,
                  anthropometry_csv=None, iap_force_n=0.0, characteristics="calibrated", data_dir=None,
                  symmetric_passive=True, in_situ_posture="reference"):
-        from .characteristics import load_characteristic_set
-        from .geometry import load_geometry
-        from .geometry.symmetry import mirror_average
+        from ..inputs.characteristics import load_characteristic_set
+        from ..geometry import load_geometry
+        from ..geometry.symmetry import mirror_average
         if not body_mass_kg > 0:
             raise ValueError(f"body_mass_kg must be > 0, got {body_mass_kg}")
         if not iap_force_n >= 0:
@@ -441,8 +442,8 @@ PAPER_CHANGES = {
 
 
 def idp_parts(compressive_n, moment_nm, area_m2=18e-4):
-    """L4-L5 IDP [MPa] and its force and moment parts (paper 2, Sect. 2.4; lumbar.idp.idp_paper2)."""
-    from .idp import MPA, idp_paper2
+    """L4-L5 IDP [MPa] and its force and moment parts (paper 2, Sect. 2.4; lumbar.mechanics.idp.idp_paper2)."""
+    from ..mechanics.idp import MPA, idp_paper2
     F = np.asarray(compressive_n, float)
     M = np.asarray(moment_nm, float)
     total = idp_paper2(F, M, area_m2=area_m2) / MPA
@@ -454,7 +455,7 @@ def make_solver(model, cfg=None):
     """RedundancySolver from the config section ``muscle_model.solver`` (weights, iterations, tracking), with
     IPOPT (:class:`lumbar.muscles.nlp.IpoptPostureSolver`) as the certifier of every reached optimum unless
     ``certifier: sqp`` (the SQP's own KKT test, for comparison)."""
-    from .muscles.redundancy import RedundancySolver, Weights
+    from .redundancy import RedundancySolver, Weights
     cfg = cfg or {}
     keys = ("activation", "fsu_load_per_n2", "tracking_per_deg2", "length_scale_m")
     w = Weights(**{k: cfg[k] for k in keys if k in cfg})
@@ -769,7 +770,7 @@ SOBOL_BOUNDS = {"ssl_um": (2.0, 3.6), "k_n_per_cm2": (10.0, 1000.0), "in_situ_sl
                 "spt_n_per_cm2": (5.0, 150.0), "pennation_deg": (0.0, 30.0)}
 SOBOL_Q2_MIN = 0.9          # a PCE whose leave-one-out Q2 is below this is flagged (fit_ok False)
 SOBOL_STABLE_WIDTH = 0.1    # stable: the top parameter's bootstrap 95 % S1 interval is narrower than this
-# Sobol indices from a polynomial chaos surrogate (Sudret 2008; lumbar.pce), not from Saltelli sampling: SALib's
+# Sobol indices from a polynomial chaos surrogate (Sudret 2008; lumbar.muscles.pce), not from Saltelli sampling: SALib's
 # Saltelli estimator with N = 16 (112 solves per posture) gave S1 up to 3.1 and 95 % half-widths 0.4-0.5 at
 # N = 64; stable S1 would need N ~ 4096 (28 672 solves per posture).
 # Default n_train 256, degree 3 (config/config.yaml), measured on 2026-11-23 with the config's model and solver
@@ -788,7 +789,7 @@ SOBOL_STABLE_WIDTH = 0.1    # stable: the top parameter's bootstrap 95 % S1 inte
 # per solve with the SQP + IPOPT certifier on 2026-11-23; 0.38 s and 1.03 s on 2026-11-24 after the issue-16
 # speed work (batches of 64, full step first, IPOPT polish from the primal point; benchmarks/bench_muscle_model.py,
 # which estimates the whole default study at 282 s on 2 cores, target 300 s). The indices were measured with
-#   python -c "import pandas as pd; from lumbar import muscle_model as mm; m = mm.LumbarMuscleModel(); \
+#   python -c "import pandas as pd; from lumbar.muscles import muscle_model as mm; m = mm.LumbarMuscleModel(); \
 #   s = mm.make_solver(m, {'certifier': 'sqp'}); b = dict(zip(mm.POSTURES, mm.solve_postures(m, s, \
 #   list(mm.POSTURES.values())))); X = mm.sobol_samples(256, 20261123); d = pd.concat([mm.sobol_evaluate(m, s, b, \
 #   X, range(256), p) for p in b]); [print(n, g, mm.sobol_indices(d[d['sample'] < n], n, g, 20261123)) \
@@ -846,7 +847,7 @@ def sobol_evaluate(model, solver, baseline: dict, X: np.ndarray, rows, posture: 
 def sobol_indices(samples: pd.DataFrame, n_train: int, degree: int, seed: int, n_bootstrap: int = 500) -> pd.DataFrame:
     """First-order (S1) and total (ST) Sobol indices of L4-L5 IDP per posture from a Legendre polynomial chaos
     expansion of total degree ``degree`` fitted by least squares on the reached samples (all ``n_train`` rows of
-    each posture, :func:`sobol_evaluate`); indices analytic from the coefficients (:mod:`lumbar.pce`).
+    each posture, :func:`sobol_evaluate`); indices analytic from the coefficients (:mod:`lumbar.muscles.pce`).
 
     Columns: ``S1``, ``ST`` (point estimates from the fit to all reached samples); ``S1_lo``/``S1_hi``,
     ``ST_lo``/``ST_hi`` (bootstrap 95 % percentile interval, ``n_bootstrap`` resamples of the reached samples,

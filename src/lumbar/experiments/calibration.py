@@ -26,7 +26,7 @@ Lateral bending and axial rotation are symmetric (one law each), flexion and ext
 
 Ligaments (steps 2-8): Eq. 7 has four parameters, but (a, b, c, d) are not identifiable from ROM
 (a shift of c trades against a and b). Project parametrisation: ``c = -a*ln(1 + exp(b/d))`` so that the
-law is zero at 0 % strain (F(0) = 0, tension-only rule of ``lumbar.elements.ligament`` unchanged), and
+law is zero at 0 % strain (F(0) = 0, tension-only rule of ``lumbar.mechanics.elements.ligament`` unchanged), and
 (a, b, d) are fitted with bounds a in [0.01, 5000] N, b in [-60, 40] %, d in [0.05, 50] % (d > 0:
 monotone laws; the paper's concave FL, d < 0, is outside this family by design). The prestrains stay the
 paper's (Sect. 2.2.4). Each fit is a ``least_squares(method="trf")`` with finite differences over that
@@ -52,11 +52,11 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import brentq, least_squares
 
-from .characteristics import SoftplusLaw, load_characteristic_set
-from .elements.facet import fit_surface
-from .elements.ligament import softplus_force
+from ..inputs.characteristics import SoftplusLaw, load_characteristic_set
+from ..mechanics.elements.facet import fit_surface
+from ..mechanics.elements.ligament import softplus_force
 from .fsu import build_fsu
-from .io import save_figure_atomic, subplots, write_table_atomic
+from ..inputs.io import save_figure_atomic, subplots, write_table_atomic
 from .stepwise_reduction import MAIN_DIRECTIONS, StageSolver
 
 log = logging.getLogger(__name__)
@@ -461,6 +461,7 @@ def write_characteristics(result: CalibrationResult, src_dir, out_dir, reference
     src, out = Path(src_dir), Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     kind = "calibrated_on_measured" if result.data_kind == "measured" else "calibrated_on_surrogate"
+    # provenance text written into the result tables: unchanged by the issue 17 regroup (result identity)
     src_note = f"lumbar.calibration.calibrate on {reference_source or 'the stepwise-reduction reference table'}"
     for f in sorted(src.glob("*.csv")):
         if f.name not in ("disc.csv", "facet.csv", "ligaments_softplus.csv"):
@@ -692,7 +693,7 @@ def fit_real_targets(geometry, charset, targets: pd.DataFrame, level="L4-L5", pa
         raise ValueError("fit_real_targets: every target rom_mean_deg must be finite and > 0 deg")
     n_real = len(t)
     # residual scales: real rows in units of 25 % of the measured value (the acceptance band of
-    # lumbar.validation), secondary rows in units of their range (rows without a range: 2 x tolerance_deg)
+    # lumbar.experiments.validation), secondary rows in units of their range (rows without a range: 2 x tolerance_deg)
     scale = 0.25 * measured / 1.0
     keys = ["stage", "direction", "moment_nm"]
     if secondary is not None and len(secondary):

@@ -21,7 +21,7 @@ import pandas as pd
 
 from . import effects as fx
 from .fsu import MAIN_DIRECTIONS, STAGES, build_fsu
-from .idp import idp_per_newton
+from ..mechanics.idp import idp_per_newton
 from .l2s1 import LEVELS, derive_cables, run_set
 from .stepwise_reduction import simulate_stepwise_reduction
 
@@ -154,7 +154,7 @@ def stepwise_reduction_table(geometry, charset, seed, n_specimens=8, variation=N
 
     Each specimen = ``virtual_specimen(geometry, charset, rng)`` with ``rng`` from
     ``specimen_rngs(seed, n_specimens)``; its 160 scenarios (8 stages x moments x 4 directions) are
-    simulated (``lumbar.stepwise_reduction.simulate_stepwise_reduction``, with the extra physical
+    simulated (``lumbar.experiments.stepwise_reduction.simulate_stepwise_reduction``, with the extra physical
     ``effects``), and Gaussian measurement noise of ``noise_sd_deg`` is added per specimen and scenario
     (the same rng, after the perturbation). Per scenario: mean, min and max over the specimens that reached
     equilibrium; a specimen without equilibrium in a scenario is dropped from that row with a log line
@@ -198,6 +198,7 @@ def stepwise_reduction_table(geometry, charset, seed, n_specimens=8, variation=N
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             mean, lo, hi = np.nanmean(A, 0), np.nanmin(A, 0), np.nanmax(A, 0)
+    # provenance text written into the result tables: unchanged by the issue 17 regroup (result identity)
     src = (f"lumbar.virtual_experiment.stepwise_reduction_table(seed={int(seed)}, n_specimens={n_specimens}, "
            f"noise_sd_deg={noise_sd_deg:g}, variation={dataclasses.asdict(v)}"
            + (f", effects={dict(effects)}" if effects else "")
@@ -258,10 +259,10 @@ def idp_table(geometry, charset, seed, n_specimens=7, variation=None, noise_sd_m
 
     Each specimen = ``virtual_specimen(geometry, charset, rng)`` (all four levels L2-L3..L5-S1 perturbed)
     with ``rng`` from ``specimen_rngs(seed, n_specimens)``; its 49 scenarios are solved with
-    ``lumbar.l2s1.run_set`` and Gaussian measurement noise of ``noise_sd_mpa`` [MPa] is added per specimen
+    ``lumbar.experiments.l2s1.run_set`` and Gaussian measurement noise of ``noise_sd_mpa`` [MPa] is added per specimen
     and scenario. ``effects``: optional {"muscle_setup/load_case": delta_mpa} ("*" matches any) added to
     every specimen's IDP, for effects the model lacks (default none), or {name: value} of an IDP effect of
-    ``lumbar.effects`` (axial_preload, idp_moment_term, disc_load_share; hidden-effect fixtures).
+    ``lumbar.experiments.effects`` (axial_preload, idp_moment_term, disc_load_share; hidden-effect fixtures).
     Per scenario: mean and sample SD over the specimens that reached equilibrium; a specimen without
     equilibrium is dropped from that row with a log line and ``n_specimens`` reduced; a row no specimen reached is left out (logged).
     Columns: muscle_setup, load_case, idp_mean_mpa, idp_sd_mpa, n_specimens, kind (= "surrogate"), source.
@@ -309,6 +310,7 @@ def idp_table(geometry, charset, seed, n_specimens=7, variation=None, noise_sd_m
         warnings.simplefilter("ignore", RuntimeWarning)
         mean = np.nanmean(A, 0)
         sd = np.where(n > 1, np.nanstd(A, 0, ddof=1), 0.0)
+    # provenance text written into the result tables: unchanged by the issue 17 regroup (result identity)
     src = (f"lumbar.virtual_experiment.idp_table(seed={int(seed)}, n_specimens={n_specimens}, "
            f"noise_sd_mpa={noise_sd_mpa:g}, variation={dataclasses.asdict(v)}"
            + (f", effects={dict(effects)}" if effects else "")

@@ -19,7 +19,7 @@ from pathlib import Path
 __all__ = ["root", "in_checkout", "data_dir", "schema_path", "SCHEMA_RELPATH"]
 
 SCHEMA_RELPATH = Path("workflow") / "schemas" / "config.schema.yaml"
-_PACKAGE = Path(__file__).resolve().parent
+_PACKAGE = Path(__file__).resolve().parents[1]   # src/lumbar/inputs/resources.py -> src/lumbar
 _CHECKOUT = _PACKAGE.parents[1]          # src/lumbar -> repository root
 _BUNDLED = _PACKAGE / "_resources"       # written by setup.py's build step into the wheel
 

@@ -18,9 +18,9 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from . import so3
+from ..mechanics import so3
 from .fsu import build_fsu
-from .solve import solve
+from ..mechanics.solve import solve
 
 COLUMNS = ("quantity", "condition", "unit", "sim", "measured", "measured_low", "measured_high", "kind",
            "source", "within", "tolerance_rule", "set", "role", "note")

@@ -6,9 +6,10 @@ lower vertebra fixed and the upper one free (6 DOF). ``range_of_motion`` solves 
 at 0 N*m, then the moment is applied by load continuation. ROM = rotation of the upper vertebra
 about the loading axis relative to the stage's 0 N*m equilibrium.
 
-Command line::
+Command line (:mod:`lumbar.cli`; ``python -m lumbar.experiments.fsu`` runs the same)::
 
-    python -m lumbar.fsu --moment 10 --direction all --geometry visible_human
+    lumbar fsu --moment 10 --direction all --geometry visible_human
+    python -m lumbar.cli fsu --moment 10 --direction all --geometry visible_human
 """
 from __future__ import annotations
 
@@ -21,20 +22,20 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from . import so3
-from .characteristics import CHARACTERISTIC_SETS, resolve_characteristic_set
-from .config import default_geometry_path
-from .elements.facet import fit_surface
-from .elements.ligament import rupp_shape
-from .geometry import load_geometry
-from .model import DiscSpec, SpineModel
-from .solve import solve
-from .tables import MAIN_DIRECTIONS, STAGES
+from ..mechanics import so3
+from ..inputs.characteristics import CHARACTERISTIC_SETS, resolve_characteristic_set
+from ..inputs.config import default_geometry_path
+from ..mechanics.elements.facet import fit_surface
+from ..mechanics.elements.ligament import rupp_shape
+from ..geometry import load_geometry
+from ..mechanics.model import DiscSpec, SpineModel
+from ..mechanics.solve import solve
+from ..inputs.tables import MAIN_DIRECTIONS, STAGES
 
 log = logging.getLogger(__name__)
 
 # STAGES: reduction stages of the stepwise-reduction experiment (Heuer et al. 2007), in removal order, and
-# MAIN_DIRECTIONS: the four loading directions (vocabularies of the tables, owned by lumbar.tables)
+# MAIN_DIRECTIONS: the four loading directions (vocabularies of the tables, owned by lumbar.inputs.tables)
 STAGE_LABELS = {"intact": "intact", "wo_ssl": "w/o SSL", "wo_isl": "w/o ISL", "wo_fl": "w/o FL",
                 "wo_cl": "w/o CL", "wo_va": "w/o VA", "wo_pll": "w/o PLL", "wo_all": "w/o ALL"}
 # what each stage removes in addition to the previous one; removing the vertebral arches (VA)
@@ -231,8 +232,8 @@ def range_of_motion(fsu: FSU, moments_nm=(1, 2.5, 5, 7.5, 10), directions=MAIN_D
     return df
 
 
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m lumbar.fsu", description=__doc__.split("\n\n")[0])
+def main(argv=None, prog: str = "python -m lumbar.experiments.fsu") -> int:
+    p = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     p.add_argument("--moment", type=float, nargs="+", default=[10.0], help="pure moment(s) [N*m]")
     p.add_argument("--direction", default="all",
                    help="all | comma list of " + ", ".join(sorted(DIRECTIONS)))

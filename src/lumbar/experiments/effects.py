@@ -10,7 +10,7 @@ unchanged, bit for bit) and acts on some of the project's experiments:
 
 Two families:
 
-* ``kind = "solver"``: enters the equilibrium (lumbar.model params ``k_tension``, ``disc_phi_offset``,
+* ``kind = "solver"``: enters the equilibrium (lumbar.mechanics.model params ``k_tension``, ``disc_phi_offset``,
   ``fibre_l0_scale``, or extra fibres/cables whose per-scenario fibre-mask weight is the parameter, so
   the solver's exact Jacobian covers them). :class:`FsuVariants` solves many parameter values of many
   effects as one batch.
@@ -19,8 +19,8 @@ Two families:
 
 This module is the one effect registry of the package (``EFFECTS``). An effect may also carry a
 ``params`` form, ``params(fsu, value) -> dict`` of per-scenario solver parameters
-(``lumbar.solve.solve(params=...)``; it may modify the specimen-private model in place), used by
-``lumbar.stepwise_reduction.simulate_stepwise_reduction`` when an effect outside ``SOLVER_EFFECTS`` is
+(``lumbar.mechanics.solve.solve(params=...)``; it may modify the specimen-private model in place), used by
+``lumbar.experiments.stepwise_reduction.simulate_stepwise_reduction`` when an effect outside ``SOLVER_EFFECTS`` is
 asked for; add such extra effects with :func:`register_effect` and turn a {name: value} dict into solver
 params with :func:`effect_params`.
 
@@ -37,12 +37,12 @@ from typing import Callable, Mapping
 import numpy as np
 import pandas as pd
 
-from . import so3
-from .characteristics import load_characteristic_set
-from .elements.ligament import rupp_shape, slack_length
+from ..mechanics import so3
+from ..inputs.characteristics import load_characteristic_set
+from ..mechanics.elements.ligament import rupp_shape, slack_length
 from .fsu import DIRECTIONS, STAGES, moment_loads
-from .idp import K_FLEXION_PA_PER_NM
-from .solve import solve
+from ..mechanics.idp import K_FLEXION_PA_PER_NM
+from ..mechanics.solve import solve
 
 EXPERIMENTS = ("stepwise_rom", "neutral_angle", "idp_invitro", "in_vivo")
 # stages after the vertebral arches were sawn off where the neutral-angle offset acts; at w/o ALL the disc
@@ -132,7 +132,7 @@ def register_effect(name: str, fn: Callable) -> None:
         EFFECTS[name] = replace(EFFECTS[name], params=fn)
     else:
         EFFECTS[name] = Effect(name, "value", "", (-np.inf, np.inf), (), (), "params",
-                               (fn.__doc__ or "").strip(), "registered with lumbar.effects.register_effect",
+                               (fn.__doc__ or "").strip(), "registered with lumbar.experiments.effects.register_effect",
                                params=fn)
 
 

@@ -13,7 +13,7 @@ in the ligament laws:
 Data live in ``data/characteristics`` (see its README.md). The directory is
 found from ``data_dir``, else ``$LUMBAR_DATA_DIR`` (the repository ``data``
 directory, or the ``characteristics`` directory itself), else the package data
-(:func:`lumbar.resources.data_dir`: the checkout's or the wheel's copy), else ``./data/characteristics``.
+(:func:`lumbar.inputs.resources.data_dir`: the checkout's or the wheel's copy), else ``./data/characteristics``.
 
 Units: SI at load (m, N, N*m, rad) - except the softplus parameters, which stay
 in the paper's units [N, %] because Eq. 7 is defined in percent strain.
@@ -28,10 +28,10 @@ from fractions import Fraction
 from pathlib import Path
 from typing import Mapping
 
-from lumbar import resources, tables
-from lumbar.elements.ligament import slack_length
-from lumbar.io import TableError, TableSchema, read_table
-from lumbar.tables import CHARACTERISTIC_SETS, LIGAMENT_KINDS
+from lumbar.inputs import resources, tables
+from lumbar.mechanics.elements.ligament import slack_length
+from lumbar.inputs.io import TableError, TableSchema, read_table
+from lumbar.inputs.tables import CHARACTERISTIC_SETS, LIGAMENT_KINDS
 
 __all__ = [
     "CHARACTERISTIC_SETS",

@@ -1,7 +1,7 @@
 """The L2-S1 lumbar spine with wire-cable muscles (paper 1, Sects. 2.1.2, 2.3, 3.2, Appendix 3).
 
 Model: sacrum (S1) fixed, L2..L5 free (24 DOF); every level L2-L3..L5-S1 gets disc, facet joints and
-ligaments through :func:`lumbar.fsu.add_level` with the same characteristic set (the L4-L5 calibration
+ligaments through :func:`lumbar.experiments.fsu.add_level` with the same characteristic set (the L4-L5 calibration
 transferred unchanged, as the paper does). Five symmetric pairs of constant, length-independent cable
 forces (Wilke et al. 1996: 80 N per pair, 40 N per side) pull L2 along lines of action derived from the
 Christophy muscle set shipped with myo-sim (``data/cables/wilke1996_cables.csv`` says which fascicles and
@@ -25,16 +25,16 @@ import pandas as pd
 import trimesh
 import matplotlib
 
-from . import resources, tables
+from ..inputs import resources, tables
 from .fsu import DIRECTIONS, add_level
-from .geometry import load_geometry
-from .geometry import myo_sim as M
-from .geometry.myo_sim import BODY_OF
-from .idp import FORMULAS, idp_from_disc
-from .io import TableError, atomic_writer, read_table, subplots
-from .model import GROUND, SpineModel
-from .solve import solve
-from .tables import CABLES, IDP_INVITRO, L2S1_FREE, L2S1_MUSCLES, LOAD_CASES, MUSCLE_SETUPS
+from ..geometry import load_geometry
+from ..geometry import myo_sim as M
+from ..geometry.myo_sim import BODY_OF
+from ..mechanics.idp import FORMULAS, idp_from_disc
+from ..inputs.io import TableError, atomic_writer, read_table, subplots
+from ..mechanics.model import GROUND, SpineModel
+from ..mechanics.solve import solve
+from ..inputs.tables import CABLES, IDP_INVITRO, L2S1_FREE, L2S1_MUSCLES, LOAD_CASES, MUSCLE_SETUPS
 
 log = logging.getLogger(__name__)
 
@@ -471,7 +471,7 @@ PUBLISHED_KEY = {"calibrated": "outliers_idp_this_paper_model", "chazal1985": "o
 
 def versus_paper(counts: pd.DataFrame, published_csv=None) -> pd.DataFrame:
     """Outlier counts beside the paper's (Table 5 / Sect. 3.2), in the columns of
-    :data:`lumbar.tables.VS_PAPER_COLUMNS`; empty paper columns if the file is absent."""
+    :data:`lumbar.inputs.tables.VS_PAPER_COLUMNS`; empty paper columns if the file is absent."""
     return tables.versus_paper(counts, published_csv, PUBLISHED_KEY)
 
 

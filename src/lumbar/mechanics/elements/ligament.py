@@ -24,7 +24,7 @@ def slack_length(reference_length, prestrain):
     """Slack length [m] of a fibre prestrained by ``prestrain`` (a strain, fraction: 0.1 = 10 %) at its
     ``reference_length`` [m]: ``l0 = l_ref / (1 + prestrain)``. The one place of this formula: the model's
     fibres, the Rupp shape parameters and the prestrain effect all use it; the characteristic tables give
-    prestrains in percent, converted once by the laws' ``prestrain`` property (``lumbar.characteristics``)."""
+    prestrains in percent, converted once by the laws' ``prestrain`` property (``lumbar.inputs.characteristics``)."""
     return reference_length / (1.0 + prestrain)
 
 

@@ -2,10 +2,10 @@
 tables it compares), with the vocabularies their columns allow, and ``read_kind`` to read one validated.
 
 Every kind of table under ``data/`` (and every user table the config can point to) has a
-:class:`lumbar.io.TableSchema` here; reading goes through :func:`lumbar.io.read_table`, whose
-:class:`lumbar.io.TableError` names the file, the 1-based data row and the column, and states the expected
+:class:`lumbar.inputs.io.TableSchema` here; reading goes through :func:`lumbar.inputs.io.read_table`, whose
+:class:`lumbar.inputs.io.TableError` names the file, the 1-based data row and the column, and states the expected
 form. The stage modules import their schemas and vocabularies from this module (it imports nothing from
-``lumbar`` but :mod:`lumbar.io`):
+``lumbar`` but :mod:`lumbar.inputs.io`):
 
 ====================  ================================================  =====================================
 kind                  files                                             schema
@@ -53,7 +53,7 @@ LIGAMENT_KINDS = ("ALL", "PLL", "FL", "CL", "ISL", "SSL", "ITL")
 #: data kinds of the characteristic tables
 CHARACTERISTIC_KINDS = frozenset({"original_text", "original_figure", "third_party", "derived_from_published_fit",
                                   "surrogate",
-                                  # written by lumbar.calibration.write_characteristics
+                                  # written by lumbar.experiments.calibration.write_characteristics
                                   # (results/calibration/characteristics)
                                   "calibrated_on_surrogate", "calibrated_on_measured"})
 #: reduction stages of the stepwise-reduction experiment (Heuer et al. 2007), in removal order
@@ -283,7 +283,7 @@ def schema_of(kind: str) -> TableSchema:
 
 
 def read_kind(path, kind: str) -> pd.DataFrame:
-    """Read ``path`` validated against the schema of ``kind`` (raises :class:`lumbar.io.TableError`)."""
+    """Read ``path`` validated against the schema of ``kind`` (raises :class:`lumbar.inputs.io.TableError`)."""
     return read_table(Path(path), schema_of(kind))
 
 

@@ -4,7 +4,7 @@ The schema is ``workflow/schemas/config.schema.yaml``, the same file the Snakema
 workflow validates against (``workflow/rules/common.smk``), so the library and the
 workflow cannot disagree about what a valid configuration is. Usable without Snakemake::
 
-    from lumbar.config import load_config
+    from lumbar.inputs.config import load_config
     cfg = load_config("config/config.yaml")      # or a dict
     cfg["fsu"]["moments_nm"]                     # defaults filled
 
@@ -40,7 +40,7 @@ class ConfigError(ValueError):
 
 
 def default_schema_path() -> Path:
-    """The workflow schema: the checkout's, or the copy shipped in the wheel (:mod:`lumbar.resources`)."""
+    """The workflow schema: the checkout's, or the copy shipped in the wheel (:mod:`lumbar.inputs.resources`)."""
     path = resources.schema_path()
     if not path.is_file():
         raise ConfigError([("<schema>", f"config schema not found at {path}; "
@@ -157,7 +157,7 @@ def _schema_doc(path: str, mtime_ns: int) -> dict:
 
 def resolve_path(path: str | Path) -> Path:
     """A config path (relative to the working directory, normally the repository root): as given when it exists
-    there or is absolute, else relative to :func:`lumbar.resources.root` (the checkout root, or the wheel's
+    there or is absolute, else relative to :func:`lumbar.inputs.resources.root` (the checkout root, or the wheel's
     bundled copy of ``data/``; for library and CLI use from another directory)."""
     p = Path(path)
     if p.is_absolute() or p.exists():

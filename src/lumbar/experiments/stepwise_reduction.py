@@ -1,13 +1,13 @@
 """Forward simulation of the stepwise-reduction experiment (paper 1, Sect. 3.1.2, Table 4, Fig. 6).
 
-160 scenarios = 8 reduction stages (``lumbar.fsu.STAGES``) x 5 pure moments x 4 directions, solved
+160 scenarios = 8 reduction stages (``lumbar.experiments.fsu.STAGES``) x 5 pure moments x 4 directions, solved
 for one characteristic set in one batch, compared with a reference ROM table (mean, min, max).
 
-Reference ROM tables (schema ``lumbar.tables.STEPWISE_ROM``, documented in ``data/experiments/README.md``):
+Reference ROM tables (schema ``lumbar.inputs.tables.STEPWISE_ROM``, documented in ``data/experiments/README.md``):
 one row per (stage, direction, moment_nm) with ``rom_mean_deg``, ``rom_min_deg``, ``rom_max_deg``,
 ``n_specimens``, ``kind``, ``source``. The measured table of Heuer et al. (2007) is not available to
 the project: the workflow uses a surrogate from virtual specimens
-(``lumbar.virtual_experiment.stepwise_reduction_table``) whose disc-only stage (``wo_all``) is replaced by
+(``lumbar.experiments.virtual_experiment.stepwise_reduction_table``) whose disc-only stage (``wo_all``) is replaced by
 the rows derived from the paper's published Eq. 3 fit (``data/experiments/``); a user may supply the
 real table in the same schema (config ``stepwise_reduction.measured_table``), which is then used as is.
 
@@ -16,11 +16,11 @@ Outlier rule (project decision): a simulated ROM is an outlier when it lies outs
 kind ``derived_from_published_fit``) use ``mean +- tolerance_deg`` (default 0.5 deg). A scenario
 without equilibrium (``converged = False``) always counts as an outlier.
 
-Extra physical effects (hook for the discrepancy workflow): the one registry is ``lumbar.effects.EFFECTS``.
-Its solver effects (``lumbar.effects.SOLVER_EFFECTS``) are solved with ``lumbar.effects.FsuVariants``; any
+Extra physical effects (hook for the discrepancy workflow): the one registry is ``lumbar.experiments.effects.EFFECTS``.
+Its solver effects (``lumbar.experiments.effects.SOLVER_EFFECTS``) are solved with ``lumbar.experiments.effects.FsuVariants``; any
 other effect needs a params form ``(fsu, value) -> dict`` of per-scenario solver parameters
-(``lumbar.solve.solve(params=...)``, may modify the specimen-private model in place), added with
-``lumbar.effects.register_effect`` (re-exported here with ``effect_params``).
+(``lumbar.mechanics.solve.solve(params=...)``, may modify the specimen-private model in place), added with
+``lumbar.experiments.effects.register_effect`` (re-exported here with ``effect_params``).
 """
 from __future__ import annotations
 
@@ -31,18 +31,18 @@ import pandas as pd
 import matplotlib
 from matplotlib.patches import Rectangle
 
-from . import so3
+from ..mechanics import so3
 from .effects import SOLVER_EFFECTS, FsuVariants, check_effect, effect_params
 from .effects import register_effect as register_effect  # re-export: the documented extension hook
 from .fsu import DIRECTIONS, MAIN_DIRECTIONS, STAGES, moment_loads
-from .io import TableError, read_table, save_figure_atomic, subplots
-from .solve import solve
-from .tables import STEPWISE_ROM, versus_paper
+from ..inputs.io import TableError, read_table, save_figure_atomic, subplots
+from ..mechanics.solve import solve
+from ..inputs.tables import STEPWISE_ROM, versus_paper
 
 log = logging.getLogger(__name__)
 
 MOMENTS_NM = (1.0, 2.5, 5.0, 7.5, 10.0)
-REL_TOLERANCE = 0.25     # acceptance of a published value without a range (equal to lumbar.validation's)
+REL_TOLERANCE = 0.25     # acceptance of a published value without a range (equal to lumbar.experiments.validation's)
 # ------------------------------------------------------------------ simulation
 def scenario_grid(stages=STAGES, directions=MAIN_DIRECTIONS, moments_nm=MOMENTS_NM) -> pd.DataFrame:
     """All (stage, direction, moment_nm) combinations in table order."""
@@ -123,10 +123,10 @@ def simulate_stepwise_reduction(fsu, stages=STAGES, directions=MAIN_DIRECTIONS, 
     """ROM of every (stage, direction, moment) scenario: stage, direction, moment_nm, rom_deg, converged,
     residual_force_n, residual_moment_nm (max residual of the loaded solve; the effects path may omit them).
 
-    ``effects`` {name: value} of the registry ``lumbar.effects.EFFECTS``: when every name is a solver effect
-    (``lumbar.effects.SOLVER_EFFECTS``, the discrepancy candidates; values within their bounds) the scenarios
-    are solved as one ``lumbar.effects.FsuVariants`` batch (no residual columns, ``load_steps`` unused);
-    otherwise every name needs a params form (``lumbar.effects.register_effect``)."""
+    ``effects`` {name: value} of the registry ``lumbar.experiments.effects.EFFECTS``: when every name is a solver effect
+    (``lumbar.experiments.effects.SOLVER_EFFECTS``, the discrepancy candidates; values within their bounds) the scenarios
+    are solved as one ``lumbar.experiments.effects.FsuVariants`` batch (no residual columns, ``load_steps`` unused);
+    otherwise every name needs a params form (``lumbar.experiments.effects.register_effect``)."""
     scen = scenario_grid(stages, directions, moments_nm)
     if effects and all(k in SOLVER_EFFECTS for k in effects):
         values = {}
@@ -223,7 +223,7 @@ def assess(sim: pd.DataFrame, ref: pd.DataFrame, set_name: str, tolerance_deg: f
     no_range = df["rom_min_deg"].isna()
     # rows without a range: the derived (published-fit) and surrogate rows use mean +- tolerance_deg; a
     # published population value without a range (e.g. Yamamoto et al. 1989) uses mean +- 25 %, the rule of
-    # lumbar.validation (REL_TOLERANCE), so Table 4 and the real-data scoreboard judge such a row alike
+    # lumbar.experiments.validation (REL_TOLERANCE), so Table 4 and the real-data scoreboard judge such a row alike
     relative = no_range & ~df["kind"].isin(["derived_from_published_fit", "surrogate"])
     half = np.where(relative, REL_TOLERANCE * df["rom_mean_deg"].to_numpy(float), tolerance_deg)
     lo = np.where(no_range, df["rom_mean_deg"] - half, df["rom_min_deg"])
@@ -267,7 +267,7 @@ PAPER_OUTLIER_KEYS = {"calibrated": "outliers_rom_this_paper_model", "chazal1985
 
 def compare_with_paper(counts: pd.DataFrame, published_csv=None) -> pd.DataFrame:
     """Our outlier counts beside the paper's (Sect. 3.1.2; 160 scenarios), in the columns of
-    :data:`lumbar.tables.VS_PAPER_COLUMNS`; empty paper columns if the file is absent."""
+    :data:`lumbar.inputs.tables.VS_PAPER_COLUMNS`; empty paper columns if the file is absent."""
     return versus_paper(counts, published_csv, PAPER_OUTLIER_KEYS, paper_n_scenarios=PAPER_N_SCENARIOS)
 
 
