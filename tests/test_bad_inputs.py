@@ -71,8 +71,17 @@ def config_file(tmp_path, **sections) -> Path:
 
 
 def run_rule(script, rule, configfile, outputs, monkeypatch) -> BaseException:
-    """Run ``workflow/scripts/<script>.py <rule>`` by hand with --output; return the exception it raised."""
+    """Run ``workflow/scripts/<script>.py <rule>`` by hand with --output; return the exception it raised.
+
+    The job's inputs are the rule's, relative to the repository root; for the characteristic sets, the set
+    "calibrated" would come from the calibration output of a local ``results/`` folder where one exists (a DAG
+    edge), which must not shadow the table under test: the resolver is given no calibration output here."""
     monkeypatch.chdir(ROOT)                   # config paths are relative to the repository root
+    from lumbar.inputs import characteristics as ch
+    resolve = ch.resolve_characteristic_set
+    monkeypatch.setattr(ch, "resolve_characteristic_set",
+                        lambda name, data_dir=None, calibrated_dir=None, overrides=None:
+                        resolve(name, data_dir=data_dir, calibrated_dir=None, overrides=overrides))
     monkeypatch.setattr(sys, "argv", [str(SCRIPTS / f"{script}.py"), rule, "--configfile", str(configfile),
                                       "--output", *map(str, outputs)])
     with pytest.raises(BaseException) as exc:

@@ -76,7 +76,7 @@ def make_hidden_effect_dataset(config, experiment, effect, magnitude, seed, idp_
     vals = {} if effect == "none" else {effect: np.array([float(magnitude)])}
     src = (f"TEST FIXTURE (benchmark): hidden effect {effect} = {magnitude:g} "
            f"{fx.EFFECTS[effect].unit if effect != 'none' else ''}, seed {seed}, {n} noisy measurements of the "
-           f"calibration model (lumbar.discover.make_hidden_effect_dataset); not data")
+           f"calibration model (lumbar.discovery.benchmark.make_hidden_effect_dataset); not data")
     if experiment == "stepwise_rom" and b.get("generator") == "virtual_specimens":
         out = _virtual_specimen_rom(config, b, effect, magnitude, seed)
         out["source"] = src.replace("noisy measurements of the calibration model",

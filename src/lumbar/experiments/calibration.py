@@ -461,8 +461,8 @@ def write_characteristics(result: CalibrationResult, src_dir, out_dir, reference
     src, out = Path(src_dir), Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     kind = "calibrated_on_measured" if result.data_kind == "measured" else "calibrated_on_surrogate"
-    # provenance text written into the result tables: unchanged by the issue 17 regroup (result identity)
-    src_note = f"lumbar.calibration.calibrate on {reference_source or 'the stepwise-reduction reference table'}"
+    # provenance text written into the result tables: names the function that made them
+    src_note = f"lumbar.experiments.calibration.calibrate on {reference_source or 'the stepwise-reduction reference table'}"
     for f in sorted(src.glob("*.csv")):
         if f.name not in ("disc.csv", "facet.csv", "ligaments_softplus.csv"):
             shutil.copyfile(f, out / f.name)
@@ -479,7 +479,7 @@ def write_characteristics(result: CalibrationResult, src_dir, out_dir, reference
         disc = pd.concat([disc, pd.DataFrame([{
             "parameter": "shear_stiffness", "direction": "shear", "value": repr(float(ks)), "unit": "N/m", "kind": kind,
             "source": src_note, "note": "fitted within the sourced range shear_stiffness_min..max on the real "
-                                        "target rows (lumbar.calibration.fit_real_targets)"}])], ignore_index=True)
+                                        "target rows (lumbar.experiments.calibration.fit_real_targets)"}])], ignore_index=True)
     write_table_atomic(disc, out / "disc.csv")
     fac = pd.read_csv(src / "facet.csv", dtype=str, keep_default_na=False)
     for i, r in fac.iterrows():

@@ -198,8 +198,8 @@ def stepwise_reduction_table(geometry, charset, seed, n_specimens=8, variation=N
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             mean, lo, hi = np.nanmean(A, 0), np.nanmin(A, 0), np.nanmax(A, 0)
-    # provenance text written into the result tables: unchanged by the issue 17 regroup (result identity)
-    src = (f"lumbar.virtual_experiment.stepwise_reduction_table(seed={int(seed)}, n_specimens={n_specimens}, "
+    # provenance text written into the result tables: names the function that made them
+    src = (f"lumbar.experiments.virtual_experiment.stepwise_reduction_table(seed={int(seed)}, n_specimens={n_specimens}, "
            f"noise_sd_deg={noise_sd_deg:g}, variation={dataclasses.asdict(v)}"
            + (f", effects={dict(effects)}" if effects else "")
            + f"); calibration model: geometry '{geometry.name}' {level} + characteristic set '{charset.name}'"
@@ -310,8 +310,8 @@ def idp_table(geometry, charset, seed, n_specimens=7, variation=None, noise_sd_m
         warnings.simplefilter("ignore", RuntimeWarning)
         mean = np.nanmean(A, 0)
         sd = np.where(n > 1, np.nanstd(A, 0, ddof=1), 0.0)
-    # provenance text written into the result tables: unchanged by the issue 17 regroup (result identity)
-    src = (f"lumbar.virtual_experiment.idp_table(seed={int(seed)}, n_specimens={n_specimens}, "
+    # provenance text written into the result tables: names the function that made them
+    src = (f"lumbar.experiments.virtual_experiment.idp_table(seed={int(seed)}, n_specimens={n_specimens}, "
            f"noise_sd_mpa={noise_sd_mpa:g}, variation={dataclasses.asdict(v)}"
            + (f", effects={dict(effects)}" if effects else "")
            + f", idp_formula={idp_formula}); calibration model: geometry '{geometry.name}' L2-S1 + "
