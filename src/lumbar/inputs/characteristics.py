@@ -113,8 +113,17 @@ class FacetParams:
     source: str = ""
 
 
+class _PrestrainInPercent:
+    """A ligament law whose table gives ``prestrain_pct`` [%]: ``prestrain`` is the strain the mechanics use."""
+
+    @property
+    def prestrain(self) -> float:
+        """The prestrain as a strain (fraction): ``prestrain_pct / 100``, the one conversion from the tables' %."""
+        return self.prestrain_pct / 100.0
+
+
 @dataclass(frozen=True)
-class SoftplusLaw:
+class SoftplusLaw(_PrestrainInPercent):
     """Eq. 7: F(eps) = a * ln(exp((eps + b)/d) + 1) + c, eps in percent.
 
     EXCEPTION to the SI rule: a, c in N and b, d in % (the paper's units), because
@@ -130,14 +139,9 @@ class SoftplusLaw:
     prestrain_pct: float
     source: str = ""
 
-    @property
-    def prestrain(self) -> float:
-        """The prestrain as a strain (fraction): ``prestrain_pct / 100``, the one conversion from the tables' %."""
-        return self.prestrain_pct / 100.0
-
 
 @dataclass(frozen=True)
-class RuppLaw:
+class RuppLaw(_PrestrainInPercent):
     """Rupp et al. (2015) nonlinear-to-linear law inputs (SI): l_a_m, l_b_m [m]
     (elongations of the Chazal tuples), f_a_n, f_b_n [N] (whole ligament),
     n_strands (fibres representing one ligament), prestrain_pct [%].
@@ -150,11 +154,6 @@ class RuppLaw:
     n_strands: int
     prestrain_pct: float
     source: str = ""
-
-    @property
-    def prestrain(self) -> float:
-        """The prestrain as a strain (fraction): ``prestrain_pct / 100``, the one conversion from the tables' %."""
-        return self.prestrain_pct / 100.0
 
 
 @dataclass(frozen=True)
