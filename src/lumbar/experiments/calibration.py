@@ -53,9 +53,8 @@ import pandas as pd
 from scipy.optimize import brentq, least_squares
 
 from ..inputs.characteristics import SoftplusLaw, load_characteristic_set
-from ..mechanics.elements.facet import fit_surface
 from ..mechanics.elements.ligament import softplus_force
-from .fsu import build_fsu
+from .fsu import build_fsu, facet_surfaces
 from ..inputs.io import save_figure_atomic, subplots, write_table_atomic
 from .stepwise_reduction import MAIN_DIRECTIONS, StageSolver
 
@@ -428,13 +427,7 @@ def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_
         info["real_fit_targets"] = rf.targets
         steps.append(_real_fit_step(rf, max(int(st["step"]) for st in steps) + 1, "real_targets", real_targets))
     surf_rows = []
-    lev = geometry.levels[level]
-    for side in ("left", "right"):
-        fl = lev.facets.get(side)
-        if fl is None:
-            continue
-        medial = np.array([0.0, -1.0 if side == "left" else 1.0, 0.0])
-        s = fit_surface(fl.superior, fl.inferior, medial_hint=medial, contact=getattr(fl, "contact", "mean_surface"))
+    for side, _, s in facet_surfaces(geometry.levels[level]):
         p30, p03, p20, p02, p00 = s.coef
         # Eq. 4 in mm: f_mm = p30*1e-6 x_mm^3 + p03*1e-6 y^3 + p20*1e-3 x^2 + p02*1e-3 y^2 + p00*1e3
         for name, v, unit in (("p30", p30 * 1e-6, "1/mm^2"), ("p03", p03 * 1e-6, "1/mm^2"),

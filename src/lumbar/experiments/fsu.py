@@ -126,15 +126,25 @@ def add_level(model: SpineModel, level, charset, facet_stiffness=None, k_shear=N
     k_fac = charset.facet.stiffness if facet_stiffness is None else facet_stiffness
     if not np.isfinite(k_fac) or k_fac < 0:
         raise ValueError(f"facet stiffness must be a finite value >= 0 N/m, got {k_fac}")
+    for side, fl, surf in facet_surfaces(level):
+        model.add_facet(up, lo, surf, fl.inferior, k_fac)
+        sides.append(side)
+    return kinds, sides
+
+
+def facet_surfaces(level) -> list:
+    """[(side, FacetLandmarks, FacetSurface)] of a level's facet joints (left, right; a missing side is left
+    out): the cubic contact surface of paper 1 Eq. 4 fitted to the landmarks, its normal towards the joint's
+    medial side, with the landmarks' contact rule ("mean_surface" where none is given)."""
+    out = []
     for side in ("left", "right"):
         fl = level.facets.get(side)
         if fl is None:
             continue
         medial = np.array([0.0, -1.0 if side == "left" else 1.0, 0.0])
-        surf = fit_surface(fl.superior, fl.inferior, medial_hint=medial, contact=getattr(fl, "contact", "mean_surface"))
-        model.add_facet(up, lo, surf, fl.inferior, k_fac)
-        sides.append(side)
-    return kinds, sides
+        out.append((side, fl, fit_surface(fl.superior, fl.inferior, medial_hint=medial,
+                                          contact=getattr(fl, "contact", "mean_surface"))))
+    return out
 
 
 def build_fsu(geometry, charset, level="L4-L5", facet_stiffness=None, k_shear=None,

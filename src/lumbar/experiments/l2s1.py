@@ -68,19 +68,10 @@ def christophy_sites(chain_xml: str | None = None):
     root = ET.parse(p).getroot()
     sites = {}
 
-    def walk(body, R_parent, t_parent):
-        R = R_parent @ M.mjcf_rotation(body)
-        t = t_parent + R_parent @ M.mjcf_vector(body, "pos", [0, 0, 0])
-        for s in body.findall("site"):
-            sites[s.get("name")] = (body.get("name"),
-                                    M.R_PROJECT_FROM_WORLD @ (t + R @ M.mjcf_vector(s, "pos", [0, 0, 0])))
-        for c in body.findall("body"):
-            walk(c, R, t)
-
-    sac = next((b for b in root.iter("body") if b.get("name") == "sacrum"), None)
-    if sac is None:
-        raise ValueError(f"{p}: no <body name='sacrum'>")
-    walk(sac, np.eye(3), np.zeros(3))
+    for body, R, t in M.body_poses(root, p):
+        for site in body.findall("site"):
+            sites[site.get("name")] = (body.get("name"),
+                                       M.R_PROJECT_FROM_WORLD @ (t + R @ M.mjcf_vector(site, "pos", [0, 0, 0])))
     tendons = {}
     tfile = p.parent / "myotorso_tendon.xml"
     for sp in ET.parse(tfile).getroot().iter("spatial"):

@@ -25,6 +25,19 @@ from ..mechanics.idp import idp_per_newton
 from .l2s1 import LEVELS, derive_cables, run_set
 from .stepwise_reduction import simulate_stepwise_reduction
 
+log = logging.getLogger(__name__)
+
+
+def _check_design(n_specimens, noise_sd, name, unit) -> int:
+    """The virtual-specimen design of a surrogate table: ``n_specimens`` >= 1 (returned as int) and a finite
+    measurement-noise SD >= 0 (``name`` [``unit``] in the message)."""
+    n = int(n_specimens)
+    if n < 1:
+        raise ValueError(f"n_specimens must be >= 1, got {n}")
+    if not np.isfinite(noise_sd) or noise_sd < 0:
+        raise ValueError(f"{name} must be finite and >= 0 {unit}, got {noise_sd}")
+    return n
+
 
 @dataclass(frozen=True)
 class SpecimenVariation:
@@ -162,15 +175,7 @@ def stepwise_reduction_table(geometry, charset, seed, n_specimens=8, variation=N
     Deterministic for a seed. Columns: stage, direction, moment_nm, rom_mean_deg, rom_min_deg,
     rom_max_deg, n_specimens, kind (= "surrogate"), source.
     """
-
-
-
-    log = logging.getLogger(__name__)
-    n_specimens = int(n_specimens)
-    if n_specimens < 1:
-        raise ValueError(f"n_specimens must be >= 1, got {n_specimens}")
-    if not np.isfinite(noise_sd_deg) or noise_sd_deg < 0:
-        raise ValueError(f"noise_sd_deg must be finite and >= 0 deg, got {noise_sd_deg}")
+    n_specimens = _check_design(n_specimens, noise_sd_deg, "noise_sd_deg", "deg")
     v = _variation(variation)
     def one(rng):
         geo_k, cs_k = virtual_specimen(geometry, charset, rng, v, levels=[level])
@@ -267,15 +272,7 @@ def idp_table(geometry, charset, seed, n_specimens=7, variation=None, noise_sd_m
     equilibrium is dropped from that row with a log line and ``n_specimens`` reduced; a row no specimen reached is left out (logged).
     Columns: muscle_setup, load_case, idp_mean_mpa, idp_sd_mpa, n_specimens, kind (= "surrogate"), source.
     """
-
-
-
-    log = logging.getLogger(__name__)
-    n_specimens = int(n_specimens)
-    if n_specimens < 1:
-        raise ValueError(f"n_specimens must be >= 1, got {n_specimens}")
-    if not np.isfinite(noise_sd_mpa) or noise_sd_mpa < 0:
-        raise ValueError(f"noise_sd_mpa must be finite and >= 0 MPa, got {noise_sd_mpa}")
+    n_specimens = _check_design(n_specimens, noise_sd_mpa, "noise_sd_mpa", "MPa")
     for key, delta in (effects or {}).items():
         if key in fx.EFFECTS:
             fx.check_effect(key, delta)

@@ -62,6 +62,22 @@ def mjcf_rotation(el) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=4)
+def body_poses(root, path):
+    """(body element, R, t) of the sacrum and every body below it at qpos0, in the MJCF world frame, parents
+    before children (document order): the pose chain shared by the mesh placements and the muscle sites.
+    ``path`` names the file in the error if the model has no sacrum."""
+    sac = next((b for b in root.iter("body") if b.get("name") == "sacrum"), None)
+    if sac is None:
+        raise GeometryError(f"{path}: no <body name='sacrum'> found")
+    stack = [(sac, np.eye(3), np.zeros(3))]
+    while stack:
+        body, R_parent, t_parent = stack.pop()
+        R = R_parent @ mjcf_rotation(body)
+        t = t_parent + R_parent @ mjcf_vector(body, "pos", [0, 0, 0])
+        yield body, R, t
+        stack.extend((c, R, t) for c in reversed(body.findall("body")))
+
+
 def placements(chain_xml: str) -> dict:
     """{body: (mesh_file_stem, R, t)} so that project = R @ v_stl + t (qpos0)."""
     p = Path(chain_xml)
@@ -82,9 +98,7 @@ def placements(chain_xml: str) -> dict:
             mesh_files[m.get("name")] = m.get("file")
     out = {}
 
-    def walk(body, R_parent, t_parent):
-        R = R_parent @ mjcf_rotation(body)
-        t = t_parent + R_parent @ mjcf_vector(body, "pos", [0, 0, 0])
+    for body, R, t in body_poses(root, p):
         name = body.get("name")
         if name in BODY_OF.values():
             for g in body.findall("geom"):
@@ -94,13 +108,6 @@ def placements(chain_xml: str) -> dict:
                     f = mesh_files.get(g.get("mesh"), f"meshes/{name}.stl")
                     out[name] = (f, R_PROJECT_FROM_WORLD @ Rg, R_PROJECT_FROM_WORLD @ tg)
                     break
-        for child in body.findall("body"):
-            walk(child, R, t)
-
-    sac = next((b for b in root.iter("body") if b.get("name") == "sacrum"), None)
-    if sac is None:
-        raise GeometryError(f"{p}: no <body name='sacrum'> found")
-    walk(sac, np.eye(3), np.zeros(3))
     missing = [b for b in BODY_OF.values() if b not in out]
     if missing:
         raise GeometryError(f"{p}: mesh geoms missing for bodies {missing}")
