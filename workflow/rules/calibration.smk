@@ -21,10 +21,14 @@ rule calibrate:
         characteristic_tables=characteristic_tables(
             config["characteristics"]["data_dir"]
         ),
+        # the surrogate generator's anchoring: the start of the calibration's own real-target fit
+        generator_fit="results/experiments/stepwise_reduction_generator_fit.csv",
     output:
         characteristics=CALIBRATION_CHARACTERISTICS,
         summary="results/calibration/calibration_summary.csv",
         real_fit="results/calibration/calibration_real_fit.csv",
+        prior="results/calibration/calibration_prior.csv",
+        penalties="results/calibration/calibration_penalties.csv",
         rom_fit="results/calibration/calibration_rom_fit.csv",
         disc_points="results/calibration/fig4_points.csv",
         ligament_points="results/calibration/fig5_points.csv",

@@ -50,6 +50,14 @@ def final_outputs():
         "results/tables/table4_outlier_counts.csv",
         # validation on real data (workflow/rules/validation.smk): the report opens with it
         "results/tables/validation_real_data.csv",
+        # load sharing, physical admissibility, other levels (workflow/rules/load_sharing.smk, admissibility.smk)
+        "results/load_sharing/load_sharing_summary.csv",
+        "results/load_sharing/l2s1_cables_l4l5.csv",
+        "results/figures/load_sharing_curves.png",
+        "results/figures/load_sharing_shares.png",
+        "results/calibration/admissibility.csv",
+        "results/tables/multilevel_rom.csv",
+        "results/figures/multilevel_rom.png",
         "results/tables/table4_vs_paper.csv",
         "results/figures/table4_grid.png",
         "results/figures/fig6_rom_stepwise_reduction.png",

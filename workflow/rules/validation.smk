@@ -7,6 +7,7 @@ rule validation_real_data:
         va_artefact=config["discovery"]["va_artefact"],
         anatomy="data/anatomy/l4l5_magnitudes_original_text.csv",
         in_vivo="results/tables/in_vivo_validation.csv",
+        multilevel="results/tables/multilevel_rom.csv",
     output:
         report(
             "results/tables/validation_real_data.csv",
@@ -21,5 +22,42 @@ rule validation_real_data:
         geometry=config["geometry"],
         fsu=config["fsu"],
         sr=config["stepwise_reduction"],
+    script:
+        "../scripts/validation.py"
+
+
+rule multilevel_validation:
+    input:
+        geometry_inputs,
+        characteristics=CALIBRATION_CHARACTERISTICS,
+        published=characteristic_tables(
+            config["characteristics"]["data_dir"], ["calibrated"]
+        ),
+        literature="data/load_sharing/load_sharing_literature.csv",
+        yamamoto="data/experiments/yamamoto1989_levels_original_text.csv",
+    output:
+        rom=report(
+            "results/tables/multilevel_rom.csv",
+            caption="../report/multilevel_rom.rst",
+            category="Validation on real data",
+        ),
+        admissibility="results/tables/multilevel_admissibility.csv",
+        curves="results/load_sharing/multilevel_curves.csv",
+        figure=report(
+            "results/figures/multilevel_rom.png",
+            caption="../report/multilevel_rom_figure.rst",
+            category="Validation on real data",
+        ),
+    log:
+        "logs/multilevel_validation.log",
+    benchmark:
+        "results/benchmarks/multilevel_validation.tsv"
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        geometry=config["geometry"],
+        fsu=config["fsu"],
+        ls=config["load_sharing"],
+        data_dir=config["characteristics"]["data_dir"],
     script:
         "../scripts/validation.py"

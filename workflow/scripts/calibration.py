@@ -39,11 +39,15 @@ if snakemake.rule == "calibrate":
              dict(ref["kind"].value_counts()))
     geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
     paper = load_characteristic_set("calibrated", data_dir=snakemake.input.characteristics)
+    anchor = cal.read_fit_start(_common.first(snakemake.input.generator_fit))
     res = cal.calibrate(geo, ref, initial=paper, level=f["level"], k_shear=f.get("disc_shear_stiffness_n_per_m"),
                         tolerance_deg=sr["outlier_tolerance_deg"], data_kind=data_kind, max_iter=s["max_iter"],
                         surrogate_weight=sr["surrogate_weight"], family=sr["calibration_family"],
                         final_surrogate_weight=sr["final_surrogate_weight"],
-                        real_targets=real if data_kind == "surrogate" else None)
+                        real_targets=real if data_kind == "surrogate" else None,
+                        transfer=sr["ligament_transfer"],
+                        geometry_path=g["path"] if g["kind"] == "visible_human" else None,
+                        anchor_start_values=anchor)
     log.info("calibration wall time %.1f s", res.wall_time_s)
     out_dir = Path(snakemake.output.characteristics[0]).parent
     cal.write_characteristics(res, snakemake.input.characteristics, out_dir,
@@ -53,13 +57,23 @@ if snakemake.rule == "calibrate":
     rf = res.info.get("real_fit")
     (rf if rf is not None else pd.DataFrame(columns=["parameter", "start", "value", "unit", "identifiable",
                                                      "at_bound"])).pipe(write_table_atomic, snakemake.output.real_fit)
-    for r in res.summary.itertuples():
-        if getattr(r, "at_bound", False):
-            log.warning("calibration step %s (%s): parameter(s) %s end at a bound", r.step, r.structure,
-                        r.at_bound_parameters)
-        if not getattr(r, "identifiable", True):
-            log.warning("calibration step %s (%s): not identifiable from its stage; kept at the published value",
-                        r.step, r.structure)
+    prior = res.info.get("prior")
+    (prior if prior is not None else pd.DataFrame(columns=["ligament", "a_n", "b_pct", "c_n", "d_pct"])).pipe(
+        write_table_atomic, snakemake.output.prior)
+    ff = res.info.get("final_fit")
+    (ff.penalties if ff is not None else pd.DataFrame(columns=["penalty", "value"])).pipe(
+        write_table_atomic, snakemake.output.penalties)
+    bound = [r for r in res.summary.itertuples() if getattr(r, "at_bound", False)]
+    unidentifiable = [r for r in res.summary.itertuples() if not getattr(r, "identifiable", True)]
+    log.info("calibration: %d of %d steps with a parameter at a bound (%s), %d not identifiable from their stage "
+             "(kept at the start value: %s); see %s", len(bound), len(res.summary),
+             "; ".join(f"{r.structure}: {r.at_bound_parameters}" for r in bound) or "none", len(unidentifiable),
+             ", ".join(str(r.structure) for r in unidentifiable) or "none", snakemake.output.summary)
+    if rf is not None and "bound_reason" in rf:
+        unexplained = rf[rf["at_bound"].astype(bool) & (rf["bound_reason"].fillna("") == "")]
+        if len(unexplained):
+            log.warning("final calibration: parameter(s) %s end at a bound with no documented reason: check the fit "
+                        "(%s)", ", ".join(unexplained["parameter"]), snakemake.output.real_fit)
     res.rom_fit.assign(data_kind=data_kind).pipe(write_table_atomic, snakemake.output.rom_fit)
     res.disc_points.assign(data_kind=data_kind).pipe(write_table_atomic, snakemake.output.disc_points)
     res.ligament_points.assign(data_kind=data_kind).pipe(write_table_atomic, snakemake.output.ligament_points)

@@ -18,6 +18,47 @@ from lumbar.inputs.characteristics import resolve_characteristic_set  # noqa: E4
 from lumbar.geometry import load_geometry  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 
+if snakemake.rule == "multilevel_validation":
+    import numpy as np  # noqa: E402
+
+    from lumbar.experiments import admissibility as ADM  # noqa: E402
+    from lumbar.experiments.calibration import elongation_prior  # noqa: E402
+    from lumbar.experiments.fsu import build_fsu  # noqa: E402
+    from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
+
+    g, f, ls = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.ls
+    levels = [lv for lv in ls["other_levels"] if lv != f["level"]]
+    geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=levels)
+    published = load_characteristic_set("calibrated", data_dir=snakemake.params.data_dir)
+    cal = load_characteristic_set("calibrated",
+                                  data_dir=Path(_common.as_list(snakemake.input.characteristics)[0]).parent)
+    on_elongation = any(getattr(law, "law_length_m", None) is not None for law in cal.ligaments.values())
+    prior = elongation_prior(published)[0] if on_elongation else published
+    lit = ADM.read_literature(snakemake.input.literature)
+    moments = np.round(np.arange(0.0, ls["max_moment_nm"] + 1e-9, ls["moment_step_nm"]), 6)
+    curves, adm = [], []
+    for lv in levels:
+        fsu = build_fsu(geo, cal, lv, facet_stiffness=f.get("facet_stiffness_n_per_m"),
+                        k_shear=f.get("disc_shear_stiffness_n_per_m"), follower=True)
+        cv, comp = ADM.assess(fsu, fsu, moments_nm=moments)
+        cv.insert(0, "level", lv)
+        curves.append(cv)
+        limits = ADM.pretension_limits(published, prior, geo, lv, g["path"] if g["kind"] == "visible_human" else None)
+        adm.append(ADM.criteria_table(cv, comp, limits, lv, ADM.neutral_zones(lv, snakemake.input.yamamoto), lit,
+                                      ADM.force_scales(cal, prior)))
+    curves = pd.concat(curves, ignore_index=True)
+    adm = pd.concat(adm, ignore_index=True)
+    rom = V.multilevel_rom(curves, pd.read_csv(snakemake.input.yamamoto))
+    write_table_atomic(curves, snakemake.output.curves)
+    write_table_atomic(adm, snakemake.output.admissibility)
+    write_table_atomic(rom, snakemake.output.rom)
+    V.plot_multilevel(rom, curves, snakemake.output.figure)
+    jumps = adm[adm["criterion"].str.startswith("no snap-through") & ~adm["passed"]]
+    log.info("other levels (calibrated set unchanged): %d of %d ROM values within %s; %d of %d admissibility "
+             "criteria pass; snap-through at %d (level, direction) pairs", int(rom["within"].sum()), len(rom),
+             rom["tolerance_rule"].iloc[0] if len(rom) else "-", int(adm["passed"].sum()), len(adm), len(jumps))
+    sys.exit(0)
+
 g, f, sr = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.sr
 geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
 cal_dir = Path(_common.as_list(snakemake.input.calibrated)[0]).parent
@@ -35,6 +76,7 @@ for p in _common.as_list(snakemake.input.real_targets):
 rows += V.va_artefact_rows(geo, cs, pd.read_csv(snakemake.input.va_artefact), level=f["level"])
 rows += V.in_vivo_rows(pd.read_csv(snakemake.input.in_vivo))
 rows += V.anatomy_rows(geo, pd.read_csv(snakemake.input.anatomy), level=f["level"])
+rows += V.multilevel_rows(pd.read_csv(snakemake.input.multilevel))
 df = V.scoreboard(rows)
 write_table_atomic(df, snakemake.output[0])
 ind = df[df["role"] == V.INDEPENDENT]

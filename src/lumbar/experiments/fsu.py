@@ -67,6 +67,11 @@ def disc_frame(normal) -> np.ndarray:
     return np.vstack([e1, np.cross(e3, e1), e3])
 
 
+#: fibre-group kind of the optional follower-load cable of a unit (weight 0 in every stage mask; a caller sets its
+#: mask weight to the compressive force in N)
+FOLLOWER = "follower"
+
+
 @dataclass
 class FSU:
     model: SpineModel
@@ -74,15 +79,16 @@ class FSU:
     charset: object
     group_kind: list           # ligament kind per fibre group
     surface_side: list         # "left"/"right" per facet surface
+    follower_group: int | None = None   # fibre-group id of the follower-load cable (build_fsu(follower=True))
 
     def masks(self, stages):
-        """Element masks (S, nf) and (S, nc) for a list of reduction stages."""
+        """Element masks (S, nf) and (S, nc) for a list of reduction stages (the follower cable, if any, at 0)."""
         m = self.model
         fk = np.array([self.group_kind[g] for g in m.f_group]) if m.nf else np.array([])
         fmask = np.ones((len(stages), m.nf))
         cmask = np.ones((len(stages), m.nc))
         for i, st in enumerate(stages):
-            gone = removed_structures(st)
+            gone = removed_structures(st) | {FOLLOWER}
             if m.nf:
                 fmask[i] = ~np.isin(fk, list(gone))
             if "facets" in gone:
@@ -113,9 +119,11 @@ def add_level(model: SpineModel, level, charset, facet_stiffness=None, k_shear=N
         if law is None or lig.kind in exclude:
             continue
         if hasattr(law, "a"):
+            l_ref = np.linalg.norm(np.asarray(lig.upper, float) - np.asarray(lig.lower, float), axis=1) + \
+                np.broadcast_to(np.asarray(lig.extra_length, float), (len(lig.upper),))
+            pre, par = softplus_fibre_params(law, l_ref, f"{level.name} {lig.name}")
             model.add_fibre_group(lig.name, lig.kind, level.name, up, lo, lig.upper, lig.lower,
-                                  lig.extra_length, "softplus", (law.a, law.b, law.c, law.d),
-                                  prestrain=law.prestrain)
+                                  lig.extra_length, "softplus", par, prestrain=pre)
         else:
             shape = rupp_shape(law.l_a_m, law.l_b_m, law.f_a_n, law.f_b_n, law.n_strands)
             model.add_fibre_group(lig.name, lig.kind, level.name, up, lo, lig.upper, lig.lower,
@@ -127,9 +135,48 @@ def add_level(model: SpineModel, level, charset, facet_stiffness=None, k_shear=N
     if not np.isfinite(k_fac) or k_fac < 0:
         raise ValueError(f"facet stiffness must be a finite value >= 0 N/m, got {k_fac}")
     for side, fl, surf in facet_surfaces(level):
-        model.add_facet(up, lo, surf, fl.inferior, k_fac)
+        model.add_facet(up, lo, surf, getattr(fl, "contact_set", fl.inferior), k_fac)
         sides.append(side)
     return kinds, sides
+
+
+#: a law on elongation may leave each fibre at least this fraction of its reference length as slack length
+MIN_SLACK_FRACTION = 0.2
+
+
+def softplus_fibre_params(law, l_ref, where=""):
+    """Per-fibre (prestrain (n,), Eq. 7 parameters (n, 4)) of a softplus law for fibres of reference lengths
+    ``l_ref`` (n,) [m], in the model's own-strain form (eps = 100 (l / l0 - 1), l0 = l_ref / (1 + prestrain)).
+
+    A law on elongation (``law.law_length_m`` = L) takes eps_L = 100 (l - l0) / L with l0 = l_ref - e0, e0 =
+    prestrain * L: then eps_L = eps * l0 / L, i.e. the same Eq. 7 with b and d multiplied by L / l0 per fibre (a, c
+    unchanged). The paper's own rule (``law_length_m`` None) gives the set's (a, b, c, d) and prestrain to every fibre.
+    """
+    l_ref = np.asarray(l_ref, float)
+    n = l_ref.shape[0]
+    if law.law_length_m is None:
+        return np.full(n, law.prestrain), np.tile([law.a, law.b, law.c, law.d], (n, 1))
+    L = float(law.law_length_m)
+    l0 = l_ref - law.prestrain * L
+    if np.any(l0 < MIN_SLACK_FRACTION * l_ref):
+        raise ValueError(f"ligament law on elongation {where}: pre-elongation {law.prestrain * L * 1e3:.3g} mm leaves "
+                         f"a slack length below {MIN_SLACK_FRACTION:g} x the shortest fibre "
+                         f"({l_ref.min() * 1e3:.3g} mm); expected prestrain_pct * law_length < "
+                         f"{(1 - MIN_SLACK_FRACTION) * l_ref.min() * 1e3:.3g} mm")
+    k = L / l0
+    par = np.column_stack([np.full(n, law.a), law.b * k, np.full(n, law.c), law.d * k])
+    return l_ref / l0 - 1.0, par
+
+
+def set_ligament_law(model: SpineModel, groups, law):
+    """Rewrite, in place, the slack lengths and Eq. 7 parameters of the fibres of ``groups`` (fibre-group ids of a
+    finalized model) for the softplus ``law`` (the same conversion as :func:`add_level`)."""
+    sel = np.flatnonzero(np.isin(model.f_group, list(groups)))
+    if sel.size == 0:
+        return
+    pre, par = softplus_fibre_params(law, model.f_lref[sel], f"groups {list(groups)}")
+    model.f_l0[sel] = model.f_lref[sel] / (1.0 + pre)
+    model.f_par[sel, :4] = par
 
 
 def facet_surfaces(level) -> list:
@@ -143,13 +190,23 @@ def facet_surfaces(level) -> list:
             continue
         medial = np.array([0.0, -1.0 if side == "left" else 1.0, 0.0])
         out.append((side, fl, fit_surface(fl.superior, fl.inferior, medial_hint=medial,
-                                          contact=getattr(fl, "contact", "mean_surface"))))
+                                          contact=getattr(fl, "contact", "mean_surface"),
+                                          contact_points=getattr(fl, "contact_points", None))))
     return out
 
 
+#: length [m] of the follower-load cable: its far end is fixed this far below the disc centre, along the normal, so
+#: its line of action stays within 1 mrad of the disc normal through the (moving) disc centre
+FOLLOWER_CABLE_LENGTH_M = 1.0
+
+
 def build_fsu(geometry, charset, level="L4-L5", facet_stiffness=None, k_shear=None,
-              contact_eps=5e-5, slack_width_pct=0.5) -> FSU:
-    """The functional unit of ``level``: lower vertebra fixed, upper free."""
+              contact_eps=5e-5, slack_width_pct=0.5, follower=False) -> FSU:
+    """The functional unit of ``level``: lower vertebra fixed, upper free.
+
+    ``follower``: also add a constant-tension cable from the disc centre (carried by the upper vertebra) along the
+    disc normal to a point fixed ``FOLLOWER_CABLE_LENGTH_M`` below: a follower (pure axial) load whose force in N is
+    its fibre-mask weight (0 in :meth:`FSU.masks`)."""
     if level not in geometry.levels:
         raise ValueError(f"geometry {geometry.name!r} has no level {level!r}; has {sorted(geometry.levels)}")
     lev = geometry.levels[level]
@@ -157,8 +214,15 @@ def build_fsu(geometry, charset, level="L4-L5", facet_stiffness=None, k_shear=No
     m.add_body(lev.upper, geometry.vertebrae[lev.upper].centroid)
     m.add_body(lev.lower, geometry.vertebrae[lev.lower].centroid, fixed=True)
     kinds, sides = add_level(m, lev, charset, facet_stiffness, k_shear)
+    gid = None
+    if follower:
+        c = np.asarray(lev.disc_centre, float)
+        n = disc_frame(lev.disc_normal)[2]
+        gid = m.add_fibre_group("follower_load", FOLLOWER, lev.name, 0, -1, c[None],
+                                (c - FOLLOWER_CABLE_LENGTH_M * n)[None], 0.0, "cable", (1.0,))
+        kinds = kinds + [FOLLOWER]
     m.finalize()
-    return FSU(m, lev, charset, kinds, sides)
+    return FSU(m, lev, charset, kinds, sides, gid)
 
 
 def moment_loads(directions, moments_nm, nb=1, body=0):

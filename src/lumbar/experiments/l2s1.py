@@ -27,6 +27,7 @@ import matplotlib
 
 from ..inputs import resources, tables
 from .fsu import DIRECTIONS, add_level
+from .load_sharing import level_structures, structure_loads
 from ..geometry import load_geometry
 from ..geometry import myo_sim as M
 from ..geometry.myo_sim import BODY_OF
@@ -389,6 +390,15 @@ def internal_loads(sol: Solution, level=IDP_LEVEL) -> pd.DataFrame:
             df[f"lig_{kind}_n"] = gf[:, kinds[kind]].sum(1)
     cab = [g for g, (_, kind, _) in enumerate(m.fibre_groups) if kind == "cable"]
     df["cable_total_n"] = gf[:, cab].sum(1) if cab else 0.0
+    # where the load goes at this level: the force each structure exerts on the level's upper vertebra along the
+    # disc normal (+ = pushes it up, i.e. carries compression) and its moments about the disc centre
+    st = level_structures(m, level, {sid: side for sid, (lv, side) in enumerate(sp.surface_side) if lv == level})
+    labels, F, M = structure_loads(m, sol.x, sol.R, sol.fmask, 1.0, structures=st)
+    normal = np.einsum("bij,j->bi", sol.R[:, m.discs[di].lower], m.discs[di].frame[2]) \
+        if m.discs[di].lower >= 0 else np.broadcast_to(m.discs[di].frame[2], (len(sol.x), 3))
+    for j, lab in enumerate(labels):
+        df[f"{lab}_axial_n"] = np.einsum("bi,bi->b", F[:, j], normal)
+        df[f"{lab}_moment_y_nm"] = M[:, j, 1]
     return df
 
 

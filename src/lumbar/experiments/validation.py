@@ -151,3 +151,80 @@ def anatomy_rows(geometry, anatomy: pd.DataFrame, level="L4-L5") -> list[dict]:
 
 def scoreboard(rows: list[dict]) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=list(COLUMNS))
+
+
+# ------------------------------------------------------------------ other levels (independent of the calibration)
+MULTILEVEL_DIRECTIONS = {"flexion": ("flexion",), "extension": ("extension",),
+                         "lateral_bending_one_side": ("lateral_bending_right", "lateral_bending_left"),
+                         "axial_rotation_one_side": ("axial_rotation_left", "axial_rotation_right")}
+
+
+def multilevel_rom(curves: pd.DataFrame, yamamoto: pd.DataFrame, moment_nm=10.0, rel=REL_TOLERANCE) -> pd.DataFrame:
+    """ROM at ``moment_nm`` of every level in ``curves`` (a ``level`` column; moment-rotation curves of the
+    calibrated set applied unchanged) against Yamamoto et al. (1989): level, direction, sim_deg (lateral bending
+    and axial rotation: the mean of both sides, as the abstract's one-side values), measured_deg, ratio,
+    within (|sim - measured| <= rel x measured), converged, largest jump of the curve."""
+    rows = []
+    y = yamamoto[yamamoto["quantity"] == "rom"]
+    for level, cv in curves.groupby("level", sort=False):
+        for yd, dirs in MULTILEVEL_DIRECTIONS.items():
+            ref = y[(y["level"] == level) & (y["direction"] == yd)]
+            if ref.empty:
+                continue
+            sel = cv[cv["direction"].isin(dirs)]
+            at = sel[np.isclose(sel["moment_nm"], moment_nm)]
+            conv = bool(sel["converged"].all()) and len(at) == len(dirs)
+            sim = float(at["rotation_deg"].mean()) if conv else float("nan")
+            jump = float(max((np.abs(np.diff(g.sort_values("moment_nm")["rotation_deg"].to_numpy())).max()
+                              for _, g in sel.groupby("direction")), default=np.nan))
+            meas = float(ref["value_deg"].iloc[0])
+            rows.append({"level": level, "direction": yd, "moment_nm": moment_nm, "sim_deg": sim,
+                         "measured_deg": meas, "ratio": sim / meas, "within": bool(abs(sim - meas) <= rel * meas),
+                         "tolerance_rule": f"measured +- {rel * 100:g} %", "converged": conv,
+                         "largest_jump_deg": jump, "kind": str(ref["kind"].iloc[0]), "source": str(ref["source"].iloc[0])})
+    return pd.DataFrame(rows)
+
+
+def multilevel_rows(table: pd.DataFrame, set_name="calibrated") -> list[dict]:
+    """validation_real_data rows of :func:`multilevel_rom`: independent comparisons (no level other than the
+    calibrated one was fitted)."""
+    rows = []
+    for r in table.itertuples(index=False):
+        rows.append({"quantity": "ROM, other levels", "condition": f"{r.level} {r.direction} {r.moment_nm:g} N*m",
+                     "unit": "deg", "sim": r.sim_deg, "measured": r.measured_deg, "measured_low": np.nan,
+                     "measured_high": np.nan, "kind": r.kind, "source": r.source, "within": bool(r.within),
+                     "tolerance_rule": r.tolerance_rule, "set": set_name, "role": INDEPENDENT,
+                     "note": "the L4-L5 calibrated characteristics applied unchanged (as paper 1 does for L2-S1)"})
+    return rows
+
+
+def plot_multilevel(rom: pd.DataFrame, curves: pd.DataFrame, path) -> None:
+    """Other levels: simulated vs measured ROM at 10 N*m (bars with the +-25 % band) and the flexion-extension
+    curves of every level."""
+    from ..inputs.io import save_figure_atomic, subplots  # noqa: PLC0415 - io draws only for figure callers
+    fig, (a1, a2) = subplots(1, 2, figsize=(12, 4.5))
+    labels = [f"{r.level}\n{r.direction.replace('_one_side', '').replace('_', ' ')}" for r in rom.itertuples()]
+    xs = np.arange(len(rom))
+    meas = rom["measured_deg"].to_numpy(float)
+    a1.bar(xs - 0.2, meas, 0.4, color="0.7", label="Yamamoto 1989")
+    a1.errorbar(xs - 0.2, meas, yerr=0.25 * meas, fmt="none", ecolor="k", capsize=2, lw=0.8)
+    col = ["C2" if w else "C3" for w in rom["within"]]
+    a1.bar(xs + 0.2, rom["sim_deg"].to_numpy(float), 0.4, color=col, label="model (green: within 25 %)")
+    a1.set_xticks(xs)
+    a1.set_xticklabels(labels, fontsize=6, rotation=90)
+    a1.set_ylabel("ROM at 10 N*m [deg]")
+    a1.legend(fontsize=8)
+    a1.set_title(f"Other levels, L4-L5 characteristics unchanged: {int(rom['within'].sum())} of {len(rom)} within 25 %",
+                 fontsize=9)
+    for i, (lv, g) in enumerate(curves.groupby("level", sort=False)):
+        for d, sign, ls in (("flexion", 1, "-"), ("extension", -1, "--")):
+            h = g[g["direction"] == d].sort_values("moment_nm")
+            a2.plot(sign * h["moment_nm"], sign * h["rotation_deg"], ls, color=f"C{i}", label=lv if d == "flexion" else None)
+    a2.axhline(0, color="0.5", lw=0.5)
+    a2.axvline(0, color="0.5", lw=0.5)
+    a2.set_xlabel("moment [N*m] (flexion +, extension -)")
+    a2.set_ylabel("rotation [deg]")
+    a2.legend(fontsize=8)
+    a2.grid(alpha=0.3)
+    fig.tight_layout()
+    save_figure_atomic(fig, path, dpi=110)

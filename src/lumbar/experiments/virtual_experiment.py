@@ -122,9 +122,13 @@ def perturb_geometry(geometry, rng: np.random.Generator, v: SpecimenVariation, l
         for side in sorted(lev.facets):
             f = lev.facets[side]
             f.superior, f.inferior = sc(f.superior), sc(f.inferior)
+            if f.contact_points is not None:
+                f.contact_points = sc(f.contact_points)
             if jitter:
                 f.superior = f.superior + rng.normal(0, v.landmark_sd_m, f.superior.shape)
                 f.inferior = f.inferior + rng.normal(0, v.landmark_sd_m, f.inferior.shape)
+                if f.contact_points is not None:
+                    f.contact_points = f.contact_points + rng.normal(0, v.landmark_sd_m, f.contact_points.shape)
         for lig in lev.ligaments:
             lig.upper, lig.lower = sc(lig.upper), sc(lig.lower)
             lig.extra_length = np.asarray(lig.extra_length, float) * s

@@ -33,6 +33,14 @@ class FacetLandmarks:
     # surfaces touch at rest (the CT joint space is cartilage): the surface passes through the nearest
     # upper-process landmark, so contact begins at once when the joint closes
     contact: str = "mean_surface"
+    # optional (n,3) points of the upper vertebra's articular face that can touch the contact surface (e.g. every node
+    # of the cartilage layer's upper sheet); None: the nine ``inferior`` landmarks. More points spread the contact over
+    # the face instead of switching between nine points (a stiffness step whenever one of them leaves the surface)
+    contact_points: np.ndarray | None = None
+
+    @property
+    def contact_set(self) -> np.ndarray:
+        return self.inferior if self.contact_points is None else self.contact_points
 
 
 @dataclass

@@ -79,8 +79,13 @@ def _level(lev: Level) -> Level:
         L, R = lev.facets["left"], lev.facets["right"]
         sl, sr, _ = _average_pair(L.superior, R.superior)
         il, ir, _ = _average_pair(L.inferior, R.inferior)
-        out.facets = {"left": FacetLandmarks(superior=sl, inferior=il, contact=L.contact),
-                      "right": FacetLandmarks(superior=sr, inferior=ir, contact=R.contact)}
+        cl = cr = None
+        if L.contact_points is not None and R.contact_points is not None:
+            # the union of the left face's points and the mirrored right face's: the same set on both sides
+            cl = np.vstack([L.contact_points, R.contact_points * M])
+            cr = cl * M
+        out.facets = {"left": FacetLandmarks(superior=sl, inferior=il, contact=L.contact, contact_points=cl),
+                      "right": FacetLandmarks(superior=sr, inferior=ir, contact=R.contact, contact_points=cr)}
     ligs = {g.name: g for g in lev.ligaments}
     new = {}
     for a, b in PAIRED_LIGAMENTS:

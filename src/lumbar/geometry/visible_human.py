@@ -270,8 +270,63 @@ def load_visible_human(path, levels=None) -> SpineGeometry:
         for s, side in (("L", "left"), ("R", "right")):
             nodes = read_nodes(folder / "facet_fe" / f"{pre}_FAC{s}_{U}.node")
             on_u, on_l = _split_joint_layer(nodes, trees[U], trees[L])
-            facets[side] = FacetLandmarks(superior=_grid_on_nodes(on_l), inferior=_grid_on_nodes(on_u), contact="touching")
+            facets[side] = FacetLandmarks(superior=_grid_on_nodes(on_l), inferior=_grid_on_nodes(on_u), contact="touching",
+                                          contact_points=on_u.copy())
         geo_levels[lv] = Level(lv, U, L, c, n, csa, height, facets, ligs)
     vertebrae = {v: Vertebra(v, meshes[v], A.hull_centroid(bodies[v].vertices)) for v in verts}
     return SpineGeometry(name="visible_human", source=f"Visible Human Male lumbosacral spine (Remus et al. 2021, "
                          f"BSD-3-Clause) from {folder}", vertebrae=vertebrae, levels=geo_levels)
+
+
+#: the columns of a ``*_UWMat.lig`` row after the name (Remus et al. 2021; data/geometry/visible_human_lss/README.md)
+UW_FIELDS = ("reference_strain", "transition_strain", "stiffness_n", "cross_section_mm2")
+
+
+def read_uw_materials(path, level: str) -> dict:
+    """The original model's ligament materials of ``level`` from the ``*_UWMat.lig`` files of a visible_human_lss
+    folder: {ligament name as in :func:`load_visible_human` (CL_L, FL, ITL_R, ALL, ...): dict(UW_FIELDS)}.
+
+    Per fibre, Blankevoort/UW law (Remus et al. 2021): rest length l0 = l_geometric * (1 + reference_strain),
+    strain e = l / l0 - 1, force 0 (e <= 0), stiffness_n * e**2 / (2 * transition_strain) (e < transition),
+    stiffness_n * (e - transition / 2) beyond (:func:`uw_force`). A missing file is an error naming it."""
+    folder = Path(path)
+    if level not in PREFIX:
+        raise GeometryError(f"unknown level {level!r}; expected one of {sorted(PREFIX)}")
+    pre = PREFIX[level]
+    out = {}
+    for part, names in (("AS", AS_NAMES), ("MP", MP_NAMES)):
+        f = folder / "ligaments" / f"{pre}_Ligs_{part}_UWMat.lig"
+        if not f.is_file():
+            raise GeometryError(f"{f}: ligament material file missing (expected the *_UWMat.lig files of the "
+                                "Visible Human set)")
+        lines = [ln.strip() for ln in f.read_text().splitlines() if ln.strip()]
+        try:
+            n = int(float(lines[0]))
+        except (IndexError, ValueError):
+            raise GeometryError(f"{f}: first line must be the number of ligaments") from None
+        if len(lines) != n + 1:
+            raise GeometryError(f"{f}: {len(lines) - 1} material rows for {n} ligaments")
+        for row, ln in enumerate(lines[1:], start=2):
+            parts = [p.strip() for p in ln.split(",")]
+            if len(parts) != 5:
+                raise GeometryError(f"{f}, line {row}: expected 'name, reference strain, transition strain, "
+                                    f"stiffness, cross-section', got {ln!r}")
+            name = NAME_MAP.get(parts[0].split("_", 1)[1], parts[0].split("_", 1)[1])
+            vals = [float(v) for v in parts[1:]]
+            if not (vals[1] > 0 and vals[2] >= 0 and vals[3] > 0):
+                raise GeometryError(f"{f}, line {row}: transition strain and cross-section must be > 0, stiffness "
+                                    f">= 0; got {vals}")
+            out[name] = dict(zip(UW_FIELDS, vals))
+        missing = [nm for nm in names if NAME_MAP.get(nm, nm) not in out]
+        if missing:
+            raise GeometryError(f"{f}: no material row for {missing}")
+    return out
+
+
+def uw_force(length, geometric_length, mat: dict):
+    """Force [N] of one fibre of the Blankevoort/UW law of :func:`read_uw_materials` at ``length`` [m], for a fibre
+    whose length in the geometry is ``geometric_length`` [m] (vectorised)."""
+    l0 = np.asarray(geometric_length, float) * (1.0 + mat["reference_strain"])
+    e = np.asarray(length, float) / l0 - 1.0
+    et, k = mat["transition_strain"], mat["stiffness_n"]
+    return np.where(e <= 0, 0.0, np.where(e < et, k * e * e / (2.0 * et), k * (e - 0.5 * et)))

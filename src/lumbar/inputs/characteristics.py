@@ -130,6 +130,12 @@ class SoftplusLaw(_PrestrainInPercent):
     Eq. 7 is defined in percent strain. prestrain_pct in %. Note the paper's
     calibrated FL (d < 0) and the 'SSL neg.' alternative (a < 0) have negative
     slope: this is published data, not an error.
+
+    ``law_length_m`` [m] (optional): the law is defined on ELONGATION. eps = 100 * (l - l0) / law_length,
+    the slack length of every fibre l0 = l_ref - prestrain * law_length (l_ref its reference length), so
+    the force depends on how far the fibre is stretched in mm, whatever the fibre's own length (the
+    transfer of a law between geometries whose fibres differ in length, docs/validity.md). ``None``: the
+    paper's own rule, eps in percent of each fibre's slack length l0 = l_ref / (1 + prestrain).
     """
 
     a: float
@@ -138,6 +144,12 @@ class SoftplusLaw(_PrestrainInPercent):
     d: float
     prestrain_pct: float
     source: str = ""
+    law_length_m: float | None = None
+
+    @property
+    def pre_elongation_m(self) -> float | None:
+        """Elongation beyond slack at the reference length [m] of a law on elongation (None otherwise)."""
+        return None if self.law_length_m is None else self.prestrain * self.law_length_m
 
 
 @dataclass(frozen=True)
@@ -231,7 +243,7 @@ _FACET_PARAMS = {
     "p30": ({"1/mm^2": 1.0}, None), "p03": ({"1/mm^2": 1.0}, None),
     "p20": ({"1/mm": 1.0}, None), "p02": ({"1/mm": 1.0}, None), "p00": ({"mm": 1.0}, None),
 }
-_SOFTPLUS_UNITS = {"a": "N", "b": "%", "c": "N", "d": "%"}
+_SOFTPLUS_UNITS = {"a": "N", "b": "%", "c": "N", "d": "%", "law_length": "mm", "prestrain": "%"}
 _RUPP_PARAMS = {
     "l_a": (_LEN, "pos"), "l_b": (_LEN, "pos"), "f_a": ({"N": 1.0}, "pos"), "f_b": ({"N": 1.0}, "pos"),
     "prestrain": ({"%": 1.0}, None), "n_strands": ({"1": 1.0}, "pos"),
@@ -251,6 +263,7 @@ _BOUNDS = {
     "n_strands": (1.0, 20.0, "1"),
     "softplus.a": (-1e6, 1e6, "N"), "softplus.c": (-1e6, 1e6, "N"),
     "softplus.b": (-200.0, 200.0, "%"), "softplus.d": (-200.0, 200.0, "%"),
+    "softplus.law_length": (0.0, 200.0, "mm"), "softplus.prestrain": (-50.0, 50.0, "%"),
 }
 
 
@@ -396,6 +409,7 @@ def _load_softplus(d: Path, name: str, prestrain: dict[str, float]):
     df = _read(path, tables.LIGAMENTS_SOFTPLUS)
     params: dict[tuple[str, str], dict[str, float]] = {}
     srcs: dict[tuple[str, str], str] = {}
+    calibrated_kinds: dict[tuple[str, str], bool] = {}
     seen: set = set()
     for row, r in _iter(df):
         p = r["parameter"]
@@ -406,6 +420,9 @@ def _load_softplus(d: Path, name: str, prestrain: dict[str, float]):
             raise _err(path, row, "value", "d = 0 (division by zero in Eq. 7)", "a non-zero number")
         _check_bounds(path, row, "value", f"softplus.{p}", r["value"],
                       f"softplus parameter '{p}' of {r['set']} {r['ligament']}")
+        if p == "law_length" and not r["value"] > 0:
+            raise _err(path, row, "value", f"law_length {r['value']!r} mm is not positive",
+                       "a length > 0 mm (the length on which the law's percent elongation is defined)")
         dkey = (r["set"], r["ligament"], r["variant"], p)
         if dkey in seen:
             raise _err(path, row, "parameter", f"duplicate row for (set, ligament, variant, parameter) {dkey}",
@@ -418,6 +435,8 @@ def _load_softplus(d: Path, name: str, prestrain: dict[str, float]):
             raise _err(path, row, "parameter", f"duplicate parameter {p!r} for {key}", "each of a,b,c,d once")
         params[key][p] = r["value"]
         srcs[key] = r["source"]
+        if str(r["kind"]).startswith("calibrated_on_"):
+            calibrated_kinds[key] = True
     ligs, alts = {}, {}
     for kind in EXPECTED_LIGAMENTS[name]:
         if (kind, "primary") not in params:
@@ -428,13 +447,16 @@ def _load_softplus(d: Path, name: str, prestrain: dict[str, float]):
         if missing:
             raise _err(path, None, "parameter", f"set '{name}' ligament '{kind}' ({variant}) lacks {missing}",
                        "one row for each of a, b, c, d")
-        if kind in ABSENT_LIGAMENTS[name] and variant == "primary":
+        if kind in ABSENT_LIGAMENTS[name] and variant == "primary" and not calibrated_kinds.get((kind, variant)):
             raise _err(path, None, "ligament", f"set '{name}' has rows for '{kind}', which the paper "
-                       f"does not provide ({ABSENT_LIGAMENTS[name][kind]})", "no such rows")
-        if kind not in prestrain:
+                       f"does not provide ({ABSENT_LIGAMENTS[name][kind]})",
+                       "no such rows (a calibration output, kind calibrated_on_*, may add them)")
+        if kind not in prestrain and "prestrain" not in pv:
             raise _err(d / "ligament_prestrain.csv", None, "ligament", f"no prestrain for '{kind}'",
-                       "one row per ligament kind")
-        law = SoftplusLaw(pv["a"], pv["b"], pv["c"], pv["d"], prestrain[kind], source=srcs[(kind, variant)])
+                       "one row per ligament kind (or a 'prestrain' row of the set in ligaments_softplus.csv)")
+        length = pv.get("law_length")
+        law = SoftplusLaw(pv["a"], pv["b"], pv["c"], pv["d"], pv.get("prestrain", prestrain.get(kind)),
+                          source=srcs[(kind, variant)], law_length_m=None if length is None else length * 1e-3)
         (ligs if variant == "primary" else alts)[kind] = law
     return ligs, alts
 

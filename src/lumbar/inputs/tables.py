@@ -145,7 +145,9 @@ LIGAMENTS_SOFTPLUS = TableSchema("ligaments_softplus", {
     "set": Column("str", allowed=frozenset(SOFTPLUS_SETS)),
     "ligament": Column("str", allowed=frozenset(LIGAMENT_KINDS)),
     "variant": Column("str", allowed=frozenset({"primary", "alternative"})),
-    "parameter": Column("str", allowed=frozenset("abcd")),
+    # a, b, c, d of Eq. 7; optional law_length [mm] (the law takes elongation in percent of this length instead of
+    # each fibre's own strain) and prestrain [%] (this set's own prestrain, else ligament_prestrain.csv)
+    "parameter": Column("str", allowed=frozenset({"a", "b", "c", "d", "law_length", "prestrain"})),
     **_COMMON})
 LIGAMENT_PRESTRAIN = TableSchema("ligament_prestrain", {
     "ligament": Column("str", allowed=frozenset(LIGAMENT_KINDS)),

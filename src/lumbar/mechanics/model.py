@@ -90,7 +90,9 @@ class SpineModel:
         (params (tension [N],)). Slack length of each fibre = reference length / (1 + prestrain), ``prestrain`` a
         strain (fraction, e.g. ``law.prestrain`` of a characteristic set's law).
         ``scale`` multiplies each fibre's law force; default 1/n_fibres (a ligament's force is
-        shared by its fibres).
+        shared by its fibres). ``prestrain`` and ``params`` may also be given per fibre ((n,) and (n, k)), e.g.
+        a law defined on elongation, whose parameters in each fibre's own strain depend on its slack length
+        (:func:`lumbar.experiments.fsu.softplus_fibre_params`).
         """
         s_upper = np.atleast_2d(np.asarray(s_upper, float))
         s_lower = np.atleast_2d(np.asarray(s_lower, float))
@@ -99,16 +101,22 @@ class SpineModel:
         l_ref = np.linalg.norm(s_upper - s_lower, axis=1) + extra
         if np.any(l_ref <= 0):
             raise ValueError(f"fibre group {name!r} at {level}: zero reference length")
-        l0 = slack_length(l_ref, prestrain)
+        l0 = np.broadcast_to(slack_length(l_ref, np.asarray(prestrain, float)), (n,))
+        if np.any(~np.isfinite(l0) | (l0 <= 0)):
+            raise ValueError(f"fibre group {name!r} at {level}: slack length <= 0 (prestrain {prestrain!r})")
         gid = len(self.fibre_groups)
         self.fibre_groups.append((name, kind, level))
         code = {"softplus": LAW_SOFTPLUS, "rupp": LAW_RUPP, "cable": LAW_CABLE}[law]
-        p = np.zeros(5)
-        p[: len(params)] = params
+        par = np.asarray(params, float)
+        P = np.zeros((n, 5))
+        if par.ndim == 2:
+            P[:, : par.shape[1]] = par
+        else:
+            P[:, : par.size] = par
         if scale is None:
             scale = 1.0 / n if law != "cable" else 1.0
         for i in range(n):
-            self._fibres.append((upper, lower, s_upper[i], s_lower[i], extra[i], l0[i], code, p, scale, gid))
+            self._fibres.append((upper, lower, s_upper[i], s_lower[i], extra[i], l0[i], code, P[i], scale, gid))
         return gid
 
     def add_facet(self, upper, lower, surface: FacetSurface, points, stiffness):
@@ -136,6 +144,8 @@ class SpineModel:
         self.f_sb = np.array([e[3] for e in f], float).reshape(-1, 3)
         self.f_extra = np.array([e[4] for e in f], float)
         self.f_l0 = np.array([e[5] for e in f], float)
+        # reference (as-built) length of every fibre [m]: what a law defined on elongation needs
+        self.f_lref = np.linalg.norm(self.f_sa - self.f_sb, axis=1) + self.f_extra if self.nf else np.zeros(0)
         self.f_law = np.array([e[6] for e in f], int)
         self.f_par = np.array([e[7] for e in f], float).reshape(-1, 5)
         self.f_scale = np.array([e[8] for e in f], float)

@@ -215,3 +215,29 @@ def solve(model, loads, x0=None, R0=None, fmask=1.0, cmask=1.0, params=None, loa
         log.warning("equilibrium not reached for %d of %d scenario(s) (max residual %.2e N, %.2e N*m); "
                     "flagged converged=False", int((~conv).sum()), B, res_f[~conv].max(), res_m[~conv].max())
     return SolveResult(x, R, conv, res_f, res_m, iters, frac)
+
+
+def solve_sequence(model, loads_path, x0=None, R0=None, fmask=1.0, cmask=1.0, params=None, **kw) -> list:
+    """Equilibria along a load path (a continuation): ``loads_path`` (K, B, nb, 6), step k warm-started from the
+    equilibrium of step k-1 (the first from ``x0, R0``, default the reference state).
+
+    ``fmask`` / ``cmask`` are shared by every step, or given per step with a leading axis K (e.g. a follower-load
+    cable whose weight grows). Returns the K :class:`SolveResult` objects. A scenario that does not converge at a step
+    is flagged there (``converged`` False) and the next step starts from its last state, so a jump of the solution
+    between two close load levels stays visible instead of being smoothed over by a fresh start."""
+    loads_path = np.asarray(loads_path, float)
+    K, B = loads_path.shape[:2]
+
+    def at(a, k):
+        a_arr = np.asarray(a, float)
+        return a_arr[k] if a_arr.ndim == 3 and a_arr.shape[0] == K else a
+
+    if x0 is None:
+        x0, R0 = model.reference_state(B)
+    x, R = np.asarray(x0, float), np.asarray(R0, float)
+    out = []
+    for k in range(K):
+        res = solve(model, loads_path[k], x0=x, R0=R, fmask=at(fmask, k), cmask=at(cmask, k), params=params, **kw)
+        x, R = res.x, res.R
+        out.append(res)
+    return out

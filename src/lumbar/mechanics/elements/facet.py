@@ -74,7 +74,7 @@ class FacetSurface:
 CONTACT_RULES = ("mean_surface", "touching")
 
 
-def fit_surface(superior, inferior, medial_hint=None, contact="mean_surface") -> FacetSurface:
+def fit_surface(superior, inferior, medial_hint=None, contact="mean_surface", contact_points=None) -> FacetSurface:
     """Fit Eq. 4 to the nine landmarks of each articular process and average the two fits.
 
     ``contact``: "mean_surface" (the paper's rule: the joint surface is the coefficient mean of the two
@@ -85,6 +85,8 @@ def fit_surface(superior, inferior, medial_hint=None, contact="mean_surface") ->
     ``superior``: (n, 3) landmarks on the lower vertebra's superior articular process;
     ``inferior``: (n, 3) on the upper vertebra's inferior articular process (reference frame).
     ``medial_hint``: unit vector used to orient w when the two sets are not separated.
+    ``contact_points``: the points of the upper face that touch the surface (default ``inferior``): the "touching"
+    rule puts the nearest of them on the surface.
     """
     S = np.asarray(superior, float)
     I = np.asarray(inferior, float)  # noqa: E741 - S/I: superior/inferior landmarks, as in the paper
@@ -114,7 +116,7 @@ def fit_surface(superior, inferior, medial_hint=None, contact="mean_surface") ->
     q_all = (allp - origin) @ axes.T
     coef = 0.5 * (coefs[0] + coefs[1])
     if contact == "touching":
-        qi = (I - origin) @ axes.T
+        qi = ((I if contact_points is None else np.asarray(contact_points, float)) - origin) @ axes.T
         gap = qi[:, 2] - _basis(qi[:, 0], qi[:, 1]) @ coef
         coef = coef.copy()
         coef[4] += float(gap.min())

@@ -1,0 +1,41 @@
+"""Admissibility stage: rule admissibility, the physical-admissibility criteria of the calibrated set at the
+calibrated level (lumbar.experiments.admissibility), from the load-sharing curves of that set.
+
+By hand: python workflow/scripts/admissibility.py admissibility --configfile config/test/config.yaml
+"""
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _common.py
+import _common  # noqa: E402
+
+snakemake, log = _common.start(globals())
+
+import pandas as pd  # noqa: E402
+
+from lumbar.experiments import admissibility as ADM  # noqa: E402
+from lumbar.experiments.calibration import elongation_prior  # noqa: E402
+from lumbar.geometry import load_geometry  # noqa: E402
+from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
+from lumbar.inputs.io import write_table_atomic  # noqa: E402
+
+g, f = snakemake.params.geometry, snakemake.params.fsu
+geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
+published = load_characteristic_set("calibrated", data_dir=snakemake.params.data_dir)
+cal = load_characteristic_set("calibrated", data_dir=Path(_common.as_list(snakemake.input.characteristics)[0]).parent)
+on_elongation = any(getattr(law, "law_length_m", None) is not None for law in cal.ligaments.values())
+prior = elongation_prior(published)[0] if on_elongation else published
+limits = ADM.pretension_limits(published, prior, geo, f["level"],
+                               g["path"] if g["kind"] == "visible_human" else None)
+table = ADM.criteria_table(pd.read_csv(snakemake.input.curves), pd.read_csv(snakemake.input.compression), limits,
+                           f["level"], ADM.neutral_zones(f["level"], snakemake.input.yamamoto),
+                           ADM.read_literature(snakemake.input.literature), ADM.force_scales(cal, prior),
+                           pd.read_csv(snakemake.input.real_fit))
+write_table_atomic(table, snakemake.output.table)
+write_table_atomic(limits, snakemake.output.limits)
+failed = table[~table["passed"]]
+log.info("admissibility of the calibrated set at %s: %d of %d criteria pass", f["level"], len(table) - len(failed),
+         len(table))
+if len(failed):
+    log.warning("the calibrated set fails %d admissibility criteria (%s): see %s", len(failed),
+                "; ".join(f"{r.criterion} {r.direction}".strip() for r in failed.itertuples()), snakemake.output.table)
