@@ -129,6 +129,8 @@ def pretension_limits(published, prior, geometry, level="L4-L5", geometry_path=N
     derived_from_published_fit; (2) the Remus et al. (2021) model of this geometry (its UW ligament materials, a
     negative reference strain = a pre-stretched fibre), summed over the level's fibres - third_party, when the
     geometry folder has the material files. The limit is the larger of the two."""
+    if published is None:
+        published = load_characteristic_set("calibrated")
     lev = geometry.levels[level]
     uw = None
     if geometry_path is not None:

@@ -1061,6 +1061,7 @@ class _Probe:
         base, _ = m.evaluate(x[j], R[j], None, self.fm[j] * 0, self.cm[j] * 0, jacobian=False)
         onlyf, _ = m.evaluate(x[j], R[j], None, self.fm[j] * 0, self.cm[j], jacobian=False)
         up = float((onlyf - base)[0, st.upper, :3] @ m.discs[st.disc].frame[2])
+        disc_up = float(m.disc_loads(x[j], R[j])["force"][0, st.disc, 2])
         disc_r = m.disc_loads(x, R)["r"][:, self.st.disc, 2]       # axial displacement [m], < 0 = compression
         moment_rows = [i for i, sc in enumerate(self.scen) if sc[0] != "compression"]
         return {"rot": rot, "min_disc_compression_mm": float(-disc_r[moment_rows].max() * 1e3),
@@ -1068,7 +1069,7 @@ class _Probe:
                 "rest_facet": cf[0].copy(),
                 "flex_tension": {k: float(gf[1, g].sum()) for k, g in kinds.items()},
                 "flex_moment": flex_moment,
-                "compression_facet_share": up / 1000.0}
+                "compression_facet_share": max(up, 0.0) / max(max(up, 0.0) + max(disc_up, 0.0), 1e-9)}
 
 
 @dataclass

@@ -230,8 +230,8 @@ def axial_compression_curve(fsu_with_cable: FSU, cable_group: int | None = None,
     """Follower load (0-1000 N by default, 50 N steps) on a unit built with ``build_fsu(..., follower=True)`` (a
     constant-tension cable along the disc normal through the disc centre whose mask weight is the force in N;
     ``cable_group`` default: the unit's ``follower_group``). Columns: force_n,
-    converged, disc axial force, facet contact forces, ligament tensions, and the shares of the applied force carried
-    by the disc and by the facets (components along the disc normal)."""
+    converged, disc axial force, facet contact forces, ligament tensions, each structure's force along the disc normal
+    and the disc's and the facets' shares of the compression crossing the joint (disc + facets)."""
     m = fsu_with_cable.model
     cable_group = fsu_with_cable.follower_group if cable_group is None else cable_group
     if cable_group is None:
@@ -262,10 +262,13 @@ def axial_compression_curve(fsu_with_cable: FSU, cable_group: int | None = None,
         up = F @ n_world
         for j, lab in enumerate(labels):
             tab[f"{lab}_axial_n"] = up[:, j]
+        # shares of the compression that crosses the joint (disc + facets: the ligaments' pre-tension adds to the
+        # applied load), as Adams & Hutton (1980) state theirs ("of the intervertebral compressive force")
         fac = sum(up[:, j] for j, lab in enumerate(labels) if lab.startswith("facet_"))
+        comp_total = np.clip(up[:, 0], 0.0, None) + np.clip(fac, 0.0, None)
         with np.errstate(invalid="ignore", divide="ignore"):
-            tab["facet_share"] = np.where(f > 0, fac / f, np.nan)
-            tab["disc_share"] = np.where(f > 0, up[:, 0] / f, np.nan)
+            tab["facet_share"] = np.where(comp_total > 0, np.clip(fac, 0.0, None) / comp_total, np.nan)
+            tab["disc_share"] = np.where(comp_total > 0, np.clip(up[:, 0], 0.0, None) / comp_total, np.nan)
         rows.append(tab)
     return pd.concat(rows, ignore_index=True)
 
