@@ -208,3 +208,30 @@ def test_admissible_fit_ends_in_an_admissible_set_within_25_percent(geometry, pr
     table, _, _ = ADM.evaluate(geometry, fit.charset, prior, None, geometry_path=GEOMETRY_DIR,
                                fit_parameters=fit.parameters)
     assert table["passed"].all(), table[~table["passed"]]
+
+
+# ------------------------------------------------------------------ the workflow's outputs (session DAG, config/test)
+def test_dag_calibrated_set_is_admissible_and_other_levels_do_not_snap(dag_workdir):
+    adm = pd.read_csv(dag_workdir / "results/calibration/admissibility.csv")
+    assert len(adm) > 30
+    assert adm["passed"].all(), adm[~adm["passed"]][["criterion", "direction", "value", "limit"]]
+    ml = pd.read_csv(dag_workdir / "results/tables/multilevel_admissibility.csv")
+    snap = ml[ml["criterion"].str.startswith("no snap-through")]
+    assert len(snap) and snap["passed"].all(), snap[~snap["passed"]]
+    rom = pd.read_csv(dag_workdir / "results/tables/multilevel_rom.csv")
+    assert set(rom["level"]) and "L4-L5" not in set(rom["level"])
+    val = pd.read_csv(dag_workdir / "results/tables/validation_real_data.csv")
+    other = val[val["quantity"] == "ROM, other levels"]
+    assert len(other) == len(rom) and (other["role"] == "independent").all()
+    real = pd.read_csv(dag_workdir / "results/calibration/calibration_real_fit.csv")
+    assert not (real["at_bound"].astype(bool) & real["bound_reason"].isna()).any()
+
+
+def test_dag_load_sharing_tables_balance(dag_workdir):
+    s = pd.read_csv(dag_workdir / "results/load_sharing/load_sharing_summary.csv")
+    loaded = s[(s["moment_nm"] > 0) & s["converged"].astype(bool)]
+    shares = loaded[[c for c in s.columns if c.endswith("_share")]].sum(axis=1)
+    np.testing.assert_allclose(shares, 1.0, atol=1e-6)
+    cables = pd.read_csv(dag_workdir / "results/load_sharing/l2s1_cables_l4l5.csv")
+    allc = cables[(cables["muscle_setup"] == "all") & (cables["load_case"] == "neutral")].iloc[0]
+    assert allc["disc_share"] > 0.5            # the disc carries most of the compression under the cables
