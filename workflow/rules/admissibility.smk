@@ -21,6 +21,11 @@ rule admissibility:
             category="Load sharing",
         ),
         limits="results/calibration/pretension_limits.csv",
+        remus=report(
+            "results/calibration/remus2021_comparison.csv",
+            caption="../report/remus2021_comparison.rst",
+            category="Load sharing",
+        ),
     log:
         "logs/admissibility.log",
     conda:

@@ -27,10 +27,18 @@ on_elongation = any(getattr(law, "law_length_m", None) is not None for law in ca
 prior = elongation_prior(published)[0] if on_elongation else published
 limits = ADM.pretension_limits(published, prior, geo, f["level"],
                                g["path"] if g["kind"] == "visible_human" else None)
+remus = None
+if g["kind"] == "visible_human":
+    from lumbar.experiments.fsu import build_fsu
+
+    remus = ADM.remus_comparison(build_fsu(geo, cal, f["level"], facet_stiffness=f.get("facet_stiffness_n_per_m"),
+                                           k_shear=f.get("disc_shear_stiffness_n_per_m")), g["path"])
+(remus if remus is not None else pd.DataFrame(columns=["ligament", "state", "model_n", "remus2021_n", "ratio"])).pipe(
+    write_table_atomic, snakemake.output.remus)
 table = ADM.criteria_table(pd.read_csv(snakemake.input.curves), pd.read_csv(snakemake.input.compression), limits,
                            f["level"], ADM.neutral_zones(f["level"], snakemake.input.yamamoto),
                            ADM.read_literature(snakemake.input.literature), ADM.force_scales(cal, prior),
-                           pd.read_csv(snakemake.input.real_fit))
+                           pd.read_csv(snakemake.input.real_fit), remus=remus)
 write_table_atomic(table, snakemake.output.table)
 write_table_atomic(limits, snakemake.output.limits)
 failed = table[~table["passed"]]

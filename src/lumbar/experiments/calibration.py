@@ -953,9 +953,16 @@ FIT_MARGIN = {"rest_facet_n": 15.0, "pretension_fraction": 0.9, "nz_fraction": 0
 PENALTY_WEIGHT = 3.0
 #: regularisation toward the prior laws: per decade of force scale and per mm of pre-elongation change
 REG_WEIGHT = 0.1
-PRE_ELONGATION_BOUNDS_MM = (-1.5, 1.5)
+#: a fitted pre-elongation may leave a ligament slack by this much [mm] at rest ...
+PRE_ELONGATION_SLACK_MM = 1.5
+#: ... or stretch it by at most this prestrain [% of its law length]: 2.5 x the paper's largest prestrain (10 %,
+#: Sect. 2.2.4); a larger one would make the shortest fibres of other levels (capsules of about 1.2 mm) unusable
+MAX_PRESTRAIN_PCT = 25.0
+#: bounds of the fitted force scales: wider than the admissible 0.1-10 x the source law (a scale outside it must be
+#: explained by the Remus et al. 2021 model of these fibres, lumbar.experiments.admissibility.remus_comparison)
+FIT_SCALE_BOUNDS = (0.02, 10.0)
 #: common ligament force scales tried for the start of :func:`fit_admissible` when no start is given
-START_SCALES = (0.1, 0.15, 0.2, 0.3, 0.5, 1.0)
+START_SCALES = (0.05, 0.1, 0.15, 0.2, 0.3, 0.5, 1.0)
 
 
 class _Probe:
@@ -1159,8 +1166,9 @@ def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", publ
     """Fit a characteristic set to real ROM rows AND the admissibility criteria (constrained least squares).
 
     Parameters (bounded; ``least_squares(method="trf")``): per ligament on elongation, log10 of its force scale in
-    [log10 SCALE_MIN, log10 SCALE_MAX] (a and c scaled; the admissible range of
-    :mod:`lumbar.experiments.admissibility`) and a change of its pre-elongation in PRE_ELONGATION_BOUNDS_MM (never
+    FIT_SCALE_BOUNDS (a and c scaled; a scale outside the admissible 0.1-10 x of
+    :mod:`lumbar.experiments.admissibility` must be explained by the Remus et al. model of these fibres) and a change of its pre-elongation (slack by up to
+    PRE_ELONGATION_SLACK_MM, prestrain at most MAX_PRESTRAIN_PCT of the law length; never
     leaving a slack length below ``fsu.MIN_SLACK_FRACTION`` of a fibre); log10 facet contact stiffness in
     FACET_STIFFNESS_RANGE; log10 disc shear stiffness in its sourced range.
     Residuals: (sim - measured) / (25 % of measured) per target row (the acceptance band of the validation) plus a
@@ -1192,18 +1200,20 @@ def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", publ
         if not hasattr(law, "a"):
             continue
         names.append(f"{kind}:scale")
-        lo.append(math.log10(ADM.SCALE_MIN))
-        hi.append(math.log10(ADM.SCALE_MAX))
+        lo.append(math.log10(FIT_SCALE_BOUNDS[0]))
+        hi.append(math.log10(FIT_SCALE_BOUNDS[1]))
         x0.append(0.0)
         if law.law_length_m is not None:
             lens = [np.linalg.norm(np.asarray(g.upper) - np.asarray(g.lower), axis=1) + np.asarray(g.extra_length)
                     for g in lev.ligaments if g.kind == kind]
             shortest = min(float(v.min()) for v in lens) if lens else 1.0
-            e_max = (1.0 - 1.25 * MIN_SLACK_FRACTION) * shortest - law.pre_elongation_m   # margin to the hard limit
+            # at most MAX_PRESTRAIN_PCT of the law length, and a margin to the hard slack-length limit of this level
+            e_max = min(MAX_PRESTRAIN_PCT / 100.0 * law.law_length_m,
+                        (1.0 - 1.25 * MIN_SLACK_FRACTION) * shortest) - law.pre_elongation_m
             names.append(f"{kind}:pre_elongation")
-            # down to slack by at least |PRE_ELONGATION_BOUNDS_MM[0]| mm at rest, whatever the prior's pre-elongation
-            lo.append(-max(law.pre_elongation_m * 1e3, 0.0) + PRE_ELONGATION_BOUNDS_MM[0])
-            hi.append(float(min(PRE_ELONGATION_BOUNDS_MM[1], e_max * 1e3)))
+            # down to slack by at least PRE_ELONGATION_SLACK_MM at rest, whatever the prior's pre-elongation
+            lo.append(-max(law.pre_elongation_m * 1e3, 0.0) - PRE_ELONGATION_SLACK_MM)
+            hi.append(float(e_max * 1e3))
             x0.append(0.0)
     names.append("facet_stiffness")
     lo.append(math.log10(FACET_STIFFNESS_RANGE[0]))

@@ -94,6 +94,26 @@ def _ns_replace(ns, **kw):
     return out
 
 
+#: a jittered fibre keeps at least this fraction of its length (the capsular fibres are 1-4 mm long, about the
+#: insertion jitter): a draw that shortens it more is drawn again from the same stream
+MIN_JITTER_LENGTH_FRACTION = 0.7
+
+
+def _jitter_fibres(upper, lower, extra, rng, sd, max_draws=50):
+    """Fibre ends displaced by N(0, sd) per axis; fibres shortened below MIN_JITTER_LENGTH_FRACTION re-drawn."""
+    upper, lower = np.asarray(upper, float), np.asarray(lower, float)
+    L0 = np.linalg.norm(upper - lower, axis=1) + extra
+    du = rng.normal(0, sd, upper.shape)
+    dl = rng.normal(0, sd, lower.shape)
+    for _ in range(max_draws):
+        bad = np.linalg.norm(upper + du - lower - dl, axis=1) + extra < MIN_JITTER_LENGTH_FRACTION * L0
+        if not bad.any():
+            break
+        du[bad] = rng.normal(0, sd, (int(bad.sum()), 3))
+        dl[bad] = rng.normal(0, sd, (int(bad.sum()), 3))
+    return upper + du, lower + dl
+
+
 def perturb_geometry(geometry, rng: np.random.Generator, v: SpecimenVariation, levels=None):
     """A deep copy of ``geometry`` scaled about the first level's disc centre, with displaced insertions.
 
@@ -133,8 +153,7 @@ def perturb_geometry(geometry, rng: np.random.Generator, v: SpecimenVariation, l
             lig.upper, lig.lower = sc(lig.upper), sc(lig.lower)
             lig.extra_length = np.asarray(lig.extra_length, float) * s
             if jitter:
-                lig.upper = lig.upper + rng.normal(0, v.insertion_sd_m, lig.upper.shape)
-                lig.lower = lig.lower + rng.normal(0, v.insertion_sd_m, lig.lower.shape)
+                lig.upper, lig.lower = _jitter_fibres(lig.upper, lig.lower, lig.extra_length, rng, v.insertion_sd_m)
     geo.name = f"{geometry.name}_virtual_specimen"
     return geo
 
