@@ -50,6 +50,7 @@ def final_outputs():
         "results/tables/table4_outlier_counts.csv",
         # validation on real data (workflow/rules/validation.smk): the report opens with it
         "results/tables/validation_real_data.csv",
+        "results/figures/validation_scoreboard.png",
         "results/tables/table4_vs_paper.csv",
         "results/figures/table4_grid.png",
         "results/figures/fig6_rom_stepwise_reduction.png",
