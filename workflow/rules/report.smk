@@ -30,5 +30,8 @@ rule paper_report:
     params:
         config=config,
         published=config["paths"]["published_model_results"],
+        # read when the report is built (every rule before it has finished): their WARNING lines are the
+        # report's "Flags" section; not inputs (a log is no rule's output file)
+        logs_dir="logs",
     script:
         "../scripts/report.py"

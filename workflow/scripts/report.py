@@ -18,8 +18,8 @@ inputs = [p for p in snakemake.input if Path(p).is_file()]   # under Snakemake a
 captions = [str(c) for c in snakemake.input.captions]
 summary = build_report(inputs, snakemake.params.config, snakemake.output.html, snakemake.output.pdf,
                        captions_dir=Path(captions[0]).parent if captions else None,
-                       published=snakemake.params.published)
-log.info("report: %d figures, %d tables; surrogate reference: %s", summary["figures"], summary["tables"],
-         summary["surrogate"])
+                       published=snakemake.params.published, logs_dir=snakemake.params.logs_dir)
+log.info("report: %d figures, %d tables; surrogate reference: %s; %d warning(s) of the workflow's logs listed "
+         "under Flags", summary["figures"], summary["tables"], summary["surrogate"], len(summary["warnings"]))
 for note in summary["not_built"]:
     log.info("  %s", note)
