@@ -53,13 +53,12 @@ if snakemake.rule == "calibrate":
     rf = res.info.get("real_fit")
     (rf if rf is not None else pd.DataFrame(columns=["parameter", "start", "value", "unit", "identifiable",
                                                      "at_bound"])).pipe(write_table_atomic, snakemake.output.real_fit)
-    for r in res.summary.itertuples():
-        if getattr(r, "at_bound", False):
-            log.warning("calibration step %s (%s): parameter(s) %s end at a bound", r.step, r.structure,
-                        r.at_bound_parameters)
-        if not getattr(r, "identifiable", True):
-            log.warning("calibration step %s (%s): not identifiable from its stage; kept at the published value",
-                        r.step, r.structure)
+    # expected outcomes, recorded in calibration_summary.csv (identifiable, at_bound, at_bound_parameters): one line
+    bound = [f"{r.structure} ({r.at_bound_parameters})" for r in res.summary.itertuples() if getattr(r, "at_bound", False)]
+    fixed = [str(r.structure) for r in res.summary.itertuples() if not getattr(r, "identifiable", True)]
+    log.info("calibration: %d steps; not identifiable, kept at the published value: %s; ending at a bound: %s "
+             "(columns identifiable, at_bound of %s)", len(res.summary), ", ".join(fixed) or "none",
+             "; ".join(bound) or "none", snakemake.output.summary)
     res.rom_fit.assign(data_kind=data_kind).pipe(write_table_atomic, snakemake.output.rom_fit)
     res.disc_points.assign(data_kind=data_kind).pipe(write_table_atomic, snakemake.output.disc_points)
     res.ligament_points.assign(data_kind=data_kind).pipe(write_table_atomic, snakemake.output.ligament_points)

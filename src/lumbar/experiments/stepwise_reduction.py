@@ -138,8 +138,8 @@ def simulate_stepwise_reduction(fsu, stages=STAGES, directions=MAIN_DIRECTIONS, 
         out["rom_deg"] = rom[0]
         out["converged"] = conv[0]
         if not out["converged"].all():
-            log.warning("stepwise reduction: %d of %d scenario(s) did not converge (rom_deg NaN, converged=False)",
-                        int((~out["converged"]).sum()), len(out))
+            log.info("stepwise reduction: %d of %d scenario(s) did not converge (rom_deg NaN, converged=False)",
+                     int((~out["converged"]).sum()), len(out))
         return out
     ss = StageSolver(fsu, scen, params=effect_params(fsu, effects), max_iter=max_iter, tol=tol,
                      load_steps=load_steps)
@@ -150,8 +150,8 @@ def simulate_stepwise_reduction(fsu, stages=STAGES, directions=MAIN_DIRECTIONS, 
     out["residual_force_n"] = res.residual_force      # of the loaded solve (the 0 N*m state has its own)
     out["residual_moment_nm"] = res.residual_moment
     if not conv.all():
-        log.warning("stepwise reduction: %d of %d scenario(s) did not converge (rom_deg NaN, converged=False)",
-                    int((~conv).sum()), len(conv))
+        log.info("stepwise reduction: %d of %d scenario(s) did not converge (rom_deg NaN, converged=False)",
+                 int((~conv).sum()), len(conv))
     return out
 
 
