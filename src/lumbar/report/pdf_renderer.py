@@ -222,6 +222,7 @@ def table_flowables(b: Table, st: dict, width: float, marks: dict) -> list:
 
 
 FRAME_WIDTH = A4[0] - 32 * mm
+FRAME_HEIGHT = A4[1] - 28 * mm
 
 
 def story(doc: Doc, builder: ReportBuilder) -> list:
@@ -258,11 +259,25 @@ def story(doc: Doc, builder: ReportBuilder) -> list:
     return out
 
 
-def render_pdf(doc: Doc, builder: ReportBuilder) -> bytes:
+class _Recorder(SimpleDocTemplate):
+    """A document template that records on which page each flowable was drawn."""
+
+    def __init__(self, *args, placed=None, **kw):
+        super().__init__(*args, **kw)
+        self.placed = placed
+
+    def afterFlowable(self, flowable):
+        if self.placed is not None:
+            self.placed.append((self.page, flowable))
+
+
+def render_pdf(doc: Doc, builder: ReportBuilder, placed: list | None = None) -> bytes:
+    """The report as PDF bytes. ``placed``: a list that receives (page number, flowable) for every flowable drawn
+    (what a test reads to know what page 1 holds)."""
     buf = io.BytesIO()
-    pdf = SimpleDocTemplate(buf, pagesize=A4, leftMargin=16 * mm, rightMargin=16 * mm, topMargin=14 * mm,
-                            bottomMargin=14 * mm, title="lumbar workflow report", author="lumbar workflow",
-                            subject="paper-style report", creator=f"lumbar {__version__}", invariant=1)
+    pdf = _Recorder(buf, pagesize=A4, leftMargin=16 * mm, rightMargin=16 * mm, topMargin=14 * mm,
+                    bottomMargin=14 * mm, title="lumbar workflow report", author="lumbar workflow",
+                    subject="paper-style report", creator=f"lumbar {__version__}", invariant=1, placed=placed)
     flow = story(doc, builder)
     reg = _FONT["regular"]
 
