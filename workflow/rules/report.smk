@@ -35,3 +35,20 @@ rule paper_report:
         logs_dir="logs",
     script:
         "../scripts/report.py"
+
+
+# Documents whose numbers are read from the results (lumbar.report.docs): docs/templates/<name>.md rendered into
+# results/report/<name>.md. The files a template's placeholders read are the rule's inputs, so a template that
+# names a file no rule makes fails the dry run.
+rule docs_numbers:
+    input:
+        templates=DOC_TEMPLATES,
+        results=doc_template_inputs,
+    output:
+        [f"results/report/{Path(t).name}" for t in DOC_TEMPLATES],
+    log:
+        "logs/docs_numbers.log",
+    conda:
+        "../envs/lumbar.yaml"
+    script:
+        "../scripts/report.py"

@@ -1,4 +1,5 @@
-"""Paper-style report: rule paper_report (workflow/rules/report.smk), the report as self-contained HTML and PDF.
+"""Paper-style report (workflow/rules/report.smk): rule paper_report, the report as self-contained HTML and PDF, and
+rule docs_numbers, the documents of docs/templates rendered with the numbers of this run.
 
 By hand (the rule's inputs that are not built yet are reported as "not built in this configuration"):
     python workflow/scripts/report.py paper_report --configfile config/test/config.yaml \
@@ -13,6 +14,14 @@ import _common  # noqa: E402
 snakemake, log = _common.start(globals())
 
 from lumbar.report import build_report  # noqa: E402
+
+if snakemake.rule == "docs_numbers":
+    from lumbar.report.docs import render_file
+
+    for template, out in zip(snakemake.input.templates, snakemake.output):
+        render_file(template, out)
+        log.info("rendered %s -> %s", template, out)
+    sys.exit(0)
 
 inputs = [p for p in snakemake.input if Path(p).is_file()]   # under Snakemake all of them; by hand, those built
 captions = [str(c) for c in snakemake.input.captions]
