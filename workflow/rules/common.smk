@@ -191,7 +191,9 @@ def doc_template_inputs(wildcards):
     """The result files the placeholders of the doc templates read (lumbar.report.docs.template_files)."""
     from lumbar.report.docs import template_files
 
-    return sorted({f for t in DOC_TEMPLATES for f in template_files(Path(t).read_text())})
+    return sorted(
+        {f for t in DOC_TEMPLATES for f in template_files(Path(t).read_text())}
+    )
 
 
 REPORT_OPTIONAL = [

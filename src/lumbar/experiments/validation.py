@@ -282,7 +282,7 @@ def plot_scoreboard(df: pd.DataFrame, path) -> None:
     heights = {r: sum(len(g) * row_in + head_in for _, g in groups[r]) for r in roles}
     H = max(heights.values()) + 0.55
     W = 7.2
-    fig, _ = subplots(figsize=(W, H), dpi=150)
+    fig, _ = subplots(figsize=(W, H), dpi=200)
     fig.delaxes(fig.axes[0])
     col_w = 1.0 / len(roles)
     title = {INDEPENDENT: "Independent checks (validation)", TARGET: "Calibration targets (fit quality)"}

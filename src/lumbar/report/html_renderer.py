@@ -16,7 +16,7 @@ color:#111}
 nav.toc ol{columns:2;margin:.3em 0 1em;padding-left:1.5em} nav.toc a{text-decoration:none}
 div.twrap{max-width:100%;overflow-x:auto;margin:.5em 0 1.5em} div.twrap table{margin:0}
 a.csv{font-weight:normal;font-size:.9em;margin-left:.5em}
-h1.title{font-size:1.6em;text-align:center} h1{font-size:1.3em;border-bottom:1px solid #999;margin-top:2em}
+h1.title{font-size:1.35em;text-align:center;margin:.4em 0} h1{font-size:1.3em;border-bottom:1px solid #999;margin-top:2em}
 h2{font-size:1.1em} p.abstract{background:#f4f4f4;padding:.4em .8em;margin:.3em 0} p.small{font-size:.9em;color:#333}
 p.note{color:#777;font-style:italic} figure{margin:1.2em 0;text-align:center} figure img{max-width:100%}
 figcaption{text-align:left;font-size:.9em} table{border-collapse:collapse;margin:.5em 0 1.5em;font-size:.8em}

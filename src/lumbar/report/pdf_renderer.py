@@ -249,8 +249,8 @@ def story(doc: Doc, builder: ReportBuilder) -> list:
             with PILImage.open(p) as im:
                 w, h = im.size
             scale = min(width / w, 150 * mm / h)
-            if b.label == "Fig. R":        # the first page's figure: as large as the page allows
-                scale = min(width / w, 185 * mm / h)
+            if b.label == "Fig. R":        # the first page's figure: as large as page 1 allows below the abstract
+                scale = min(width / w, 160 * mm / h)
             out.append(KeepTogether([Spacer(1, 4), Image(str(p), width=w * scale, height=h * scale),
                                      Paragraph(f"<b>{_pdf_text(b.label)}</b> {_pdf_text(b.caption)}", st["cap"]),
                                      Spacer(1, 6)]))

@@ -389,7 +389,7 @@ class ReportBuilder:
         """Five sentences: what is compared, the independent checks, the calibration targets, the muscle model,
         what is only a method check and how many warnings need attention."""
         d = self._distinct()
-        geo = fmt(self._cfg("geometry", "kind"))
+        geo = human_value(fmt(self._cfg("geometry", "kind")))
         out = []
         if d is None or not len(d):
             out.append(f"This report shows the results of the lumbar workflow ({geo} geometry); the comparison with "
@@ -411,7 +411,7 @@ class ReportBuilder:
                     miss.append(f"{name}, {int(g['within'].sum())} of {len(g)} within")
             text = f"Independent checks: {w} of {n} within their acceptance interval"
             if agree:
-                text += "; it agrees with " + ", ".join(agree)
+                text += "; the model agrees with " + ", ".join(agree)
             if miss:
                 text += "; it misses " + "; ".join(miss)
             out.append(text + ".")
