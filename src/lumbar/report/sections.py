@@ -39,6 +39,7 @@ SET_LABELS = {"calibrated": "calibrated (this model)", "chazal1985": "Chazal et 
               "nolte1990": "Nolte et al. (1990)", "rupp2015": "Rupp et al. (2015)"}
 DIRECTION_ABBR = {"flexion": "F", "extension": "E", "lateral_bending": "L", "axial_rotation": "A"}
 MAX_ROWS = 60          # generic CSV tables: at most this many rows are drawn, the rest is referenced
+MAX_WARNINGS = 40      # the Flags section lists at most this many warnings (all are in logs/)
 
 T = "results/tables/"
 F = "results/figures/"
@@ -490,8 +491,10 @@ class ReportBuilder:
         elif not warn:
             self.doc.add(Para("No warning in the workflow's logs.", "p"))
         else:
-            self.table_block(f"Warnings in the workflow's logs ({len(warn)})", ["log", "warning"],
-                             [[name, msg] for name, msg in warn], key_cols=0)
+            note = (f"First {MAX_WARNINGS} of {len(warn)}; every one is in its rule's log under logs/."
+                    if len(warn) > MAX_WARNINGS else "")
+            self.table_block(f"Warnings in the workflow's logs ({len(warn)})", ["rule log", "warning"],
+                             [[name, msg] for name, msg in warn[:MAX_WARNINGS]], note=note, key_cols=0)
 
     def summary(self):
         paras = [
@@ -679,7 +682,7 @@ class ReportBuilder:
         rows = []
         for stage in dict.fromkeys(df["stage"]):
             for m in sorted(set(df.loc[df["stage"] == stage, "moment_nm"])):
-                row = [stage, f"{fmt(m)} N*m"]
+                row = [human_value(stage), f"{fmt(m)} N\u00b7m"]
                 for st in sets:
                     for d in dirs:
                         r = keyed.get((st, stage, m, d))
@@ -704,7 +707,7 @@ class ReportBuilder:
         rows = []
         for mu in dict.fromkeys(df["muscle_setup"]):
             for lc in dict.fromkeys(df.loc[df["muscle_setup"] == mu, "load_case"]):
-                row = [mu, lc]
+                row = [human_value(mu), human_value(lc)]
                 for st in sets:
                     r = keyed.get((st, mu, lc))
                     row.append("" if r is None else NC if not bool(r.converged) else
