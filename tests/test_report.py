@@ -332,7 +332,7 @@ def test_first_page_abstract_counts_distinct_comparisons(fake_full):
     html_path, _, _ = _build(*fake_full)
     text = parse_report(html_path).text
     # 9 rows, 7 distinct comparisons: 4 independent (1 within... 2 within), 3 calibration targets (all met)
-    assert "with 7 distinct measurements" in text
+    assert "in 7 distinct comparisons" in text
     assert "Independent checks: 2 of 4 within" in text and "Calibration targets (a fit quality, not a validation): " \
         "3 of 3 met" in text
     assert "L4-L5 IDP in vivo (muscle model), 1 of 2 within" in text
@@ -352,7 +352,7 @@ def test_pdf_first_page_holds_abstract_and_scoreboard_figure(fake_full):
     placed = []
     render_pdf(doc, b, placed=placed)
     page1 = [f for p, f in placed if p == 1]
-    assert any(isinstance(f, Paragraph) and "distinct measurements" in f.text for f in page1)
+    assert any(isinstance(f, Paragraph) and "distinct comparisons" in f.text for f in page1)
     assert any(isinstance(f, Image) and str(f.filename).endswith("validation_scoreboard.png") for f in page1)
 
 

@@ -14,6 +14,7 @@ class Heading:
     text: str
     level: int = 1
     anchor: str | None = None      # id of the heading in the HTML (a table of contents or a doc links to it)
+    new_page: bool = False         # the PDF starts a new page here
 
 
 @dataclass

@@ -42,7 +42,7 @@ def render_html(doc: Doc, builder: ReportBuilder) -> str:
             out.append(f'<h1 class="title"{ident}>{_h(b.text)}</h1>' if b.level == 0 else
                        f"<h{b.level}{ident}>{_h(b.text)}</h{b.level}>")
         elif isinstance(b, Contents):
-            out.append('<nav class="toc"><ol>' + "".join(f'<li><a href="#{_h(a)}">{_h(t)}</a></li>'
+            out.append('<nav class="toc"><b>Contents</b><ol>' + "".join(f'<li><a href="#{_h(a)}">{_h(t)}</a></li>'
                                                           for t, a in b.items) + "</ol></nav>")
         elif isinstance(b, Para):
             out.append(f'<p class="{b.style}">{_h(b.text)}</p>')

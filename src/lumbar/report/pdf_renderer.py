@@ -16,7 +16,7 @@ from reportlab.lib.styles import ParagraphStyle, getSampleStyleSheet
 from reportlab.lib.units import mm
 from reportlab.pdfbase import pdfmetrics
 from reportlab.pdfbase.ttfonts import TTFont
-from reportlab.platypus import Image, KeepTogether, Paragraph, SimpleDocTemplate, Spacer
+from reportlab.platypus import Image, KeepTogether, PageBreak, Paragraph, SimpleDocTemplate, Spacer
 from reportlab.platypus import Table as RLTable
 from reportlab.platypus import TableStyle
 
@@ -235,12 +235,13 @@ def story(doc: Doc, builder: ReportBuilder) -> list:
              NC: '<font color="#cc6600">n.c.</font>'}
     for b in doc.blocks:
         if isinstance(b, Heading):
+            if b.new_page:
+                out.append(PageBreak())
             out.append(Paragraph(_pdf_text(b.text), st["title"] if b.level == 0 else st[min(b.level, 3)]))
         elif isinstance(b, Para):
             out.append(Paragraph(_pdf_text(b.text), st.get(b.style, st["p"])))
-        elif isinstance(b, Contents):
-            for text, _anchor in b.items:
-                out.append(Paragraph(_pdf_text(text), st["toc"]))
+        elif isinstance(b, Contents):       # links for the HTML; the PDF's readers page through
+            continue
         elif isinstance(b, Bullets):
             for i in b.items:
                 out.append(Paragraph("- " + _pdf_text(i), st["p"]))

@@ -307,10 +307,10 @@ class ReportBuilder:
         registered section in order (:data:`SECTIONS`; :func:`report_section` adds one)."""
         self.first_page()
         numbered = [sec for sec in SECTIONS if sec.numbered]
-        self.doc.add(Heading("Contents", 1, "contents"))
         self.doc.add(Contents([(self._section_title(sec, numbered), sec.anchor) for sec in SECTIONS]))
-        for sec in SECTIONS:
-            self.doc.add(Heading(self._section_title(sec, numbered), 1, sec.anchor))
+        for k, sec in enumerate(SECTIONS):
+            # the PDF's page 2 starts with the first section (Tables R1 and R2 together on one page)
+            self.doc.add(Heading(self._section_title(sec, numbered), 1, sec.anchor, new_page=k == 0))
             sec.build(self)
         return self.doc
 
@@ -399,8 +399,8 @@ class ReportBuilder:
             out.append("Calibration targets: none in this configuration.")
         else:
             counts = V.role_counts(d)
-            out.append(f"This report compares the lumbar workflow's models ({geo} geometry) with {len(d)} distinct "
-                       "measurements they did not generate (Fig. R, Tables R1 and R2).")
+            out.append(f"This report compares the lumbar workflow's models ({geo} geometry) with measurements they did "
+                       f"not generate, in {len(d)} distinct comparisons (Fig. R, Tables R1 and R2).")
             w, n = counts.get(V.INDEPENDENT, (0, 0))
             ind = d[d["role"] == V.INDEPENDENT]
             agree, miss = [], []
@@ -419,7 +419,7 @@ class ReportBuilder:
             w, n = counts.get(V.TARGET, (0, 0))
             out.append(f"Calibration targets (a fit quality, not a validation): {w} of {n} met." if n else
                        "Calibration targets: none in this configuration.")
-        out.append(self._muscle_sentence())
+        out.append(self._muscle_abstract())
         sur = [name for name, flag in (("Table 4", self.sr_surrogate), ("Table 5", self.idp_surrogate)) if flag]
         warn = self.warnings()
         tail = (f"{len(warn)} warning(s) need the user's attention (Flags)." if warn is not None
@@ -430,6 +430,31 @@ class ReportBuilder:
         else:
             out.append(f"Tables 4 and 5 compare with the configured measured tables; {tail}")
         return " ".join(out)
+
+    def _muscle_abstract(self) -> str:
+        rel = MM + "in_vivo_metrics.json"
+        if not self.has(rel):
+            return f"Muscle model, in-vivo validation: {NOT_BUILT}."
+        m = json.loads(self.path(rel).read_text())
+        n, total = m.get("n"), m.get("n_total", m.get("n"))
+        if m.get("r2") is None or m.get("rmse_mpa") is None:
+            s = (f"The muscle-driven model reaches {fmt(n)} of {fmt(total)} in-vivo activities, too few for R2 and "
+                 "RMSE of the L4-L5 intradiscal pressure")
+        else:
+            s = (f"The muscle-driven model predicts the in-vivo L4-L5 intradiscal pressure with R2 = {fmt(m['r2'])} "
+                 f"and RMSE = {fmt(m['rmse_mpa'])} MPa over the {fmt(n)} of {fmt(total)} activities it reaches")
+        pub = self.published.get("idp_validation_r2")
+        paper = pub["value"] if pub is not None else m.get("paper_r2")
+        if paper is not None:
+            s += f" (paper: R2 = {fmt(paper)})"
+        iv = T + "in_vivo_validation.csv"
+        if self.has(iv):
+            t = _read_csv(self.path(iv))
+            if "reached" in t.columns:
+                miss = [human_value(a) for a, r in zip(t["activity"], t["reached"]) if not bool(r)]
+                if miss:
+                    s += f"; not reached (beyond its muscles' capacity; muscle capacity table): {', '.join(miss)}"
+        return s + "."
 
     def scoreboard_section(self):
         """Tables R1 and R2: one row per distinct comparison, independent checks apart from calibration targets."""
