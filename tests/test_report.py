@@ -315,10 +315,12 @@ def pdf_table_problems(doc, builder) -> list[str]:
         colw = list(t._argW)
         if sum(colw) > FRAME_WIDTH + 0.01:
             out.append(f"table {k}: {sum(colw):.0f} pt wide, frame {FRAME_WIDTH:.0f} pt")
-        for row in t._cellvalues:
-            for w, cell in zip(colw, row):
+        spans = {(c0, r0): sum(colw[c0:c1 + 1]) for _, (c0, r0), (c1, r1) in t._spanCmds}
+        for r, row in enumerate(t._cellvalues):
+            for c, (w, cell) in enumerate(zip(colw, row)):
                 if not isinstance(cell, Paragraph):
                     continue
+                w = spans.get((c, r), w)                         # a group header spans its columns
                 assert cell.style.splitLongWords == 0
                 for frag in cell.frags:
                     for word in frag.text.split():
@@ -423,6 +425,6 @@ def test_dag_report_pdf_tables_and_scoreboard_page(dag_workdir, monkeypatch):
     r = [(i, f) for i, f in enumerate(flow) if isinstance(f, RLTable) and i > 0 and isinstance(flow[i - 1], Paragraph)
          and re.match(r"<b>Table R[12]\.", flow[i - 1].text)]
     assert len(r) == 2
+    assert all(f._cellvalues[1][1].style.fontSize == CELL_SIZES[0] for _, f in r)    # the largest cell font
     height = sum(f.wrap(FRAME_WIDTH, FRAME_HEIGHT)[1] + 30 for _, f in r)      # + title and spacing
     assert height < FRAME_HEIGHT
-    assert all(f._cellvalues[1][0].style.fontSize == CELL_SIZES[0] for _, f in r)
