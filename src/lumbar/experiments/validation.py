@@ -332,8 +332,8 @@ def _draw_panel(ax, g: pd.DataFrame) -> None:
                 ax.plot([r.sim], [yi], marker="o", color="#1a9641", ms=3.6, ls="")
             else:
                 ax.plot([r.sim], [yi], marker="X", color="#d7191c", ms=4.6, ls="")
-        else:
-            ax.text(r.measured, yi, "  no value", color="#d7191c", fontsize=5.5, va="center", ha="left")
+        else:                          # no simulated value (no equilibrium): said inside the panel, at its left
+            ax.text(lo - pad, yi, " no simulated value", color="#d7191c", fontsize=5.5, va="center", ha="left")
     ax.set_yticks(y)
     ax.set_yticklabels(_row_labels(g), fontsize=5.6)
     ax.tick_params(axis="x", labelsize=5.5, length=2, pad=1)
