@@ -20,7 +20,7 @@ h1.title{font-size:1.35em;text-align:center;margin:.4em 0} h1{font-size:1.3em;bo
 h2{font-size:1.1em} p.abstract{background:#f4f4f4;padding:.4em .8em;margin:.3em 0} p.small{font-size:.9em;color:#333}
 p.note{color:#777;font-style:italic} figure{margin:1.2em 0;text-align:center} figure img{max-width:100%}
 figcaption{text-align:left;font-size:.9em} table{border-collapse:collapse;margin:.5em 0 1.5em;font-size:.8em}
-td,th{overflow-wrap:normal;word-break:normal;vertical-align:top}
+td,th{overflow-wrap:normal;word-break:normal;vertical-align:top} td.nw{white-space:nowrap}
 caption{caption-side:top;text-align:left;font-weight:bold;padding:.3em 0}
 th,td{border:1px solid #bbb;padding:.15em .4em}
 th{background:#eee} td.ok{color:#080;text-align:center} td.out{color:#c00;text-align:center;font-weight:bold}
@@ -65,6 +65,8 @@ def render_html(doc: Doc, builder: ReportBuilder) -> str:
                 cells = []
                 for v in r:
                     cls = {CHECK: "ok", CROSS: "out", NC: "nc"}.get(v) if b.marks else None
+                    if cls is None and str(v) and " " not in str(v):
+                        cls = "nw"            # one word (a number, "L1-L2", a file name): never broken inside
                     cells.append(f'<td class="{cls}">{_h(v)}</td>' if cls else f"<td>{_h(v)}</td>")
                 rows.append("<tr>" + "".join(cells) + "</tr>")
             rows.append("</tbody></table></div>")
