@@ -142,3 +142,63 @@ def test_link_checker_reports_broken_links(tmp_path):
     assert any("fig.png does not exist" in p for p in problems)
     assert any("#nowhere" in p for p in problems)
     assert any("outside the repository" in p for p in problems)
+
+
+# ---- docs that cannot go stale: no typed measurement; numbers come from templates rendered by the workflow
+TEMPLATES = sorted((DOCS / "templates").glob("*.md"))
+
+
+def test_docs_type_no_dated_measurement():
+    """A number measured once and typed into prose goes stale: README and docs/*.md carry none (no 'recorded at',
+    no measurement date, no 'not recorded'); numbers live in the report and in docs/templates/."""
+    bad = []
+    for path in markdown_files():
+        for i, line in _prose_lines(path.read_text()):
+            if re.search(r"not recorded|recorded at|\b20\d\d-\d\d-\d\d\b", line, re.I):
+                bad.append(f"{path.relative_to(ROOT)}:{i}: {line.strip()[:100]}")
+    assert not bad, "typed measurements in docs:\n" + "\n".join(bad)
+
+
+def test_doc_templates_read_workflow_outputs():
+    """Every placeholder of docs/templates/*.md reads a result file that a rule of the workflow names (the rule
+    docs_numbers takes them as inputs) and has the form 'path | ... | value'."""
+    from lumbar.report.docs import PLACEHOLDER, template_files
+
+    assert TEMPLATES, "docs/templates/ has no template"
+    rules = "".join(p.read_text() for p in (ROOT / "workflow" / "rules").glob("*.smk"))
+    for t in TEMPLATES:
+        text = t.read_text()
+        for m in PLACEHOLDER.finditer(text):
+            assert len(m.group(1).split("|")) >= 2, f"{t.name}: {m.group(0)}"
+        for f in template_files(text):
+            assert f.startswith("results/") and f.endswith((".csv", ".tsv", ".json")), f
+            assert f'"{f}"' in rules, f"{t.name}: {f} is named by no rule in workflow/rules/"
+
+
+def test_template_renderer_reads_values_and_says_what_is_missing(tmp_path):
+    from lumbar.report.docs import MISSING, render
+
+    (tmp_path / "t.csv").write_text("set,dir,rom_deg,ok\na,flexion,7.76476,True\nb,flexion,2.3295,False\n"
+                                    "a,extension,5.75043,True\n")
+    (tmp_path / "m.json").write_text('{"r2": 0.99402917, "n": 4, "sub": {"x": 1.5}}')
+    text = ("{{ t.csv | set=a; dir=flexion | rom_deg }} {{ t.csv | ok=True | count }} {{ t.csv | max:rom_deg }} "
+            "{{ t.csv | ok=False | list:set }} {{ t.csv | set=c | rom_deg }} {{ m.json | r2 }} {{ m.json | sub.x }} "
+            "{{ t.csv | range:rom_deg }}")
+    assert render(text, tmp_path) == f"7.76 2 7.76 b {MISSING} 0.994 1.5 2.33 to 7.76"
+    with pytest.raises(KeyError, match="no column 'nope'"):
+        render("{{ t.csv | nope }}", tmp_path)
+    with pytest.raises(FileNotFoundError):
+        render("{{ absent.csv | count }}", tmp_path)
+
+
+@pytest.mark.workflow
+def test_rendered_findings_of_the_test_run_are_current(dag_workdir):
+    """results/report/<name>.md of the test-config run equals its template rendered now from that run's results:
+    the workflow re-renders it whenever a template or a result it reads changes (the rule's inputs)."""
+    from lumbar.report.docs import render
+
+    for t in TEMPLATES:
+        out = dag_workdir / "results" / "report" / t.name
+        text = out.read_text()
+        assert "{{" not in text
+        assert text.split("\n", 1)[1] == render(t.read_text(), dag_workdir)

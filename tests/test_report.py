@@ -143,7 +143,7 @@ def fake_muscle_discrepancy(fake_results, fake_png):
 def _build(tmp, config, inputs, name="paper"):
     out = tmp / "results" / "report"
     summary = build_report(inputs, config, out / f"{name}.html", out / f"{name}.pdf",
-                           captions_dir=ROOT / "workflow" / "report")
+                           captions_dir=ROOT / "workflow" / "report", logs_dir="logs")
     return out / f"{name}.html", out / f"{name}.pdf", summary
 
 
@@ -241,3 +241,190 @@ def test_dag_report_references_exist(dag_workdir):
     for n in range(1, 6):
         assert any(c.startswith(f"Table {n}.") for c in titles), n
     assert "Data provenance" in refs.text and "Summary" in refs.text
+
+
+# ----------------------------------------------------------------------------------------------- first page, tables
+VALIDATION_CSV = (
+    "quantity,condition,unit,sim,measured,measured_low,measured_high,kind,source,within,tolerance_rule,set,role,note\n"
+    # disc-only rows: the same comparison for two sets (shared disc) -> one distinct comparison each
+    "L4-L5 ROM,wo_all flexion 1 N*m,deg,4.9298,4.9298,,,derived_from_published_fit,fit,True,measured +- 0.5,"
+    "calibrated,calibration target,\n"
+    "L4-L5 ROM,wo_all flexion 1 N*m,deg,4.92979,4.9298,,,derived_from_published_fit,fit,True,measured +- 0.5,"
+    "rupp2015,calibration target,\n"
+    "L4-L5 ROM,wo_all flexion 5 N*m,deg,8.4291,8.4291,,,derived_from_published_fit,fit,True,measured +- 0.5,"
+    "calibrated,calibration target,\n"
+    "L4-L5 ROM,wo_all flexion 5 N*m,deg,8.4292,8.4291,,,derived_from_published_fit,fit,True,measured +- 0.5,"
+    "rupp2015,calibration target,\n"
+    "L4-L5 ROM,intact flexion 10 N*m,deg,7.76,8.9,,,original_text,Yamamoto,True,measured +- 25 % (no range published),"
+    "calibrated,calibration target,\n"
+    "L4-L5 ROM,intact flexion 10 N*m,deg,2.33,8.9,,,original_text,Yamamoto,False,measured +- 25 % (no range published),"
+    "paper_table3_as_published,independent,\n"
+    "L4-L5 IDP in vivo,crate_far,MPa,,1.8,,,third_party,Wilke,False,no simulated value (no equilibrium),muscle model,"
+    "independent,posture not converged\n"
+    "L4-L5 IDP in vivo,upright_standing,MPa,0.388,0.5,,,third_party,Wilke,True,measured +- 25 % (no range published),"
+    "muscle model,independent,\n"
+    "facet joint space width,lumbar (pooled),mm,1.68,1.93,1.42,2.44,third_party,Simon,True,measured range,geometry,"
+    "independent,\n")
+
+
+@pytest.fixture
+def fake_full(fake_results, tmp_path):
+    """``fake_results`` plus the real-data scoreboard (repeated disc-only rows, a missing simulated value), its
+    figure (drawn by the library), a table far wider than the page, and workflow logs with warnings."""
+    import pandas as pd
+
+    from lumbar.experiments.validation import plot_scoreboard
+
+    tmp, config, inputs = fake_results
+    t, f = Path("results/tables"), Path("results/figures")
+    (t / "validation_real_data.csv").write_text(VALIDATION_CSV)
+    plot_scoreboard(pd.read_csv(t / "validation_real_data.csv"), f / "validation_scoreboard.png")
+    cols = [f"structure_{k}_moment_about_the_left_lateral_axis_nm" for k in range(30)]
+    wide = pd.DataFrame([[1.23456e-5 * (i + 1) * (k + 1) for k in range(30)] for i in range(12)], columns=cols)
+    wide.insert(0, "level", [f"L{i}-L{i + 1}" for i in range(1, 13)])
+    wide.to_csv(t / "fsu_geometry.csv", index=False)
+    logs = Path("logs")
+    (logs / "muscle_sobol_chunk").mkdir(parents=True)
+    (logs / "calibrate.log").write_text("2026-01-01 00:00:00,000 INFO lumbar.workflow.calibrate: calibration: 9 steps\n")
+    (logs / "muscle_sobol_chunk" / "flexion_1.log").write_text(
+        "2026-01-01 00:00:01,000 WARNING lumbar.workflow.muscle_sobol_chunk: Sobol flexion chunk 1: 2 reached "
+        "posture(s) whose optimum IPOPT could not certify\n")
+    extra = [str(t / "validation_real_data.csv"), str(f / "validation_scoreboard.png"), str(t / "fsu_geometry.csv")]
+    return tmp, config, inputs + [e for e in extra if e not in inputs]
+
+
+def _document(tmp, config, inputs, logs_dir="logs"):
+    from lumbar.report import build_document
+    return build_document(inputs, config, tmp / "results" / "report" / "paper.html",
+                          captions_dir=ROOT / "workflow" / "report", logs_dir=logs_dir)
+
+
+def pdf_table_problems(doc, builder) -> list[str]:
+    """Measured with reportlab on the flowables the PDF is made of: every table fits the frame, and no word of a
+    cell is wider than its column (reportlab then never breaks it inside; the cells never split long words)."""
+    from reportlab.pdfbase.pdfmetrics import stringWidth
+    from reportlab.platypus import Paragraph
+    from reportlab.platypus import Table as RLTable
+
+    from lumbar.report.pdf_renderer import FRAME_WIDTH, PAD, story
+
+    out = []
+    tables = [f for f in story(doc, builder) if isinstance(f, RLTable)]
+    assert tables
+    for k, t in enumerate(tables):
+        colw = list(t._argW)
+        if sum(colw) > FRAME_WIDTH + 0.01:
+            out.append(f"table {k}: {sum(colw):.0f} pt wide, frame {FRAME_WIDTH:.0f} pt")
+        spans = {(c0, r0): sum(colw[c0:c1 + 1]) for _, (c0, r0), (c1, r1) in t._spanCmds}
+        for r, row in enumerate(t._cellvalues):
+            for c, (w, cell) in enumerate(zip(colw, row)):
+                if not isinstance(cell, Paragraph):
+                    continue
+                w = spans.get((c, r), w)                         # a group header spans its columns
+                assert cell.style.splitLongWords == 0
+                for frag in cell.frags:
+                    for word in frag.text.split():
+                        ww = stringWidth(word, frag.fontName, frag.fontSize)
+                        if ww > w - 2 * PAD + 1e-6:
+                            out.append(f"table {k}: '{word}' ({ww:.1f} pt) in a {w - 2 * PAD:.1f} pt column")
+    return out
+
+
+def test_first_page_abstract_counts_distinct_comparisons(fake_full):
+    html_path, _, _ = _build(*fake_full)
+    text = parse_report(html_path).text
+    # 9 rows, 7 distinct comparisons: 4 independent (1 within... 2 within), 3 calibration targets (all met)
+    assert "in 7 distinct comparisons" in text
+    assert "Independent checks: 2 of 4 within" in text and "Calibration targets (a fit quality, not a validation): " \
+        "3 of 3 met" in text
+    assert "L4-L5 IDP in vivo (muscle model), 1 of 2 within" in text
+    assert "Table R1. Independent checks (validation): 2 of 4 distinct comparisons within" in text
+    assert "Table R2. Calibration targets (fit quality, not validation): 3 of 3 distinct comparisons within" in text
+    assert "no value" in text and "2 characteristic sets" in text        # crate_far; the shared disc-only rows
+    assert "1 warning(s) need the user's attention" in text
+    assert "Sobol flexion chunk 1: 2 reached posture(s)" in text and "muscle_sobol_chunk/flexion_1" in text
+    assert "calibration: 9 steps" not in text                              # INFO lines are not flags
+
+
+def test_pdf_first_page_holds_abstract_and_scoreboard_figure(fake_full):
+    from reportlab.platypus import Image, Paragraph
+
+    from lumbar.report import render_pdf
+    doc, b = _document(*fake_full)
+    placed = []
+    render_pdf(doc, b, placed=placed)
+    page1 = [f for p, f in placed if p == 1]
+    assert any(isinstance(f, Paragraph) and "distinct comparisons" in f.text for f in page1)
+    assert any(isinstance(f, Image) and str(f.filename).endswith("validation_scoreboard.png") for f in page1)
+
+
+def test_pdf_tables_never_wrap_a_word_and_fit_the_frame(fake_full):
+    doc, b = _document(*fake_full)
+    assert pdf_table_problems(doc, b) == []
+    # the 31-column geometry table is wider than the page at the smallest font: split, its level column repeated
+    from reportlab.platypus import Table as RLTable
+
+    from lumbar.report.pdf_renderer import story
+    parts = [f for f in story(doc, b) if isinstance(f, RLTable) and "L1-L2" in str(f._cellvalues[1][0].text)]
+    assert len(parts) >= 2
+
+
+def test_pdf_table_checker_finds_a_word_wider_than_its_column(fake_full):
+    """The measurement above can fail: a cell whose one word is wider than the frame."""
+    from lumbar.report.document import Table
+    doc, b = _document(*fake_full)
+    doc.blocks.append(Table("too wide", ["a"], [["x" * 400]]))
+    assert any("'xxxx" in p for p in pdf_table_problems(doc, b))
+
+
+def test_tables_have_human_headers_and_rounded_values(fake_results):
+    html_path, _, _ = _build(*fake_results)
+    html = html_path.read_text()
+    heads = re.findall(r"<th>(.*?)</th>", html)
+    assert "p3 [N·m/rad]" in heads and "ROM simulated [deg]" not in heads   # table1; table4 synopsis is a grid
+    assert "p3_nm_per_rad" not in heads and "-1.69" in html and "-1.685" not in html
+    assert "0.00591" in html                                                  # 3 significant digits
+
+
+def test_report_sections_can_be_added_from_outside(fake_results):
+    from lumbar.report import SECTIONS, report_section
+
+    before = list(SECTIONS)
+    try:
+        @report_section("load-sharing", "Load sharing between disc, facets and ligaments", after="idp")
+        def _load_sharing(b):
+            b.para("Load sharing: read from a result file.")
+            b.csv_table("results/load_sharing/absent.csv", "Load sharing per structure")
+        html_path, _, _ = _build(*fake_results)
+        text = parse_report(html_path).text
+        anchors = [s.anchor for s in SECTIONS]
+        assert anchors.index("load-sharing") == anchors.index("idp") + 1
+        assert "6 Load sharing between disc, facets and ligaments" in text     # numbered after section 5 (IDP)
+        assert f"Load sharing per structure (absent.csv): {NOT_BUILT}" in text
+        assert 'href="#load-sharing"' in html_path.read_text()
+        with pytest.raises(ValueError, match="no section"):
+            report_section("x", "X", after="nowhere")(lambda b: None)
+    finally:
+        SECTIONS[:] = before
+
+
+@pytest.mark.workflow
+def test_dag_report_pdf_tables_and_scoreboard_page(dag_workdir, monkeypatch):
+    """The test-config DAG's report: every PDF table fits the frame without a word wrapped inside, and Tables R1
+    and R2 together fit one page at the largest cell font."""
+    from reportlab.platypus import Paragraph
+    from reportlab.platypus import Table as RLTable
+
+    from lumbar.report.pdf_renderer import CELL_SIZES, FRAME_HEIGHT, FRAME_WIDTH, story
+    monkeypatch.chdir(dag_workdir)
+    inputs = [str(p) for p in sorted(Path("results").rglob("*")) if p.is_file() and "report" not in p.parts]
+    inputs += [str(p) for p in sorted(Path("data").rglob("*.csv"))]
+    doc, b = _document(dag_workdir, load_config(dag_workdir / "config" / "test" / "config.yaml"), inputs)
+    assert pdf_table_problems(doc, b) == []
+    flow = story(doc, b)
+    r = [(i, f) for i, f in enumerate(flow) if isinstance(f, RLTable) and i > 0 and isinstance(flow[i - 1], Paragraph)
+         and re.match(r"<b>Table R[12]\.", flow[i - 1].text)]
+    assert len(r) == 2
+    assert all(f._cellvalues[1][1].style.fontSize == CELL_SIZES[0] for _, f in r)    # the largest cell font
+    height = sum(f.wrap(FRAME_WIDTH, FRAME_HEIGHT)[1] + 30 for _, f in r)      # + title and spacing
+    assert height < FRAME_HEIGHT

@@ -52,3 +52,55 @@ def test_in_vivo_rows_flag_unconverged_postures():
     r = V.in_vivo_rows(df)
     assert r[0]["within"] and not r[1]["within"] and np.isnan(r[1]["sim"])
     assert {x["role"] for x in r} == {V.INDEPENDENT}
+
+
+def _scoreboard_rows(levels=()):
+    rows = []
+    for s in ("calibrated", "rupp2015", "nolte1990"):          # the same disc-only comparison for three sets
+        rows.append(dict(quantity="L4-L5 ROM", condition="wo_all flexion 5 N*m", unit="deg", sim=8.4291 + 1e-6,
+                         measured=8.4291, measured_low=np.nan, measured_high=np.nan, within=True,
+                         tolerance_rule="measured +- 0.5", set=s, role="calibration target"))
+    rows.append(dict(quantity="L4-L5 IDP in vivo", condition="crate_far", unit="MPa", sim=np.nan, measured=1.8,
+                     measured_low=np.nan, measured_high=np.nan, within=False,
+                     tolerance_rule="no simulated value (no equilibrium)", set="muscle model", role="independent"))
+    rows.append(dict(quantity="facet joint space width", condition="lumbar", unit="mm", sim=1.68, measured=1.93,
+                     measured_low=1.42, measured_high=2.44, within=True, tolerance_rule="measured range",
+                     set="geometry", role="independent"))
+    for lv in levels:                                            # other levels' ROM: a new quantity each
+        for d, sim in (("flexion", 8.0), ("extension", 2.0)):
+            rows.append(dict(quantity=f"{lv} ROM", condition=f"intact {d} 10 N*m", unit="deg", sim=sim,
+                             measured=6.0, measured_low=np.nan, measured_high=np.nan,
+                             within=abs(sim - 6.0) <= 1.5, tolerance_rule="measured +- 25 % (no range published)",
+                             set="calibrated", role="independent"))
+    return pd.DataFrame([{**r, "kind": "original_text", "source": "s", "note": ""} for r in rows])
+
+
+def test_distinct_comparisons_count_shared_rows_once_and_bands_follow_the_rule():
+    d = V.distinct_comparisons(_scoreboard_rows())
+    assert len(d) == 3 and list(d["role"]) == ["independent", "independent", "calibration target"]
+    disc = d[d["role"] == "calibration target"].iloc[0]
+    assert disc["n_rows"] == 3 and disc["sets"] == "calibrated; rupp2015; nolte1990"
+    assert (disc["band_low"], disc["band_high"]) == pytest.approx((7.9291, 8.9291))
+    assert V.role_counts(d) == {"independent": (1, 2), "calibration target": (1, 1)}
+    facet = d[d["quantity"] == "facet joint space width"].iloc[0]
+    assert (facet["band_low"], facet["band_high"]) == (1.42, 2.44)               # the published range
+    row = {"measured": 6.0, "measured_low": np.nan, "measured_high": np.nan, "tolerance_rule": "measured +- 25 %"}
+    assert V.acceptance_band(row) == pytest.approx((4.5, 7.5))
+    # a simulated value that differs beyond 3 significant digits is another comparison
+    df = _scoreboard_rows()
+    df.loc[1, "sim"] = 8.6
+    assert len(V.distinct_comparisons(df)) == 4
+    assert V.condition_label("wo_all lateral_bending 7.5 N*m") == "w/o ALL lateral bending 7.5 N\u00b7m"
+
+
+def test_scoreboard_figure_grows_with_new_quantities(tmp_path):
+    """Generic over the rows: another level's ROM rows are new panels, and the figure grows to hold them."""
+    from PIL import Image
+
+    a, b = tmp_path / "a.png", tmp_path / "b.png"
+    V.plot_scoreboard(_scoreboard_rows(), a)
+    V.plot_scoreboard(_scoreboard_rows(levels=("L1-L2", "L2-L3", "L3-L4", "L5-S1")), b)
+    (wa, ha), (wb, hb) = Image.open(a).size, Image.open(b).size
+    assert wa == wb and hb > ha * 1.5
+    V.plot_scoreboard(_scoreboard_rows().iloc[0:0], tmp_path / "empty.png")       # no row: a figure that says so
+    assert (tmp_path / "empty.png").stat().st_size > 0

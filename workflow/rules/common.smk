@@ -58,6 +58,7 @@ def final_outputs():
         "results/calibration/admissibility.csv",
         "results/tables/multilevel_rom.csv",
         "results/figures/multilevel_rom.png",
+        "results/figures/validation_scoreboard.png",
         "results/tables/table4_vs_paper.csv",
         "results/figures/table4_grid.png",
         "results/figures/fig6_rom_stepwise_reduction.png",
@@ -90,6 +91,8 @@ def final_outputs():
         # paper-style report (issue 7, workflow/rules/report.smk): reads every output above
         "results/report/paper.html",
         "results/report/paper.pdf",
+        # documents whose numbers are read from the results (rule docs_numbers)
+        *[f"results/report/{Path(t).name}" for t in DOC_TEMPLATES],
     ]
 
 
@@ -189,6 +192,18 @@ def stepwise_reduction_tables(wildcards):
 
 
 # ---- paper-style report (issue 7, workflow/rules/report.smk)
+DOC_TEMPLATES = sorted(glob("docs/templates/*.md"))
+
+
+def doc_template_inputs(wildcards):
+    """The result files the placeholders of the doc templates read (lumbar.report.docs.template_files)."""
+    from lumbar.report.docs import template_files
+
+    return sorted(
+        {f for t in DOC_TEMPLATES for f in template_files(Path(t).read_text())}
+    )
+
+
 REPORT_OPTIONAL = [
     "results/calibration/calibration_summary.csv",
     "results/calibration/calibration_real_fit.csv",

@@ -30,5 +30,25 @@ rule paper_report:
     params:
         config=config,
         published=config["paths"]["published_model_results"],
+        # read when the report is built (every rule before it has finished): their WARNING lines are the
+        # report's "Flags" section; not inputs (a log is no rule's output file)
+        logs_dir="logs",
+    script:
+        "../scripts/report.py"
+
+
+# Documents whose numbers are read from the results (lumbar.report.docs): docs/templates/<name>.md rendered into
+# results/report/<name>.md. The files a template's placeholders read are the rule's inputs, so a template that
+# names a file no rule makes fails the dry run.
+rule docs_numbers:
+    input:
+        templates=DOC_TEMPLATES,
+        results=doc_template_inputs,
+    output:
+        [f"results/report/{Path(t).name}" for t in DOC_TEMPLATES],
+    log:
+        "logs/docs_numbers.log",
+    conda:
+        "../envs/lumbar.yaml"
     script:
         "../scripts/report.py"

@@ -61,3 +61,23 @@ rule multilevel_validation:
         data_dir=config["characteristics"]["data_dir"],
     script:
         "../scripts/validation.py"
+
+
+# The first figure of the report: every distinct comparison of validation_real_data.csv (measured value, the
+# interval a simulated value must fall in, the simulated value), independent checks apart from calibration
+# targets; one panel per quantity, whatever rows the table holds.
+rule validation_scoreboard_figure:
+    input:
+        "results/tables/validation_real_data.csv",
+    output:
+        report(
+            "results/figures/validation_scoreboard.png",
+            caption="../report/validation_scoreboard.rst",
+            category="Validation on real data",
+        ),
+    log:
+        "logs/validation_scoreboard_figure.log",
+    conda:
+        "../envs/lumbar.yaml"
+    script:
+        "../scripts/validation.py"

@@ -97,6 +97,14 @@ def _sobol_figure(df, path):
     _save(fig, path)
 
 
+def _warn_uncertified(what, which, table):
+    """One WARNING per rule for reached postures whose optimum IPOPT could not certify (something to act on);
+    postures the muscles cannot reach are expected outcomes (red stars), counted in the rule's summary line."""
+    if which:
+        log.warning("%s: %d reached posture(s) whose optimum IPOPT could not certify (certified=False in %s): "
+                    "raise muscle_model.solver.ipopt_max_iter, or read them as uncertified", what, len(which), table)
+
+
 rule = snakemake.rule
 p = snakemake.params.muscle_model
 if rule == "muscle_validation":
@@ -112,6 +120,8 @@ if rule == "muscle_validation":
     sols = mm.solve_postures(model, solver, names)
     log.info("%d activities solved in %.1f s; converged: %s", len(names), time.perf_counter() - t0,
              {n: s.converged for n, s in zip(names, sols)})
+    _warn_uncertified("muscle_validation", [n for n, s in zip(names, sols) if s.reached and not s.certified],
+                      snakemake.output.segment_loads)
     for n, s in zip(names, sols):
         log.info("%s: converged=%s reached=%s certified=%s KKT residual %.1e, residual %.1e N %.1e N*m, tracking "
                  "error %.3f deg, %d iterations %s", n, s.converged, s.reached, s.certified, s.kkt_residual,
@@ -198,6 +208,8 @@ elif rule == "muscle_sensitivity":
     log.info("chunk %s (ssl %s): %d scenarios in %.1f s, %d not reached, %d reached but not certified "
              "(max KKT residual %.1e)", param, ssl, len(out), time.perf_counter() - t0, int((~out["reached"]).sum()),
              int((out["reached"] & ~out["certified"]).sum()), out["kkt_residual"].max())
+    _warn_uncertified(f"sensitivity chunk {param} (ssl {ssl})", list(out.index[out["reached"] & ~out["certified"]]),
+                      snakemake.output[0])
     write_table_atomic(out, snakemake.output[0])
 elif rule == "muscle_sensitivity_table":
     df = pd.concat([pd.read_csv(f) for f in snakemake.input.chunks], ignore_index=True)
@@ -280,6 +292,8 @@ elif rule == "muscle_sobol_chunk":
     log.info("Sobol %s chunk %d: %d samples in %.1f s, %d not reached, %d reached but not certified", posture, k + 1,
              len(out), time.perf_counter() - t0, int((~out["reached"]).sum()),
              int((out["reached"] & ~out["certified"]).sum()))
+    _warn_uncertified(f"Sobol {posture} chunk {k + 1}", list(out.index[out["reached"] & ~out["certified"]]),
+                      snakemake.output[0])
     write_table_atomic(out, snakemake.output[0])
 elif rule == "muscle_sobol":
     import time

@@ -1,4 +1,5 @@
-"""Paper-style report: rule paper_report (workflow/rules/report.smk), the report as self-contained HTML and PDF.
+"""Paper-style report (workflow/rules/report.smk): rule paper_report, the report as self-contained HTML and PDF, and
+rule docs_numbers, the documents of docs/templates rendered with the numbers of this run.
 
 By hand (the rule's inputs that are not built yet are reported as "not built in this configuration"):
     python workflow/scripts/report.py paper_report --configfile config/test/config.yaml \
@@ -14,12 +15,20 @@ snakemake, log = _common.start(globals())
 
 from lumbar.report import build_report  # noqa: E402
 
+if snakemake.rule == "docs_numbers":
+    from lumbar.report.docs import render_file
+
+    for template, out in zip(snakemake.input.templates, snakemake.output):
+        render_file(template, out)
+        log.info("rendered %s -> %s", template, out)
+    sys.exit(0)
+
 inputs = [p for p in snakemake.input if Path(p).is_file()]   # under Snakemake all of them; by hand, those built
 captions = [str(c) for c in snakemake.input.captions]
 summary = build_report(inputs, snakemake.params.config, snakemake.output.html, snakemake.output.pdf,
                        captions_dir=Path(captions[0]).parent if captions else None,
-                       published=snakemake.params.published)
-log.info("report: %d figures, %d tables; surrogate reference: %s", summary["figures"], summary["tables"],
-         summary["surrogate"])
+                       published=snakemake.params.published, logs_dir=snakemake.params.logs_dir)
+log.info("report: %d figures, %d tables; surrogate reference: %s; %d warning(s) of the workflow's logs listed "
+         "under Flags", summary["figures"], summary["tables"], summary["surrogate"], len(summary["warnings"]))
 for note in summary["not_built"]:
     log.info("  %s", note)

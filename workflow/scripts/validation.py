@@ -1,7 +1,8 @@
-"""Validation stage: rule validation_real_data, the scoreboard of comparisons with real data
-(lumbar.experiments.validation).
+"""Validation stage (lumbar.experiments.validation): rule validation_real_data, the scoreboard of comparisons with
+real data, and rule validation_scoreboard_figure, its figure (the report's first figure).
 
 By hand: python workflow/scripts/validation.py validation_real_data --configfile config/test/config.yaml
+         python workflow/scripts/validation.py validation_scoreboard_figure --configfile config/test/config.yaml
 """
 import sys
 from pathlib import Path
@@ -14,6 +15,14 @@ snakemake, log = _common.start(globals())
 import pandas as pd  # noqa: E402
 
 from lumbar.experiments import validation as V  # noqa: E402
+
+if snakemake.rule == "validation_scoreboard_figure":
+    table = pd.read_csv(snakemake.input[0])
+    V.plot_scoreboard(table, snakemake.output[0])
+    counts = V.role_counts(V.distinct_comparisons(table))
+    log.info("validation scoreboard figure: %d rows, %s", len(table),
+             "; ".join(f"{role}: {w} of {n} distinct comparisons within" for role, (w, n) in counts.items()))
+    sys.exit(0)
 from lumbar.inputs.characteristics import resolve_characteristic_set  # noqa: E402
 from lumbar.geometry import load_geometry  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402

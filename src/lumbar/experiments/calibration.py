@@ -366,9 +366,9 @@ def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_
                 pub = base.ligaments.get(what)
                 if pub is not None and hasattr(pub, "a"):
                     set_ligament_law(m, _kind_groups(m, what), pub)
-            log.warning("calibration step %d (%s on %s): not identifiable (no ROM of the stage changes by %.2g "
-                        "deg when its parameters change): kept at the start set's value", step, what, stage,
-                        IDENTIFIABLE_MIN_DEG)
+            log.info("calibration step %d (%s on %s): not identifiable (no ROM of the stage changes by %.2g "
+                     "deg when its parameters change): kept at the start set's value", step, what, stage,
+                     IDENTIFIABLE_MIN_DEG)
         else:
             best = None
             for apply, x0, lb, ub, xs, to_law in candidates:
@@ -859,7 +859,7 @@ def fit_real_targets(geometry, charset, targets: pd.DataFrame, level="L4-L5", pa
     tt["converged"] = conv
     for row in rows:
         if row["at_bound"]:
-            log.warning("real-target fit: %s ends at its bound (%.4g %s)", row["parameter"], row["value"], row["unit"])
+            log.info("real-target fit: %s ends at its bound (%.4g %s)", row["parameter"], row["value"], row["unit"])
         if not row["identifiable"]:
             log.info("real-target fit: %s not identifiable from these rows (%.3g deg per decade): kept at %.4g",
                      row["parameter"], row["sensitivity_deg_per_decade"], row["start"])

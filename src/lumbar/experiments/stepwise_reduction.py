@@ -138,8 +138,8 @@ def simulate_stepwise_reduction(fsu, stages=STAGES, directions=MAIN_DIRECTIONS, 
         out["rom_deg"] = rom[0]
         out["converged"] = conv[0]
         if not out["converged"].all():
-            log.warning("stepwise reduction: %d of %d scenario(s) did not converge (rom_deg NaN, converged=False)",
-                        int((~out["converged"]).sum()), len(out))
+            log.info("stepwise reduction: %d of %d scenario(s) did not converge (rom_deg NaN, converged=False)",
+                     int((~out["converged"]).sum()), len(out))
         return out
     ss = StageSolver(fsu, scen, params=effect_params(fsu, effects), max_iter=max_iter, tol=tol,
                      load_steps=load_steps)
@@ -150,8 +150,8 @@ def simulate_stepwise_reduction(fsu, stages=STAGES, directions=MAIN_DIRECTIONS, 
     out["residual_force_n"] = res.residual_force      # of the loaded solve (the 0 N*m state has its own)
     out["residual_moment_nm"] = res.residual_moment
     if not conv.all():
-        log.warning("stepwise reduction: %d of %d scenario(s) did not converge (rom_deg NaN, converged=False)",
-                    int((~conv).sum()), len(conv))
+        log.info("stepwise reduction: %d of %d scenario(s) did not converge (rom_deg NaN, converged=False)",
+                 int((~conv).sum()), len(conv))
     return out
 
 
@@ -218,8 +218,12 @@ def assess(sim: pd.DataFrame, ref: pd.DataFrame, set_name: str, tolerance_deg: f
             f"{sorted(set(ref['stage']))}. Set stepwise_reduction.moments_nm to the table's moments (or check "
             "stepwise_reduction.measured_table)")
     if len(df) < len(sim):
-        log.warning("set %s: %d simulated scenario(s) have no reference row and are not assessed",
-                    set_name, len(sim) - len(df))
+        # a surrogate leaves out the rows its virtual specimens cannot reach (a model limit, logged where the
+        # surrogate is made): expected; a measured table without a simulated scenario is for the user to check
+        surrogate = "kind" in ref.columns and (ref["kind"] == "surrogate").any()
+        log.log(logging.INFO if surrogate else logging.WARNING,
+                "set %s: %d simulated scenario(s) have no reference row and are not assessed", set_name,
+                len(sim) - len(df))
     no_range = df["rom_min_deg"].isna()
     # rows without a range: the derived (published-fit) and surrogate rows use mean +- tolerance_deg; a
     # published population value without a range (e.g. Yamamoto et al. 1989) uses mean +- 25 %, the rule of

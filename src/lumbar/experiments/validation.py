@@ -228,3 +228,192 @@ def plot_multilevel(rom: pd.DataFrame, curves: pd.DataFrame, path) -> None:
     a2.grid(alpha=0.3)
     fig.tight_layout()
     save_figure_atomic(fig, path, dpi=110)
+# ----------------------------------------------------------------------------------- the scoreboard for readers
+#: display names of the ``set`` column (the characteristic sets and the other sources of a simulated value)
+SET_NAMES = {"calibrated": "calibrated unit", "paper_table3_as_published": "paper's Table 3 set as published",
+             "muscle model": "muscle model", "geometry": "geometry", "chazal1985": "Chazal 1985",
+             "shirazi_adl1986": "Shirazi-Adl 1986", "white_panjabi1990": "White and Panjabi 1990",
+             "nolte1990": "Nolte 1990", "rupp2015": "Rupp 2015"}
+ROLE_ORDER = (INDEPENDENT, TARGET)
+
+
+def _sig(x, digits=3):
+    """``x`` rounded to ``digits`` significant digits (NaN stays NaN): two comparisons that agree to what the
+    table shows are one comparison."""
+    x = float(x)
+    if not np.isfinite(x) or x == 0:
+        return x
+    return float(f"{x:.{digits}g}")
+
+
+def condition_label(condition: str) -> str:
+    """A condition of the scoreboard as a reader writes it: ``wo_all lateral_bending 7.5 N*m`` ->
+    ``w/o ALL lateral bending 7.5 N·m``."""
+    import re  # noqa: PLC0415
+
+    s = re.sub(r"\bwo_([a-z]+)", lambda m: "w/o " + m.group(1).upper(), str(condition))
+    return s.replace("_", " ").replace("N*m", "N\u00b7m")
+
+
+def acceptance_band(row) -> tuple[float, float]:
+    """The interval a simulated value must fall in to count as ``within``: the published range, or the
+    measured value +- the absolute or relative tolerance named in ``tolerance_rule`` (NaN, NaN if neither)."""
+    import re  # noqa: PLC0415
+
+    lo, hi, m = float(row["measured_low"]), float(row["measured_high"]), float(row["measured"])
+    if np.isfinite(lo) and np.isfinite(hi):
+        return lo, hi
+    rule = str(row.get("tolerance_rule", ""))
+    g = re.search(r"\+-\s*([0-9.eE+-]+)\s*(%?)", rule)
+    if g is None or not np.isfinite(m):
+        return np.nan, np.nan
+    tol = float(g.group(1)) * (abs(m) / 100.0 if g.group(2) == "%" else 1.0)
+    return m - tol, m + tol
+
+
+def distinct_comparisons(df: pd.DataFrame) -> pd.DataFrame:
+    """One row per distinct comparison of a real-data scoreboard (``validation_real_data.csv``).
+
+    Rows that compare the same quantity and condition with the same reference, in the same role, and whose
+    simulated values agree to 3 significant digits are one comparison (e.g. the disc-only rows, which every
+    characteristic set shares because all of them use the paper's disc): they become one row whose ``sets``
+    lists every set and ``n_rows`` counts them. Columns: quantity, condition, unit, sim, measured,
+    measured_low, measured_high, band_low, band_high, within, tolerance_rule, role, sets, n_rows, kind, source,
+    note; independent checks first, then calibration targets, each in the order of the input."""
+    d = df.copy()
+    d["_sim3"] = [_sig(v) for v in d["sim"]]
+    d["_within"] = d["within"].astype(str).str.lower().isin(["true", "1"])
+    key = ["quantity", "condition", "unit", "role", "measured", "measured_low", "measured_high", "_sim3",
+           "_within"]
+    k = pd.Series(["|".join(str(v) for v in t) for t in d[key].itertuples(index=False)], index=d.index)
+    out = []
+    for _, g in d.groupby(k, sort=False):
+        r = g.iloc[0]
+        sets = list(dict.fromkeys(str(s) for s in g["set"]))
+        lo, hi = acceptance_band(r)
+        out.append({"quantity": r["quantity"], "condition": r["condition"], "unit": r["unit"],
+                    "sim": float(r["sim"]), "measured": float(r["measured"]),
+                    "measured_low": float(r["measured_low"]), "measured_high": float(r["measured_high"]),
+                    "band_low": lo, "band_high": hi, "within": bool(r["_within"]),
+                    "tolerance_rule": r["tolerance_rule"], "role": r["role"], "sets": "; ".join(sets),
+                    "n_rows": len(g), "kind": r["kind"], "source": r["source"], "note": r["note"]})
+    res = pd.DataFrame(out)
+    if res.empty:
+        return res
+    order = {r: i for i, r in enumerate(ROLE_ORDER)}
+    res["_o"] = [order.get(r, len(order)) for r in res["role"]]
+    return res.sort_values("_o", kind="stable").drop(columns="_o").reset_index(drop=True)
+
+
+def role_counts(distinct: pd.DataFrame) -> dict[str, tuple[int, int]]:
+    """{role: (within, total)} over the distinct comparisons, in ``ROLE_ORDER``."""
+    out = {}
+    for role in list(ROLE_ORDER) + [r for r in dict.fromkeys(distinct.get("role", [])) if r not in ROLE_ORDER]:
+        g = distinct[distinct["role"] == role] if len(distinct) else distinct
+        if len(g):
+            out[role] = (int(g["within"].sum()), len(g))
+    return out
+
+
+def sets_label(sets: str) -> str:
+    """``sets`` of a distinct comparison for a reader: one set by its name, several as "N characteristic sets"."""
+    names = [s.strip() for s in str(sets).split(";") if s.strip()]
+    if len(names) == 1:
+        return SET_NAMES.get(names[0], names[0])
+    return f"{len(names)} characteristic sets"
+
+
+def unit_label(unit: str) -> str:
+    return {"mm2": "mm\u00b2", "N*m": "N\u00b7m"}.get(str(unit), str(unit))
+
+
+def _row_labels(g: pd.DataFrame) -> list[str]:
+    return [condition_label(c) for c in g["condition"]]
+
+
+def plot_scoreboard(df: pd.DataFrame, path) -> None:
+    """The validation scoreboard as one figure: every distinct comparison of ``df`` (a real-data scoreboard,
+    see :func:`distinct_comparisons`) as a row: the measured value (black bar) with the interval a simulated
+    value must fall in (grey band), the simulated value (green dot within, red cross outside, red "no value"
+    where the model gave none). Panels per quantity and unit; independent checks in the left column,
+    calibration targets (fit quality, not validation) in the right one. Generic over the rows: a new quantity
+    is a new panel."""
+    from matplotlib.lines import Line2D  # noqa: PLC0415
+
+    from ..inputs.io import save_figure_atomic, subplots  # noqa: PLC0415
+
+    d = distinct_comparisons(df)
+    roles = [r for r in ROLE_ORDER if (d["role"] == r).any()] if len(d) else []
+    roles += [r for r in dict.fromkeys(d.get("role", [])) if r not in roles]
+    if not roles:
+        fig, ax = subplots(figsize=(7.0, 1.0), dpi=150)
+        ax.axis("off")
+        ax.text(0.5, 0.5, "no comparison with real data in this configuration", ha="center", va="center")
+        save_figure_atomic(fig, path)
+        return
+    groups = {r: [(q, g) for q, g in d[d["role"] == r].groupby(["quantity", "unit", "sets"], sort=False)]
+              for r in roles}
+    row_in, head_in = 0.145, 0.36          # inches per comparison row and per panel (title, axis)
+    heights = {r: sum(len(g) * row_in + head_in for _, g in groups[r]) for r in roles}
+    H = max(heights.values()) + 0.55
+    W = 7.2
+    fig, _ = subplots(figsize=(W, H), dpi=200)
+    fig.delaxes(fig.axes[0])
+    col_w = 1.0 / len(roles)
+    title = {INDEPENDENT: "Independent checks (validation)", TARGET: "Calibration targets (fit quality)"}
+    for ci, role in enumerate(roles):
+        w_in, _ = counts_text(d, role)
+        fig.text(ci * col_w + 0.01, 1 - 0.12 / H, f"{title.get(role, role)}: {w_in}", fontsize=7.5,
+                 fontweight="bold", va="top")
+        top = H - 0.42
+        for (q, unit, sets), g in groups[role]:
+            h = len(g) * row_in
+            left = ci * col_w + col_w * 0.42
+            ax = fig.add_axes([left, (top - h - 0.16) / H, col_w * 0.55, h / H])
+            _draw_panel(ax, g)
+            fig.text(ci * col_w + 0.01, (top - 0.06) / H, f"{condition_label(q)} [{unit_label(unit)}], {sets_label(sets)}",
+                     fontsize=6.6, fontweight="bold", va="top")
+            top -= len(g) * row_in + head_in
+    handles = [Line2D([], [], color="0.55", lw=5, alpha=0.5, label="acceptance interval"),
+               Line2D([], [], color="k", marker="|", ls="", ms=7, label="measured"),
+               Line2D([], [], color="#1a9641", marker="o", ls="", ms=4, label="simulated, within"),
+               Line2D([], [], color="#d7191c", marker="X", ls="", ms=5, label="simulated, outside")]
+    fig.legend(handles=handles, loc="lower center", ncol=4, fontsize=6.5, frameon=False,
+               bbox_to_anchor=(0.5, 0.0))
+    save_figure_atomic(fig, path)
+
+
+def counts_text(d: pd.DataFrame, role: str) -> tuple[str, int]:
+    g = d[d["role"] == role]
+    return f"{int(g['within'].sum())} of {len(g)} within", len(g)
+
+
+def _draw_panel(ax, g: pd.DataFrame) -> None:
+    n = len(g)
+    y = np.arange(n)[::-1].astype(float)
+    vals = np.concatenate([g["measured"].to_numpy(float), g["sim"].to_numpy(float), g["band_low"].to_numpy(float),
+                           g["band_high"].to_numpy(float)])
+    vals = vals[np.isfinite(vals)]
+    lo, hi = (float(vals.min()), float(vals.max())) if len(vals) else (0.0, 1.0)
+    pad = 0.08 * (hi - lo) if hi > lo else max(abs(hi), 1.0) * 0.1
+    ax.set_xlim(lo - pad, hi + pad)
+    ax.set_ylim(-0.7, n - 0.3)
+    for yi, r in zip(y, g.itertuples(index=False)):
+        if np.isfinite(r.band_low) and np.isfinite(r.band_high):
+            ax.plot([r.band_low, r.band_high], [yi, yi], color="0.55", lw=4.5, alpha=0.45, solid_capstyle="butt")
+        ax.plot([r.measured], [yi], marker="|", color="k", ms=7, mew=1.2)
+        if np.isfinite(r.sim):
+            if r.within:
+                ax.plot([r.sim], [yi], marker="o", color="#1a9641", ms=3.6, ls="")
+            else:
+                ax.plot([r.sim], [yi], marker="X", color="#d7191c", ms=4.6, ls="")
+        else:                          # no simulated value (no equilibrium): said inside the panel, at its left
+            ax.text(lo - pad, yi, " no simulated value", color="#d7191c", fontsize=5.5, va="center", ha="left")
+    ax.set_yticks(y)
+    ax.set_yticklabels(_row_labels(g), fontsize=5.6)
+    ax.tick_params(axis="x", labelsize=5.5, length=2, pad=1)
+    ax.tick_params(axis="y", length=0, pad=2)
+    ax.grid(axis="x", color="0.9", lw=0.5)
+    ax.set_axisbelow(True)
+    for s in ("top", "right"):
+        ax.spines[s].set_visible(False)

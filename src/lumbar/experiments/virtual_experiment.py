@@ -216,8 +216,8 @@ def stepwise_reduction_table(geometry, charset, seed, n_specimens=8, variation=N
             roms[k] = np.where(neg, 0.0, roms[k])
     for i in np.flatnonzero(limit):
         r = sim.iloc[i]
-        log.warning("no equilibrium for most virtual specimens at %s %s %g N*m (a limit of the model, not of one "
-                    "specimen): row left out", r["stage"], r["direction"], r["moment_nm"])
+        log.info("no equilibrium for most virtual specimens at %s %s %g N*m (a limit of the model, not of one "
+                 "specimen): row left out", r["stage"], r["direction"], r["moment_nm"])
     A = np.vstack(roms)
     A[:, limit] = np.nan
     n = np.isfinite(A).sum(axis=0)
@@ -238,8 +238,8 @@ def stepwise_reduction_table(geometry, charset, seed, n_specimens=8, variation=N
     empty = n == 0
     for i in np.flatnonzero(empty):
         r = keys.iloc[i]
-        log.warning("no virtual specimen reached equilibrium at %s %s %g N*m: row left out",
-                    r["stage"], r["direction"], r["moment_nm"])
+        log.info("no virtual specimen reached equilibrium at %s %s %g N*m: row left out",
+                 r["stage"], r["direction"], r["moment_nm"])
     reduced = int(((n < n_specimens) & ~empty).sum())
     if reduced:
         log.warning("%d row(s) have fewer than %d specimens (specimens without equilibrium after every re-draw; "

@@ -212,8 +212,8 @@ def solve(model, loads, x0=None, R0=None, fmask=1.0, cmask=1.0, params=None, loa
         iters[bad] += out[5]
     conv = conv & (res_f <= PHYSICAL_TOL_FORCE_N) & (res_m <= PHYSICAL_TOL_MOMENT_NM)   # never a looser "converged"
     if not conv.all():
-        log.warning("equilibrium not reached for %d of %d scenario(s) (max residual %.2e N, %.2e N*m); "
-                    "flagged converged=False", int((~conv).sum()), B, res_f[~conv].max(), res_m[~conv].max())
+        log.info("equilibrium not reached for %d of %d scenario(s) (max residual %.2e N, %.2e N*m); "
+                 "flagged converged=False", int((~conv).sum()), B, res_f[~conv].max(), res_m[~conv].max())
     return SolveResult(x, R, conv, res_f, res_m, iters, frac)
 
 

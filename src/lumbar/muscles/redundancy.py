@@ -500,7 +500,8 @@ class RedundancySolver:
             else:
                 o.message = (f"IPOPT: KKT residual {o.kkt_residual:.1e} > {self.certifier.tol:.0e} ({o.ipopt_status}): "
                              "optimum not certified")
-                log.warning("posture %d (target %.1f deg) reached but not certified: %s", i, targets[i], o.message)
+                # recorded (certified, ipopt_status, message); the workflow's rule warns once with the count
+                log.info("posture %d (target %.1f deg) reached but not certified: %s", i, targets[i], o.message)
             o.converged = bool(o.reached and (o.certified or self.accept_suboptimal))
 
     def _retry(self, out, B, targets_deg, params, x0, R0, a0):
@@ -726,12 +727,11 @@ class RedundancySolver:
             # converged = reached with a certified optimum (the KKT residual, not the SQP's stopping rule)
             conv = bool(reached and (certified or self.accept_suboptimal))
             if not conv:
-                # with a certifier, IPOPT decides next (and warns if it cannot certify): the SQP's own verdict
-                # on a reached posture is then a progress note, not a warning
-                level = logging.INFO if (reached and self.certifier is not None) else logging.WARNING
-                log.log(level, "posture %d (target %.1f deg) not converged by the SQP: %s (residual %.1e N, %.1e N*m, "
-                        "tracking error %.2f deg, KKT residual %.1e)", i, targets[i], msg[i], rf[i], rm[i],
-                        terr[i], kkt[i])
+                # an outcome of this posture, recorded in its solution (reached, converged, message) and in the
+                # workflow's tables (red stars), with one summary line per rule: a progress note, not a warning
+                log.info("posture %d (target %.1f deg) not converged by the SQP: %s (residual %.1e N, %.1e N*m, "
+                         "tracking error %.2f deg, KKT residual %.1e)", i, targets[i], msg[i], rf[i], rm[i],
+                         terr[i], kkt[i])
             out.append(PostureSolution(x[i].copy(), R[i].copy(), a[i].copy(), conv, eq, float(terr[i]),
                                        float(rf[i]), float(rm[i]), float(st["c"][i]), int(iters[i]), msg[i],
                                        reached, float(kkt[i]), certified))

@@ -30,33 +30,35 @@ from lumbar.inputs.io import atomic_writer, write_text_atomic
 from .document import Doc, Para
 from .html_renderer import render_html
 from .pdf_renderer import render_pdf
-from .sections import NOT_BUILT, ReportBuilder, fmt
+from .sections import NOT_BUILT, SECTIONS, ReportBuilder, fmt, report_section
 
-__all__ = ["build_document", "build_report", "render_html", "render_pdf", "NOT_BUILT", "ReportBuilder", "Doc", "fmt"]
+__all__ = ["build_document", "build_report", "render_html", "render_pdf", "NOT_BUILT", "ReportBuilder", "Doc", "fmt",
+           "SECTIONS", "report_section"]
 
 
-def build_document(inputs: Iterable, config: Mapping, html_path, captions_dir=None, published=None):
+def build_document(inputs: Iterable, config: Mapping, html_path, captions_dir=None, published=None, logs_dir=None):
     """The report as a document model (``Doc``) and its builder, without writing anything."""
-    b = ReportBuilder(inputs, config, html_path, captions_dir=captions_dir, published=published)
+    b = ReportBuilder(inputs, config, html_path, captions_dir=captions_dir, published=published, logs_dir=logs_dir)
     return b.build(), b
 
 
 def build_report(inputs: Iterable, config: Mapping, html_path, pdf_path, captions_dir=None,
-                 published=None) -> dict:
+                 published=None, logs_dir=None) -> dict:
     """Write the paper-style report as HTML (self-contained) and PDF.
 
     ``inputs``: paths (relative to the working directory, or absolute) of every result and data file the report
     may show; a file that is not among them is reported as "not built in this configuration".
     ``config``: the validated workflow configuration (methods, labels). ``captions_dir``: directory of the
     ``<output stem>.rst`` captions (workflow/report). ``published``: the published-results CSV (paper values,
-    optional). Returns a summary: figure and table counts and which inputs were not built.
+    optional). ``logs_dir``: the workflow's logs (``logs/``); their WARNING lines make the "Flags" section.
+    Returns a summary: figure and table counts, which inputs were not built and the warnings listed.
     """
     inputs = list(inputs)
-    doc, b = build_document(inputs, config, html_path, captions_dir, published)
+    doc, b = build_document(inputs, config, html_path, captions_dir, published, logs_dir)
     write_text_atomic(render_html(doc, b), html_path)
     pdf = render_pdf(doc, b)
     with atomic_writer(pdf_path, "wb") as f:
         f.write(pdf)
     notes = [x.text for x in doc.blocks if isinstance(x, Para) and x.style == "note"]
-    return {"figures": b.n_fig, "tables": b.n_tab, "not_built": notes,
+    return {"figures": b.n_fig, "tables": b.n_tab, "not_built": notes, "warnings": b.warnings() or [],
             "surrogate": {"stepwise_reduction": b.sr_surrogate, "idp": b.idp_surrogate}}

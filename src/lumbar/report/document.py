@@ -13,6 +13,8 @@ CHECK, CROSS, NC = "\u2713", "\u2717", "n.c."
 class Heading:
     text: str
     level: int = 1
+    anchor: str | None = None      # id of the heading in the HTML (a table of contents or a doc links to it)
+    new_page: bool = False         # the PDF starts a new page here
 
 
 @dataclass
@@ -42,6 +44,13 @@ class Table:
     note: str = ""
     group_header: list | None = None     # [(text, colspan), ...] drawn above the header
     marks: bool = False                   # cells are check / cross marks
+    key_cols: int = 1                     # leading columns repeated in each part when a wide table is split
+
+
+@dataclass
+class Contents:
+    """A table of contents: [(text, anchor), ...] (links to headings with that ``anchor``)."""
+    items: list
 
 
 @dataclass

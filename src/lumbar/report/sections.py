@@ -10,7 +10,8 @@ import math
 import os
 import re
 from pathlib import Path
-from typing import Any, Mapping
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping
 
 import numpy as np
 import pandas as pd
@@ -18,7 +19,9 @@ import pandas as pd
 from lumbar import __version__
 from lumbar.inputs.tables import OUTLIER_COUNT_NAMES
 
-from .document import CHECK, CROSS, NC, Bullets, Doc, Figure, Heading, Para, Table
+from lumbar.experiments import validation as V
+
+from .document import CHECK, CROSS, NC, Bullets, Contents, Doc, Figure, Heading, Para, Table
 
 log = logging.getLogger(__name__)
 
@@ -36,6 +39,7 @@ SET_LABELS = {"calibrated": "calibrated (this model)", "chazal1985": "Chazal et 
               "nolte1990": "Nolte et al. (1990)", "rupp2015": "Rupp et al. (2015)"}
 DIRECTION_ABBR = {"flexion": "F", "extension": "E", "lateral_bending": "L", "axial_rotation": "A"}
 MAX_ROWS = 60          # generic CSV tables: at most this many rows are drawn, the rest is referenced
+MAX_WARNINGS = 40      # the Flags section lists at most this many warnings (all are in logs/)
 
 T = "results/tables/"
 F = "results/figures/"
@@ -51,8 +55,9 @@ def _norm(p) -> str:
     return Path(os.path.normpath(str(p))).as_posix()
 
 
-def fmt(v, digits: int = 4) -> str:
-    """A value as a short string: floats to ``digits`` significant digits, NaN/None as empty."""
+def fmt(v, digits: int = 3) -> str:
+    """A value as a short string: floats to ``digits`` significant digits (a value of ``digits`` or more integer
+    digits keeps them: 1706.7 -> "1707", not "1.71e+03"), NaN/None as empty."""
     if v is None:
         return ""
     if isinstance(v, bool):
@@ -64,6 +69,8 @@ def fmt(v, digits: int = 4) -> str:
             return ""
         if v == int(v) and abs(v) < 1e6:
             return str(int(v))
+        if 10 ** digits <= abs(v) < 1e6:
+            return str(int(round(v)))
         return f"{v:.{digits}g}"
     if isinstance(v, np.bool_):
         return "yes" if bool(v) else "no"
@@ -77,6 +84,51 @@ def fmt(v, digits: int = 4) -> str:
         items = [fmt(x, digits) for x in v[:8]]
         return "[" + ", ".join(items) + (f", ... ({len(v)} items)" if len(v) > 8 else "") + "]"
     return str(v)
+
+
+#: unit suffixes of the project's column names (README "Frame and units"), longest first
+_UNIT_SUFFIXES = (
+    ("_n_per_cm2", "N/cm\u00b2"), ("_nm_per_rad", "N\u00b7m/rad"), ("_nm_per_deg", "N\u00b7m/deg"),
+    ("_n_per_mm", "N/mm"), ("_n_per_m", "N/m"), ("_mm2", "mm\u00b2"), ("_cm2", "cm\u00b2"), ("_m2", "m\u00b2"),
+    ("_rad3", "rad\u00b3"), ("_mpa", "MPa"), ("_kpa", "kPa"), ("_deg", "deg"), ("_rad", "rad"),
+    ("_nm", "N\u00b7m"), ("_mm", "mm"), ("_um", "\u00b5m"), ("_kg", "kg"), ("_pct", "%"), ("_n", "N"),
+    ("_m", "m"), ("_s", "s"))
+#: words of column names and identifiers as a reader writes them
+_WORDS = {"sim": "simulated", "idp": "IDP", "rom": "ROM", "rms": "RMS", "csa": "CSA", "kkt": "KKT",
+          "ipopt": "IPOPT", "sqp": "SQP", "pce": "PCE", "loo": "LOO", "lo": "low", "hi": "high", "n": "n",
+          "nlp": "NLP", "ssl": "SSL", "isl": "ISL", "all": "ALL", "pll": "PLL", "fl": "FL", "cl": "CL",
+          "va": "VA", "com": "COM", "sd": "SD", "ci": "CI", "std": "SD", "num": "number", "max": "max",
+          "min": "min", "csv": "CSV", "json": "JSON", "q2": "Q2", "r2": "R2", "rmse": "RMSE", "mpa": "MPa",
+          "vs": "vs", "id": "id"}
+
+
+def human_header(col: str) -> str:
+    """A column name of a result table as a table header: words instead of identifiers, the unit in brackets
+    (``disc_moment_sagittal_nm`` -> "disc moment sagittal [N·m]", ``p3_nm_per_rad`` -> "p3 [N·m/rad]",
+    ``n_outliers`` -> "n outliers"). A name with no unit suffix keeps its words."""
+    c = str(col)
+    unit = ""
+    low = c.lower()
+    for suf, u in _UNIT_SUFFIXES:
+        if low.endswith(suf) and len(low) > len(suf):
+            c, unit = c[: -len(suf)], u
+            break
+    words = [w for w in re.split(r"[_\s]+", c) if w]
+    words = [_WORDS.get(w, w) if w.islower() or w.isdigit() else w for w in words]
+    text = " ".join(words).replace("wo ", "w/o ") if words[:1] == ["wo"] else " ".join(words)
+    return f"{text} [{unit}]" if unit else text
+
+
+_IDENT = re.compile(r"^[a-z][a-z0-9]*(?:_[a-z0-9]+)+$")
+
+
+def human_value(v: str) -> str:
+    """An identifier-like cell (``lateral_bending``, ``wo_all``, ``crate_far``) as words; anything else as is
+    (file paths, sentences, numbers)."""
+    s = str(v)
+    if not _IDENT.match(s):
+        return s
+    return re.sub(r"\bwo ([a-z]+)", lambda m: "w/o " + m.group(1).upper(), s.replace("_", " "))
 
 
 def _reference_text(section: dict, noise: str) -> str:
@@ -128,8 +180,9 @@ class ReportBuilder:
     """Reads the result files and writes the report's sections into a :class:`~lumbar.report.document.Doc`
     (prose from the configuration and the files, figure and table numbering, what was not built)."""
 
-    def __init__(self, inputs, config, html_path, captions_dir=None, published=None):
+    def __init__(self, inputs, config, html_path, captions_dir=None, published=None, logs_dir=None):
         self.config = config
+        self.logs_dir = Path(logs_dir) if logs_dir else None
         self.html_dir = Path(html_path).resolve().parent
         self.inputs = {}
         for p in inputs:
@@ -219,39 +272,58 @@ class ReportBuilder:
             surrogate = _mentions_surrogate(self.path(rel))
         shown = df[columns] if columns else df
         note = self.caption(rel, "", surrogate=False)
+        # a column with one value in every row is said once, in the note, not repeated in every row
+        if len(shown) >= 3 and shown.shape[1] > 3:
+            const = [c for c in shown.columns if shown[c].nunique(dropna=False) == 1]
+            if const and len(const) < shown.shape[1] - 1:
+                said = "; ".join(f"{human_header(c)} = {self._cell(c, shown[c].iloc[0]) or '(empty)'}"
+                                 for c in const)
+                note = (note + " " if note else "") + f"In every row: {said}."
+                shown = shown.drop(columns=const)
         if shown.shape[1] > 12 and len(shown) <= 8:      # wide and short: one row per column
             header = ["column"] + [f"row {i + 1}" for i in range(len(shown))]
-            rows = [[c] + [fmt(v) for v in shown[c]] for c in shown.columns]
+            rows = [[human_header(c)] + [self._cell(c, v) for v in shown[c]] for c in shown.columns]
             self.table_block(title, header, rows, source=rel, note=note, surrogate=surrogate, label=label)
             return df
         if len(shown) > max_rows:
             note = (note + " " if note else "") + f"First {max_rows} of {len(shown)} rows; full table: {rel}."
             shown = shown.head(max_rows)
-        rows = [[fmt(v) for v in r] for r in shown.itertuples(index=False)]
-        self.table_block(title, list(shown.columns), rows, source=rel, note=note, surrogate=surrogate, label=label)
+        rows = [[self._cell(c, v) for c, v in zip(shown.columns, r)] for r in shown.itertuples(index=False)]
+        self.table_block(title, [human_header(c) for c in shown.columns], rows, source=rel, note=note,
+                         surrogate=surrogate, label=label)
         return df
+
+    @staticmethod
+    def _cell(column: str, v) -> str:
+        """One cell of a result table as the reader sees it: numbers rounded (:func:`fmt`), set names spelled
+        out, identifiers as words."""
+        if isinstance(v, str):
+            return SET_LABELS.get(v, human_value(v)) if column == "set" else human_value(v)
+        return fmt(v)
 
     # ------------------------------------------------------------------------------------------- sections
     def build(self) -> Doc:
-        self.doc.add(Heading(TITLE, 0))
-        self.doc.add(Para("Workflow report of the lumbar project, reproducing: " + "; ".join(PAPERS) + ". "
-                          f"Generated by lumbar {__version__} from the result files of this configuration "
-                          f"(geometry '{fmt(self._cfg('geometry', 'kind'))}', seed {fmt(self._cfg('seed'))}). "
-                          "Every number below is read from a result file; figures are the workflow's outputs.",
-                          "small"))
-        self.real_data_scoreboard()
-        self.summary()
-        self.methods()
-        self.model_section()
-        self.calibration_section()
-        self.forward_section()
-        self.idp_section()
-        self.muscle_section()
-        self.discrepancy_section()
-        self.other_figures()
-        self.provenance_section()
-        self.config_appendix()
+        """The whole report: the first page (title, abstract, validation scoreboard figure), then every
+        registered section in order (:data:`SECTIONS`; :func:`report_section` adds one)."""
+        self.first_page()
+        numbered = [sec for sec in SECTIONS if sec.numbered]
+        self.doc.add(Contents([(self._section_title(sec, numbered), sec.anchor) for sec in SECTIONS]))
+        for k, sec in enumerate(SECTIONS):
+            # the PDF's page 2 starts with the first section (Tables R1 and R2 together on one page)
+            self.doc.add(Heading(self._section_title(sec, numbered), 1, sec.anchor, new_page=k == 0))
+            sec.build(self)
         return self.doc
+
+    @staticmethod
+    def _section_title(sec, numbered) -> str:
+        return f"{numbered.index(sec) + 1} {sec.title}" if sec.numbered else sec.title
+
+    # -- helpers for sections (also for sections registered from outside this module)
+    def heading(self, text: str, level: int = 2, anchor: str | None = None):
+        self.doc.add(Heading(text, level, anchor))
+
+    def para(self, text: str, style: str = "p"):
+        self.doc.add(Para(text, style))
 
     def _cfg(self, *keys, default=None):
         v = self.config
@@ -295,39 +367,161 @@ class ReportBuilder:
             " The paper's counts are not available in this run (paths.published_model_results not found)."
         return f"{what}, outliers against {ref}: " + "; ".join(parts) + "." + paper_note
 
-    def real_data_scoreboard(self):
-        """The report opens with what real data say (results/tables/validation_real_data.csv)."""
+    # -- first page: can I trust this model, and for what?
+    def first_page(self):
+        """Title, a five-sentence abstract read from the result files, and the validation scoreboard figure."""
+        self.doc.add(Heading(TITLE, 0))
+        self.doc.add(Para(self.abstract(), "abstract"))
+        self.figure(F + "validation_scoreboard.png", "Validation scoreboard: every distinct comparison with data "
+                    "this model did not generate.", label="Fig. R")
+        self.doc.add(Para(f"Generated by lumbar {__version__} from the result files of this configuration (geometry "
+                          f"'{fmt(self._cfg('geometry', 'kind'))}', seed {fmt(self._cfg('seed'))}); every number "
+                          "is read from a result file. Reproduces: " + "; ".join(PAPERS) + ".", "small"))
+
+    def _distinct(self):
         rel = T + "validation_real_data.csv"
-        self.doc.add(Heading("What real data say", 1))
         if not self.has(rel):
-            self.doc.add(Para(f"Validation on real data: {NOT_BUILT}.", "abstract"))
-            return
+            return None
         df = _read_csv(self.path(rel))
-        parts = []
-        role = df["role"] if "role" in df.columns else pd.Series("", index=df.index)
-        for who, sel in (("independent of every fit, calibrated L4-L5 unit", (df["set"] == "calibrated")
-                          & (role == "independent")),
-                         ("muscle model (in-vivo IDP)", df["set"] == "muscle model"),
-                         ("geometry (anatomy)", df["set"] == "geometry"),
-                         ("calibration targets met by the calibrated unit", (df["set"] == "calibrated")
-                          & (role == "calibration target")),
-                         ("the paper's Table 3 set as published, on this geometry",
-                          df["set"] == "paper_table3_as_published")):
-            d = df[sel]
-            if len(d):
-                w = d["within"].astype(str).str.lower().isin(["true", "1"])
-                miss = "; ".join(f"{r.quantity} {r.condition}: {fmt(r.sim)} vs {fmt(r.measured)} {r.unit}"
-                                 for r in d[~w.to_numpy()].itertuples(index=False))
-                parts.append(f"{who}: {int(w.sum())} of {len(d)} within" + (f" (outside: {miss})" if miss else ""))
-        self.doc.add(Para("Comparisons with data this model did not generate (published measurements and the "
-                          "published disc fit): " + "; ".join(parts) + ". Agreement with the SURROGATE tables "
-                          "further below is a method check (a round trip on virtual specimens of this same "
-                          "model), not a reproduction of the paper or of an experiment.", "abstract"))
-        self.csv_table(rel, "Validation on real data (every comparison whose reference this model did not generate)",
-                       surrogate=False, max_rows=80, label="Table R")
+        self.shown.add(_norm(rel))
+        return V.distinct_comparisons(df) if len(df) else df
+
+    def abstract(self) -> str:
+        """Five sentences: what is compared, the independent checks, the calibration targets, the muscle model,
+        what is only a method check and how many warnings need attention."""
+        d = self._distinct()
+        geo = human_value(fmt(self._cfg("geometry", "kind")))
+        out = []
+        if d is None or not len(d):
+            out.append(f"This report shows the results of the lumbar workflow ({geo} geometry); the comparison with "
+                       f"real data is {NOT_BUILT}.")
+            out.append("Independent checks: none in this configuration.")
+            out.append("Calibration targets: none in this configuration.")
+        else:
+            counts = V.role_counts(d)
+            out.append(f"This report compares the lumbar workflow's models ({geo} geometry) with measurements they did "
+                       f"not generate, in {len(d)} distinct comparisons (Fig. R, Tables R1 and R2).")
+            w, n = counts.get(V.INDEPENDENT, (0, 0))
+            ind = d[d["role"] == V.INDEPENDENT]
+            agree, miss = [], []
+            for (q, sets), g in ind.groupby(["quantity", "sets"], sort=False):
+                name = f"{V.condition_label(q)} ({V.sets_label(sets)})"
+                if g["within"].all():
+                    agree.append(name)
+                else:
+                    miss.append(f"{name}, {int(g['within'].sum())} of {len(g)} within")
+            text = f"Independent checks: {w} of {n} within their acceptance interval"
+            if agree:
+                text += "; the model agrees with " + ", ".join(agree)
+            if miss:
+                text += "; it misses " + "; ".join(miss)
+            out.append(text + ".")
+            w, n = counts.get(V.TARGET, (0, 0))
+            out.append(f"Calibration targets (a fit quality, not a validation): {w} of {n} met." if n else
+                       "Calibration targets: none in this configuration.")
+        out.append(self._muscle_abstract())
+        sur = [name for name, flag in (("Table 4", self.sr_surrogate), ("Table 5", self.idp_surrogate)) if flag]
+        warn = self.warnings()
+        tail = (f"{len(warn)} warning(s) need the user's attention (Flags)." if warn is not None
+                else "the workflow logs were not given to the report.")
+        if sur:
+            out.append(f"The outlier counts of {' and '.join(sur)} compare with SURROGATE data (virtual specimens of "
+                       f"this model), a method check, not a reproduction of the paper; {tail}")
+        else:
+            out.append(f"Tables 4 and 5 compare with the configured measured tables; {tail}")
+        return " ".join(out)
+
+    def _muscle_abstract(self) -> str:
+        rel = MM + "in_vivo_metrics.json"
+        if not self.has(rel):
+            return f"Muscle model, in-vivo validation: {NOT_BUILT}."
+        m = json.loads(self.path(rel).read_text())
+        n, total = m.get("n"), m.get("n_total", m.get("n"))
+        if m.get("r2") is None or m.get("rmse_mpa") is None:
+            s = (f"The muscle-driven model reaches {fmt(n)} of {fmt(total)} in-vivo activities, too few for R2 and "
+                 "RMSE of the L4-L5 intradiscal pressure")
+        else:
+            s = (f"The muscle-driven model predicts the in-vivo L4-L5 intradiscal pressure with R2 = {fmt(m['r2'])} "
+                 f"and RMSE = {fmt(m['rmse_mpa'])} MPa over the {fmt(n)} of {fmt(total)} activities it reaches")
+        pub = self.published.get("idp_validation_r2")
+        paper = pub["value"] if pub is not None else m.get("paper_r2")
+        if paper is not None:
+            s += f" (paper: R2 = {fmt(paper)})"
+        iv = T + "in_vivo_validation.csv"
+        if self.has(iv):
+            t = _read_csv(self.path(iv))
+            if "reached" in t.columns:
+                miss = [human_value(a) for a, r in zip(t["activity"], t["reached"]) if not bool(r)]
+                if miss:
+                    s += f"; not reached (beyond its muscles' capacity; muscle capacity table): {', '.join(miss)}"
+        return s + "."
+
+    def scoreboard_section(self):
+        """Tables R1 and R2: one row per distinct comparison, independent checks apart from calibration targets."""
+        rel = T + "validation_real_data.csv"
+        d = self._distinct()
+        if d is None:
+            self.missing("Validation on real data (validation_real_data.csv)")
+            return
+        self.doc.add(Para("One row per distinct comparison: rows that several characteristic sets share (the "
+                          "disc-only stage, for which every set uses the paper's disc) are shown once, with the "
+                          "number of sets. Acceptance interval: the published range, else the tolerance named in "
+                          f"the CSV's tolerance_rule. Every row, with its source: {rel}. Agreement with the "
+                          "SURROGATE tables further below is a method check, not a validation."))
+        titles = {V.INDEPENDENT: ("R1", "Independent checks (validation)"),
+                  V.TARGET: ("R2", "Calibration targets (fit quality, not validation)")}
+        for role, (w, n) in V.role_counts(d).items():
+            g = d[d["role"] == role]
+            label, title = titles.get(role, (None, role))
+            rows, last = [], None
+            for r in g.itertuples(index=False):
+                q = f"{V.condition_label(r.quantity)} [{V.unit_label(r.unit)}]"
+                band = (f"{fmt(r.band_low)} to {fmt(r.band_high)}" if np.isfinite(r.band_low) else "")
+                sim = fmt(r.sim) if np.isfinite(r.sim) else "no value"
+                rows.append([q if q != last else "", V.condition_label(r.condition), sim, fmt(r.measured), band,
+                             CHECK if r.within else CROSS, V.sets_label(r.sets)])
+                last = q
+            self.table_block(f"{title}: {w} of {n} distinct comparisons within", ["quantity [unit]", "condition",
+                             "simulated", "measured", "acceptance interval", "within", "simulated by"], rows,
+                             source=rel, label=f"Table {label}" if label else None, marks=True, key_cols=2)
+
+    def warnings(self) -> list[tuple[str, str]] | None:
+        """(log, message) of every WARNING line in the workflow's logs (``logs_dir``), time stamps removed, in
+        file order; None when no logs directory was given or it does not exist."""
+        if self.logs_dir is None or not self.logs_dir.is_dir():
+            return None
+        out = []
+        for p in sorted(self.logs_dir.rglob("*.log")):
+            if p.name == "paper_report.log":          # this report's own log, being written
+                continue
+            for line in p.read_text(errors="replace").splitlines():
+                m = re.match(r"^(?:\d{4}-\d\d-\d\d[ T][\d:,.]+\s+)?WARNING\s+(.*)$", line)
+                if m:
+                    out.append((p.relative_to(self.logs_dir).with_suffix("").as_posix(), m.group(1).strip()))
+        return out
+
+    def flags_section(self):
+        """Every WARNING of the workflow's logs: what a user must act on. Expected outcomes are results in their
+        tables (and one summary line in the rule's log), not warnings."""
+        warn = self.warnings()
+        self.doc.add(Para(
+            "A warning in a rule's log is something to act on. Expected outcomes are results in their tables, each "
+            "rule's log has one summary line for them: postures the muscles cannot hold (columns reached and "
+            "converged of the muscle tables; red stars in the figures), scenarios without equilibrium (converged, "
+            "n.c. in the grids), calibration parameters that are not identifiable or end at a bound (columns "
+            "identifiable and at_bound of calibration_summary.csv), comparisons outside their acceptance interval "
+            "(Tables R1 and R2)."))
+        if warn is None:
+            self.doc.add(Para(f"Workflow logs: {NOT_BUILT} (no logs directory given to the report).", "note"))
+        elif not warn:
+            self.doc.add(Para("No warning in the workflow's logs.", "p"))
+        else:
+            note = (f"First {MAX_WARNINGS} of {len(warn)}; every one is in its rule's log under logs/."
+                    if len(warn) > MAX_WARNINGS else "")
+            self.table_block(f"Warnings in the workflow's logs ({len(warn)})", ["rule log", "warning"],
+                             [[name, msg] for name, msg in warn[:MAX_WARNINGS]], note=note, key_cols=0)
 
     def summary(self):
-        self.doc.add(Heading("Summary", 1))
         paras = [
             self._counts_sentence(T + "table4_vs_paper.csv", T + "table4_outlier_counts.csv",
                                   "Stepwise reduction, forward simulation (Table 4 analog)", self.sr_surrogate),
@@ -403,7 +597,6 @@ class ReportBuilder:
     # -- methods
     def methods(self):
         c = self._cfg
-        self.doc.add(Heading("1 Methods (generated from the configuration)", 1))
         g = c("geometry", default={}) or {}
         geo = f"Geometry: '{fmt(g.get('kind'))}'" + (f" read from {g.get('path')}" if g.get("kind") ==
                                                       "visible_human" else " (myo-sim meshes with project landmarks)")
@@ -446,7 +639,6 @@ class ReportBuilder:
 
     # -- paper 1
     def model_section(self):
-        self.doc.add(Heading("2 Models", 1))
         self.figure(F + "fig1_l4l5_model.png", "L4-L5 functional spinal unit (Fig. 1 analog).", label="Fig. 1")
         self.figure(F + "fig3_l2s1_cables.png", "L2-S1 lumbar spine with wire cables (Fig. 3 analog).",
                     label="Fig. 3")
@@ -454,7 +646,6 @@ class ReportBuilder:
 
     def calibration_section(self):
         s = self.sr_surrogate
-        self.doc.add(Heading("3 Calibration on the stepwise reduction (backwards)", 1))
         self.csv_table(T + "table1_disc_calibrated.csv", "Disc torque-angle parameters, Eq. 3 (Table 1 analog)", s,
                        label="Table 1")
         self.figure(F + "fig4_disc_torque_angle.png", "Disc torque-angle characteristics (Fig. 4 analog).", s,
@@ -475,7 +666,6 @@ class ReportBuilder:
 
     def forward_section(self):
         s = self.sr_surrogate
-        self.doc.add(Heading("4 Forward simulation of the stepwise reduction", 1))
         self.figure(F + "fig6_rom_stepwise_reduction.png", "Range of motion per reduction stage (Fig. 6 analog).", s,
                     label="Fig. 6")
         self.csv_table(T + "table4_vs_paper.csv", "ROM outlier counts per characteristic set beside the paper's", s)
@@ -484,7 +674,6 @@ class ReportBuilder:
 
     def idp_section(self):
         s = self.idp_surrogate
-        self.doc.add(Heading("5 Intradiscal pressure in the L2-S1 spine with wire cables", 1))
         self.figure(F + "fig7_idp.png", "L4-L5 intradiscal pressure per muscle set-up and load case (Fig. 7 analog).",
                     s, label="Fig. 7")
         self.csv_table(T + "table5_vs_paper.csv", "IDP outlier counts per characteristic set beside the paper's", s)
@@ -518,7 +707,7 @@ class ReportBuilder:
         rows = []
         for stage in dict.fromkeys(df["stage"]):
             for m in sorted(set(df.loc[df["stage"] == stage, "moment_nm"])):
-                row = [stage, f"{fmt(m)} N*m"]
+                row = [human_value(stage), f"{fmt(m)} N\u00b7m"]
                 for st in sets:
                     for d in dirs:
                         r = keyed.get((st, stage, m, d))
@@ -543,7 +732,7 @@ class ReportBuilder:
         rows = []
         for mu in dict.fromkeys(df["muscle_setup"]):
             for lc in dict.fromkeys(df.loc[df["muscle_setup"] == mu, "load_case"]):
-                row = [mu, lc]
+                row = [human_value(mu), human_value(lc)]
                 for st in sets:
                     r = keyed.get((st, mu, lc))
                     row.append("" if r is None else NC if not bool(r.converged) else
@@ -556,7 +745,6 @@ class ReportBuilder:
 
     # -- paper 2
     def muscle_section(self):
-        self.doc.add(Heading("6 Paraspinal muscles and spinal loading (paper 2)", 1))
         files = [T + "muscle_model_segment_loads.csv", T + "in_vivo_validation.csv", MM + "in_vivo_metrics.json",
                  T + "flexion_relaxation.csv", T + "muscle_capacity.csv", T + "sensitivity_idp.csv",
                  T + "sensitivity_directions.csv", T + "sobol_indices.csv"]
@@ -593,7 +781,6 @@ class ReportBuilder:
 
     # -- discrepancy
     def discrepancy_section(self):
-        self.doc.add(Heading("7 Where model and experiment disagree (discrepancy workflow)", 1))
         any_d = any(p.startswith(D) for p in self.inputs) or self.has(F + "discrepancy_benchmark.png")
         if not any_d:
             self.doc.add(Para(f"Discrepancy workflow: {NOT_BUILT}.", "note"))
@@ -721,14 +908,14 @@ class ReportBuilder:
 
     def other_figures(self):
         rest = sorted(p for p in self.inputs if p.endswith(".png") and p not in self.shown and self.has(p))
-        if rest:
-            self.doc.add(Heading("8 Further figures", 1))
+        if not rest:
+            self.doc.add(Para("Every figure of this configuration is shown above.", "small"))
+        else:
             for p in rest:
                 self.figure(p, f"{Path(p).stem.replace('_', ' ')}.", _mentions_surrogate(p))
 
     # -- provenance
     def provenance_section(self):
-        self.doc.add(Heading("Data provenance", 1))
         self.doc.add(Para(
             "Kinds: original_text / original_figure = printed in (or read off a figure of) one of the two papers; "
             "third_party = another publication (cited in source); derived_from_published_fit = computed from "
@@ -788,7 +975,6 @@ class ReportBuilder:
         return ", ".join(f"{k}: {n}" for k, n in df[c].value_counts(sort=False).items()) if c else "(no kind column)"
 
     def config_appendix(self):
-        self.doc.add(Heading("Appendix: configuration and input files", 1))
         self.table_block("Configuration used (every key)", ["key", "value"],
                          [[k, fmt(v, 8)] for k, v in _flatten(self.config)])
         rows = []
@@ -802,3 +988,58 @@ class ReportBuilder:
                 rows.append([rel, f"({NOT_BUILT})", ""])
         self.table_block("Input files of this report (SHA-256, first 16 hex digits)", ["file", "bytes", "sha256"],
                          rows)
+
+
+# ----------------------------------------------------------------------------------------------- the sections
+@dataclass
+class Section:
+    """One section of the report: ``build(builder)`` adds its blocks below a level-1 heading ``title`` (numbered
+    when ``numbered``), which the HTML gives the id ``anchor`` (the contents and the docs link to it)."""
+    anchor: str
+    title: str
+    build: Callable[[ReportBuilder], None]
+    numbered: bool = True
+
+
+#: the report's sections in order, after the first page
+SECTIONS: list[Section] = []
+
+
+def report_section(anchor: str, title: str, *, after: str | None = None, before: str | None = None,
+                   numbered: bool = True):
+    """Register ``f(builder)`` as a section of the report (decorator), at the end or ``after``/``before`` the
+    section with that anchor. ``f`` writes with the builder's ``csv_table``, ``figure``, ``table_block``,
+    ``heading``, ``para`` and ``missing``; a file it shows must be among the report's inputs (in the workflow:
+    an output of ``final_outputs()`` or ``REPORT_OPTIONAL`` in workflow/rules/common.smk), else it is reported
+    as "not built in this configuration". Re-registering an anchor replaces that section."""
+    def register(f):
+        sec = Section(anchor, title, f, numbered)
+        old = [i for i, x in enumerate(SECTIONS) if x.anchor == anchor]
+        if old:
+            SECTIONS[old[0]] = sec
+            return f
+        ref = after or before
+        idx = next((i for i, x in enumerate(SECTIONS) if x.anchor == ref), None) if ref else None
+        if ref and idx is None:
+            raise ValueError(f"report_section({anchor!r}): no section {ref!r}; anchors: "
+                             f"{[x.anchor for x in SECTIONS]}")
+        SECTIONS.insert(len(SECTIONS) if idx is None else idx + (1 if after else 0), sec)
+        return f
+    return register
+
+
+for _anchor, _title, _method, _numbered in (
+        ("validation", "Validation on real data", "scoreboard_section", False),
+        ("flags", "Flags: what needs attention", "flags_section", False),
+        ("summary", "Summary", "summary", False),
+        ("methods", "Methods (generated from the configuration)", "methods", True),
+        ("models", "Models", "model_section", True),
+        ("calibration", "Calibration on the stepwise reduction (backwards)", "calibration_section", True),
+        ("forward", "Forward simulation of the stepwise reduction", "forward_section", True),
+        ("idp", "Intradiscal pressure in the L2-S1 spine with wire cables", "idp_section", True),
+        ("muscles", "Paraspinal muscles and spinal loading (paper 2)", "muscle_section", True),
+        ("discrepancy", "Where model and experiment disagree (discrepancy workflow)", "discrepancy_section", True),
+        ("figures", "Further figures", "other_figures", False),
+        ("provenance", "Data provenance", "provenance_section", False),
+        ("appendix", "Appendix: configuration and input files", "config_appendix", False)):
+    report_section(_anchor, _title, numbered=_numbered)(getattr(ReportBuilder, _method))
