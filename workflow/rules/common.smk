@@ -206,6 +206,9 @@ def doc_template_inputs(wildcards):
 
 REPORT_OPTIONAL = [
     "results/calibration/calibration_summary.csv",
+    "results/load_sharing/compression_summary.csv",
+    "results/calibration/remus2021_comparison.csv",
+    "results/tables/multilevel_admissibility.csv",
     "results/calibration/calibration_real_fit.csv",
     "results/muscle_model/in_vivo_metrics.json",
     "results/tables/muscle_model_segment_loads.csv",

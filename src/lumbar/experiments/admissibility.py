@@ -211,7 +211,7 @@ def criteria_table(curves: pd.DataFrame, compression: pd.DataFrame | None, limit
     rows = []
     cv = curves[curves["stage"] == stage]
     rest = cv[cv["moment_nm"] == 0.0].iloc[0]
-    proj = "project threshold (docs/validity.md)"
+    proj = "project threshold (docs/load_sharing.md)"
     # unloaded state
     for side in ("left", "right"):
         col = f"facet_{side}_contact_n"

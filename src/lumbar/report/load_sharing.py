@@ -1,0 +1,116 @@
+"""Report section "Load sharing and physical admissibility": how the calibrated unit shares the moment between disc,
+facets and ligaments, whether it reaches its range of motion for the reasons real segments have (the admissibility
+criteria), where the wire-cable forces go at L4-L5, and the other lumbar levels with the calibrated characteristics
+unchanged. Every number is read from the result files (workflow/rules/load_sharing.smk, admissibility.smk,
+validation.smk); registered after the calibration section."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from .sections import ReportBuilder, _read_csv, fmt, report_section
+
+ADM = "results/calibration/admissibility.csv"
+SUMMARY = "results/load_sharing/load_sharing_summary.csv"
+COMPRESSION = "results/load_sharing/compression_summary.csv"
+CABLES = "results/load_sharing/l2s1_cables_l4l5.csv"
+REMUS = "results/calibration/remus2021_comparison.csv"
+MULTI = "results/tables/multilevel_rom.csv"
+MULTI_ADM = "results/tables/multilevel_admissibility.csv"
+STRUCTURES = ("disc", "facet_left", "facet_right", "ALL", "PLL", "FL", "CL", "ITL", "ISL", "SSL")
+STRUCTURE_NAMES = {"disc": "disc", "facet_left": "left facet", "facet_right": "right facet"}
+DIRECTION_NAMES = {"flexion": "flexion", "extension": "extension", "lateral_bending_right": "lateral bending right",
+                   "lateral_bending_left": "lateral bending left", "axial_rotation_left": "axial rotation left",
+                   "axial_rotation_right": "axial rotation right"}
+
+
+def _summary_sentence(b: ReportBuilder) -> str:
+    parts = []
+    if b.has(ADM):
+        a = _read_csv(b.path(ADM))
+        failed = a[~a["passed"].astype(bool)]
+        parts.append(f"The calibrated unit passes {len(a) - len(failed)} of {len(a)} admissibility criteria"
+                     + (f" (not: {'; '.join(sorted(set(failed['criterion'])))})" if len(failed) else "") + ".")
+    if b.has(MULTI):
+        m = _read_csv(b.path(MULTI))
+        jump = m["largest_jump_deg"].max()
+        parts.append(f"With its characteristics unchanged, {int(m['within'].sum())} of {len(m)} ROM values of the "
+                     f"other levels lie within 25 % of Yamamoto et al. (1989); the largest rotation jump between two "
+                     f"load steps at any level is {fmt(jump)} deg.")
+    if b.has(CABLES):
+        c = _read_csv(b.path(CABLES))
+        n = c[(c["load_case"] == "neutral") & (c["muscle_setup"] == "all")]
+        if len(n):
+            r = n.iloc[0]
+            parts.append(f"Under all five cable pairs in the neutral position the L4-L5 disc carries "
+                         f"{fmt(100 * r['disc_share'])} % of the compression that crosses the joint, the facets "
+                         f"{fmt(100 * r['facets_share'])} %.")
+    return " ".join(parts)
+
+
+@report_section("load_sharing", "Load sharing and physical admissibility", after="calibration")
+def load_sharing_section(b: ReportBuilder):
+    b.para("Reaching the range of motion is not enough: the unit must reach it for the reasons real segments have "
+           "(no clamped facets at rest, no ligament switched off, no snap-through, the disc carrying most of a "
+           "compression). Method and criteria: docs/load_sharing.md. " + _summary_sentence(b))
+    b.heading("Admissibility of the calibrated set")
+    b.csv_table(ADM, "Physical admissibility criteria of the calibrated set (value, limit, passed, source)", False,
+                columns=["criterion", "direction", "value", "limit", "unit", "passed", "source"])
+    b.figure("results/figures/load_sharing_curves.png", "Moment-rotation curves of the intact unit.")
+    b.figure("results/figures/load_sharing_shares.png", "Moment carried by each structure, calibrated unit.")
+    b.heading("How the calibrated unit shares the moment")
+    if b.has(SUMMARY):
+        s = _read_csv(b.path(SUMMARY))
+        cal = s[(s["set"] == "calibrated") & (s["stage"] == "intact")]
+        top = cal[cal["moment_nm"] == cal["moment_nm"].max()]
+        cols = [c for c in (f"{k}_share" for k in STRUCTURES) if c in top.columns]
+        header = ["direction", "rotation [deg]"] + [f"{STRUCTURE_NAMES.get(c[:-6], c[:-6])} [%]" for c in cols]
+        rows = [[DIRECTION_NAMES.get(r["direction"], r["direction"]), fmt(r["rotation_deg"])] +
+                [fmt(100 * r[c]) for c in cols] for _, r in top.iterrows()]
+        b.table_block(f"Share of the applied {fmt(top['moment_nm'].max())} N*m carried by each structure "
+                      "(calibrated, intact)", header, rows, source=SUMMARY,
+                      note="Moments about the disc centre; a negative share pushes with the applied moment.")
+        rest = cal[cal["moment_nm"] == 0.0].head(1)
+        if len(rest):
+            r = rest.iloc[0]
+            forces = [c for c in r.index if c.endswith(("_contact_n", "_tension_n"))] + ["disc_axial_force_n"]
+            b.table_block("The unloaded unit (0 N*m, no preload): contact forces, ligament tensions and disc "
+                          "compression [N]", ["structure", "force [N]"],
+                          [[c.replace("_contact_n", " facet contact").replace("_tension_n", " tension")
+                            .replace("disc_axial_force_n", "disc compression").replace("facet_", ""),
+                            fmt(r[c])] for c in forces], source=SUMMARY)
+    else:
+        b.missing(f"Load-sharing summary ({Path(SUMMARY).name})")
+    b.csv_table(COMPRESSION, "Pure axial (follower) load: shares of disc and facets per characteristic set", False,
+                columns=None)
+    if b.has(CABLES):
+        c = _read_csv(b.path(CABLES))
+        n = c[c["load_case"] == "neutral"]
+        b.table_block("Where the wire-cable forces go at L4-L5 (neutral position, calibrated set, L2-S1 model)",
+                      ["muscle set-up", "cable total [N]", "disc [N]", "facets [N]", "ligaments [N]", "disc share [%]",
+                       "facet share [%]", "IDP [MPa]"],
+                      [[r["muscle_setup"].replace("_", " "), fmt(r["cable_total_n"]), fmt(r["disc_n"]),
+                        fmt(r["facets_n"]), fmt(r["ligaments_n"]), fmt(100 * r["disc_share"]),
+                        fmt(100 * r["facets_share"]), fmt(r["idp_mpa"])] for _, r in n.iterrows()],
+                      source=CABLES, note="Forces along the disc normal on L4 (ligaments pull: negative); shares of "
+                                          "the compression crossing the joint (disc + facets). Every load case: "
+                                          + CABLES + ".")
+    else:
+        b.missing(f"Cable load paths ({Path(CABLES).name})")
+    b.csv_table(REMUS, "The calibrated ligaments beside the Remus et al. (2021) model of the same fibres (tension "
+                       "under both laws at the same deformation)", False)
+    b.heading("Other lumbar levels, calibrated characteristics unchanged")
+    b.csv_table(MULTI, "ROM at 10 N*m of the other levels against Yamamoto et al. (1989) (independent)", False,
+                columns=["level", "direction", "sim_deg", "measured_deg", "ratio", "within", "largest_jump_deg"])
+    b.figure("results/figures/multilevel_rom.png", "Other levels with the L4-L5 characteristics unchanged.")
+    if b.has(MULTI_ADM):
+        a = _read_csv(b.path(MULTI_ADM))
+        per = a.groupby("level", sort=False)["passed"].agg(["sum", "count"])
+        failed = a[~a["passed"].astype(bool)]
+        b.table_block("Admissibility criteria per level (calibrated characteristics unchanged)",
+                      ["level", "criteria passed", "criteria", "failed"],
+                      [[lv, int(r["sum"]), int(r["count"]),
+                        "; ".join(sorted(set(failed[failed["level"] == lv]["criterion"]))) or "none"]
+                       for lv, r in per.iterrows()], source=MULTI_ADM)
+
+
+__all__ = ["load_sharing_section"]
