@@ -86,12 +86,14 @@ def active() -> bool:
 
 # ---------------------------------------------------------------------------------------------------- packing
 def _f64(a, shape=None):
+    """A C-contiguous, writeable float64 array (one compiled signature for every caller: numba types read-only and
+    writeable arrays apart, and a broadcast view is read-only)."""
     a = np.asarray(a, dtype=np.float64)
-    return np.ascontiguousarray(a if shape is None else a.reshape(shape))
+    return np.require(a if shape is None else a.reshape(shape), np.float64, ["C", "W"])
 
 
 def _i64(a):
-    return np.ascontiguousarray(np.asarray(a, dtype=np.int64))
+    return np.require(np.asarray(a, dtype=np.int64), np.int64, ["C", "W"])
 
 
 _TORQUE_ORDER = ("lateral_bending", "flexion", "extension", "axial_rotation")
@@ -119,11 +121,11 @@ def model_data(model) -> tuple:
 
 
 def _rows(a, B, n):
-    """A per-scenario weight array (scalar, (n,), (B, 1), (B, n), ...) as (1, n) or (B, n), contiguous float."""
+    """A per-scenario weight array (scalar, (n,), (B, 1), (B, n), ...) as (1, n) or (B, n)."""
     a = np.asarray(a, dtype=np.float64)
     if a.ndim >= 2 and a.shape[0] == B and B > 1:
-        return np.ascontiguousarray(np.broadcast_to(a.reshape(B, -1), (B, n)))
-    return np.ascontiguousarray(np.broadcast_to(a.reshape(-1) if a.ndim else a, (n,))[None])
+        return _f64(np.broadcast_to(a.reshape(B, -1), (B, n)))
+    return _f64(np.broadcast_to(a.reshape(-1) if a.ndim else a, (n,))[None])
 
 
 def scenario_data(model, B, loads, fmask, cmask, params) -> tuple:
@@ -134,23 +136,20 @@ def scenario_data(model, B, loads, fmask, cmask, params) -> tuple:
         L = np.zeros((1, nb, 6))
     else:
         L = np.asarray(loads, dtype=np.float64)
-        L = np.ascontiguousarray(L if L.ndim == 3 and L.shape[0] in (1, B) else np.broadcast_to(L, (B, nb, 6)))
+        L = _f64(L if L.ndim == 3 and L.shape[0] in (1, B) else np.broadcast_to(L, (B, nb, 6)))
     fm = _rows(fmask, B, nf)
     cm = _rows(cmask, B, nc)
     l0 = np.asarray(model.f_l0, dtype=np.float64)
     sc = params.get("fibre_l0_scale")
-    if sc is None:
-        l0 = np.ascontiguousarray(l0[None])
-    else:
-        l0 = np.ascontiguousarray(np.broadcast_to(l0 * np.asarray(sc, float).reshape(B, -1), (B, nf)))
+    l0 = _f64(l0[None] if sc is None else np.broadcast_to(l0 * np.asarray(sc, float).reshape(B, -1), (B, nf)))
     kt = params.get("k_tension")
     if kt is None:
-        kt = np.array([[d.k_tension for d in model.discs]], dtype=np.float64).reshape(1, nd)
+        kt = _f64([d.k_tension for d in model.discs], (1, nd))
     else:
-        kt = np.ascontiguousarray(np.broadcast_to(np.reshape(np.asarray(kt, float), (-1, 1)), (
-            np.size(kt) if np.ndim(kt) else 1, nd)))
+        kt = np.reshape(np.asarray(kt, float), (-1, 1))
+        kt = _f64(np.broadcast_to(kt, (kt.shape[0], nd)))
     off = params.get("disc_phi_offset")
-    off = np.zeros((1, 3)) if off is None else np.ascontiguousarray(np.reshape(np.asarray(off, float), (-1, 3)))
+    off = np.zeros((1, 3)) if off is None else _f64(off, (-1, 3))
     return L, fm, cm, l0, kt, off
 
 
@@ -604,8 +603,7 @@ def evaluate_batch(x, R, L, fm, cm, l0, kt, off, jac, md, Q, J):
 
 def evaluate(model, x, R, loads=None, fmask=1.0, cmask=1.0, jacobian=True, params=None):
     """Compiled ``SpineModel.evaluate`` (same arguments and results as the reference path)."""
-    x = np.ascontiguousarray(x, dtype=np.float64)
-    R = np.ascontiguousarray(R, dtype=np.float64)
+    x, R = _f64(x), _f64(R)
     B, nb = x.shape[0], model.nb
     L, fm, cm, l0, kt, off = scenario_data(model, B, loads, fmask, cmask, params)
     Q = np.empty((B, nb, 6))
@@ -797,8 +795,7 @@ def newton_batch(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max
 def newton(model, x, R, loads, fmask, cmask, params, max_iter, tol_force, tol_moment, max_step_trans,
            max_step_rot, reg, S, length_scale):
     """Compiled ``lumbar.mechanics.solve.newton`` (same arguments and results as the reference path)."""
-    x0 = np.ascontiguousarray(x, dtype=np.float64)
-    R0 = np.ascontiguousarray(R, dtype=np.float64)
+    x0, R0 = _f64(x), _f64(R)
     B = x0.shape[0]
     L, fm, cm, l0, kt, off = scenario_data(model, B, loads, fmask, cmask, params)
     xo, Ro = np.empty_like(x0), np.empty_like(R0)
