@@ -89,11 +89,16 @@ def _f64(a, shape=None):
     """A C-contiguous, writeable float64 array (one compiled signature for every caller: numba types read-only and
     writeable arrays apart, and a broadcast view is read-only)."""
     a = np.asarray(a, dtype=np.float64)
-    return np.require(a if shape is None else a.reshape(shape), np.float64, ["C", "W"])
+    if shape is not None:
+        a = a.reshape(shape)
+    f = a.flags
+    return a if f.c_contiguous and f.writeable else np.array(a, dtype=np.float64, order="C")
 
 
 def _i64(a):
-    return np.require(np.asarray(a, dtype=np.int64), np.int64, ["C", "W"])
+    a = np.asarray(a, dtype=np.int64)
+    f = a.flags
+    return a if f.c_contiguous and f.writeable else np.array(a, dtype=np.int64, order="C")
 
 
 _TORQUE_ORDER = ("lateral_bending", "flexion", "extension", "axial_rotation")

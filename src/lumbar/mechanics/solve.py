@@ -71,7 +71,7 @@ def _modified_newton_step(A, Q, nb):
     stiffnesses are comparable before the eigenvalue test.
     """
     n = A.shape[-1]
-    S = np.tile(np.r_[np.ones(3), np.full(3, 1.0 / LENGTH_SCALE)], nb)
+    S = _scaling(nb)
     As = A * S[:, None] * S[None, :]
     sym = 0.5 * (As + np.swapaxes(As, -1, -2))
     lam = np.linalg.eigvalsh(sym)[:, 0]
@@ -83,7 +83,12 @@ def _modified_newton_step(A, Q, nb):
 
 
 def _regularisation(nb, damping):
-    return np.tile(np.r_[np.full(3, damping[0]), np.full(3, damping[1])], nb)
+    return np.tile(np.repeat(np.asarray(damping, float)[:2], 3), nb)
+
+
+def _scaling(nb):
+    """Variable scaling of the modified Newton step: rotations by LENGTH_SCALE."""
+    return np.tile(np.repeat([1.0, 1.0 / LENGTH_SCALE], 3), nb)
 
 
 def newton(model, x, R, loads, fmask=1.0, cmask=1.0, params=None, max_iter=50, tol_force=1e-8,
@@ -96,9 +101,8 @@ def newton(model, x, R, loads, fmask=1.0, cmask=1.0, params=None, max_iter=50, t
     :func:`newton_reference`."""
     if isinstance(model, SpineModel) and type(model).evaluate is SpineModel.evaluate and kernel.active():
         nb = x.shape[1]
-        S = np.tile(np.r_[np.ones(3), np.full(3, 1.0 / LENGTH_SCALE)], nb)
         return kernel.newton(model, x, R, loads, fmask, cmask, params, max_iter, tol_force, tol_moment,
-                             max_step_trans, max_step_rot, _regularisation(nb, damping), S, LENGTH_SCALE)
+                             max_step_trans, max_step_rot, _regularisation(nb, damping), _scaling(nb), LENGTH_SCALE)
     return newton_reference(model, x, R, loads, fmask, cmask, params, max_iter, tol_force, tol_moment,
                             max_step_trans, max_step_rot, damping)
 
