@@ -809,3 +809,21 @@ def newton(model, x, R, loads, fmask, cmask, params, max_iter, tol_force, tol_mo
                  float(tol_moment), float(max_step_trans), float(max_step_rot), _f64(reg), _f64(S),
                  float(length_scale), xo, Ro, conv, res_f, res_m, iters)
     return xo, Ro, conv, res_f, res_m, iters
+
+
+def warm_up() -> bool:
+    """Compile both kernels, or load them from the on-disk cache, on an empty one-body model (a process that is
+    about to start others, e.g. a test session before its Snakemake runs, calls this so that they all load the
+    cache instead of compiling at the same time). Returns whether the compiled core is active."""
+    if not active():
+        return False
+    f2, f3, i1 = np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros(0, np.int64)
+    md = (np.zeros((1, 3)), i1, i1.copy(), f2, f2.copy(), np.zeros(0), i1.copy(), np.zeros((0, 5)), np.zeros(0),
+          0.5, i1.copy(), i1.copy(), f2.copy(), i1.copy(), np.zeros(0), 5e-5, f2.copy(), f3, np.zeros((0, 5)),
+          i1.copy(), i1.copy(), f2.copy(), f3.copy(), f2.copy(), np.zeros((0, 4, 3)))
+    x, R = np.zeros((1, 1, 3)), np.eye(3)[None, None].copy()
+    rows = (np.zeros((1, 1, 6)), np.ones((1, 0)), np.ones((1, 0)), np.ones((1, 0)), np.zeros((1, 0)), np.zeros((1, 3)))
+    evaluate_batch(x, R, *rows, True, md, np.empty((1, 1, 6)), np.empty((1, 1, 6, 1, 6)))
+    newton_batch(x, R, *rows, md, 5, 1e-8, 1e-8, 1e-3, 0.05, np.ones(6), np.ones(6), 0.05, np.empty_like(x),
+                 np.empty_like(R), np.zeros(1, bool), np.empty(1), np.empty(1), np.zeros(1, np.int64))
+    return True
