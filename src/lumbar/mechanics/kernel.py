@@ -257,6 +257,38 @@ def _attach(x, R, c, body, S, row, p, r):
 
 
 @_jit
+def _point(x, R, c, body, S, row):
+    """(p, r) as six scalars: world point of reference point S[row] on ``body`` and its lever arm (see _attach)."""
+    if body < 0:
+        return S[row, 0], S[row, 1], S[row, 2], S[row, 0], S[row, 1], S[row, 2]
+    s0, s1, s2 = S[row, 0] - c[body, 0], S[row, 1] - c[body, 1], S[row, 2] - c[body, 2]
+    r0 = R[body, 0, 0] * s0 + R[body, 0, 1] * s1 + R[body, 0, 2] * s2
+    r1 = R[body, 1, 0] * s0 + R[body, 1, 1] * s1 + R[body, 1, 2] * s2
+    r2 = R[body, 2, 0] * s0 + R[body, 2, 1] * s1 + R[body, 2, 2] * s2
+    return x[body, 0] + r0, x[body, 1] + r1, x[body, 2] + r2, r0, r1, r2
+
+
+@_jit
+def _frame_coords(P, o, A):
+    """Coordinates of point P in the frame with origin o and rows A (the rows' directions)."""
+    d0, d1, d2 = P[0] - o[0], P[1] - o[1], P[2] - o[2]
+    return (d0 * A[0, 0] + d1 * A[0, 1] + d2 * A[0, 2], d0 * A[1, 0] + d1 * A[1, 1] + d2 * A[1, 2],
+            d0 * A[2, 0] + d1 * A[2, 1] + d2 * A[2, 2])
+
+
+@_jit
+def _in_body(x, R, c, body, p0, p1, p2):
+    """(lever arm of world point p about ``body``'s reference point, reference-frame coordinates of p in ``body``)
+    as six scalars (see _lever, _to_body)."""
+    if body < 0:
+        return p0, p1, p2, p0, p1, p2
+    e0, e1, e2 = p0 - x[body, 0], p1 - x[body, 1], p2 - x[body, 2]
+    return (e0, e1, e2, R[body, 0, 0] * e0 + R[body, 1, 0] * e1 + R[body, 2, 0] * e2 + c[body, 0],
+            R[body, 0, 1] * e0 + R[body, 1, 1] * e1 + R[body, 2, 1] * e2 + c[body, 1],
+            R[body, 0, 2] * e0 + R[body, 1, 2] * e1 + R[body, 2, 2] * e2 + c[body, 2])
+
+
+@_jit
 def _lever(x, body, p, r):
     """Lever arm of world point p about ``body``'s reference point (the point itself for ground)."""
     for i in range(3):
@@ -273,6 +305,15 @@ def _to_body(x, R, c, body, p, P):
         for i in range(3):
             P[i] = (R[body, 0, i] * (p[0] - x[body, 0]) + R[body, 1, i] * (p[1] - x[body, 1])
                     + R[body, 2, i] * (p[2] - x[body, 2])) + c[body, i]
+
+
+@_jit
+def _relative_point(x, R, c, a, b, S, row, p, ra, rb, P):
+    """Point S[row] carried by body a: world point p, its lever arms ra, rb about bodies a and b, and its
+    reference-frame coordinates P in body b (where a law fixed in body b reads it)."""
+    _attach(x, R, c, a, S, row, p, ra)
+    _lever(x, b, p, rb)
+    _to_body(x, R, c, b, p, P)
 
 
 @_jit
@@ -427,24 +468,8 @@ def _eval_one(x, R, Q, J, jac, md, fm, cm, l0, kt, off, w3, w33):
     # ---- fibres: K = dT u u^T + T/|d| (I - u u^T) with the sign of a pulling element
     for n in range(f_a.shape[0]):
         a, b = f_a[n], f_b[n]
-        if a >= 0:
-            s0, s1, s2 = f_sa[n, 0] - c[a, 0], f_sa[n, 1] - c[a, 1], f_sa[n, 2] - c[a, 2]
-            ra0 = R[a, 0, 0] * s0 + R[a, 0, 1] * s1 + R[a, 0, 2] * s2
-            ra1 = R[a, 1, 0] * s0 + R[a, 1, 1] * s1 + R[a, 1, 2] * s2
-            ra2 = R[a, 2, 0] * s0 + R[a, 2, 1] * s1 + R[a, 2, 2] * s2
-            pa0, pa1, pa2 = x[a, 0] + ra0, x[a, 1] + ra1, x[a, 2] + ra2
-        else:
-            ra0, ra1, ra2 = f_sa[n, 0], f_sa[n, 1], f_sa[n, 2]
-            pa0, pa1, pa2 = ra0, ra1, ra2
-        if b >= 0:
-            s0, s1, s2 = f_sb[n, 0] - c[b, 0], f_sb[n, 1] - c[b, 1], f_sb[n, 2] - c[b, 2]
-            rb0 = R[b, 0, 0] * s0 + R[b, 0, 1] * s1 + R[b, 0, 2] * s2
-            rb1 = R[b, 1, 0] * s0 + R[b, 1, 1] * s1 + R[b, 1, 2] * s2
-            rb2 = R[b, 2, 0] * s0 + R[b, 2, 1] * s1 + R[b, 2, 2] * s2
-            pb0, pb1, pb2 = x[b, 0] + rb0, x[b, 1] + rb1, x[b, 2] + rb2
-        else:
-            rb0, rb1, rb2 = f_sb[n, 0], f_sb[n, 1], f_sb[n, 2]
-            pb0, pb1, pb2 = rb0, rb1, rb2
+        pa0, pa1, pa2, ra0, ra1, ra2 = _point(x, R, c, a, f_sa, n)
+        pb0, pb1, pb2, rb0, rb1, rb2 = _point(x, R, c, b, f_sb, n)
         d0, d1, d2 = pa0 - pb0, pa1 - pb1, pa2 - pb2
         dn = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
         T, dT = _tension(f_law[n], dn + f_extra[n], l0[n], f_par, n, width)
@@ -483,16 +508,17 @@ def _eval_one(x, R, Q, J, jac, md, fm, cm, l0, kt, off, w3, w33):
     # ---- facet contact: penalty on the gap to the lower body's cubic surface
     for n in range(k_a.shape[0]):
         a, b = k_a[n], k_b[n]
-        _attach(x, R, c, a, k_s, n, pa, ra)
-        _lever(x, b, pa, rb)
-        _to_body(x, R, c, b, pa, P)
+        # scalars until the point is known to touch (array-writing helpers cost more than the arithmetic)
+        p0, p1, p2, q0, q1, q2 = _point(x, R, c, a, k_s, n)
+        e0, e1, e2, P0, P1, P2 = _in_body(x, R, c, b, p0, p1, p2)
         sid = k_surf[n]
-        o, ax, cf = s_orig[sid], s_axes[sid], s_coef[sid]
-        u = (P[0] - o[0]) * ax[0, 0] + (P[1] - o[1]) * ax[0, 1] + (P[2] - o[2]) * ax[0, 2]
-        v = (P[0] - o[0]) * ax[1, 0] + (P[1] - o[1]) * ax[1, 1] + (P[2] - o[2]) * ax[1, 2]
-        w = (P[0] - o[0]) * ax[2, 0] + (P[1] - o[1]) * ax[2, 1] + (P[2] - o[2]) * ax[2, 2]
+        d0, d1, d2 = P0 - s_orig[sid, 0], P1 - s_orig[sid, 1], P2 - s_orig[sid, 2]
+        u = d0 * s_axes[sid, 0, 0] + d1 * s_axes[sid, 0, 1] + d2 * s_axes[sid, 0, 2]
+        v = d0 * s_axes[sid, 1, 0] + d1 * s_axes[sid, 1, 1] + d2 * s_axes[sid, 1, 2]
+        w = d0 * s_axes[sid, 2, 0] + d1 * s_axes[sid, 2, 1] + d2 * s_axes[sid, 2, 2]
         u2, v2_ = u * u, v * v
-        delta = -(w - (cf[0] * (u2 * u) + cf[1] * (v2_ * v) + cf[2] * u2 + cf[3] * v2_ + cf[4]))
+        delta = -(w - (s_coef[sid, 0] * (u2 * u) + s_coef[sid, 1] * (v2_ * v) + s_coef[sid, 2] * u2
+                       + s_coef[sid, 3] * v2_ + s_coef[sid, 4]))
         k = k_stiff[n]
         if delta > 0.0 and delta < ceps:
             Fm, dFm = k * (delta * delta) / (2 * ceps), k * delta / ceps
@@ -504,6 +530,8 @@ def _eval_one(x, R, Q, J, jac, md, fm, cm, l0, kt, off, w3, w33):
         dFm = dFm * cm[n]
         if Fm == 0.0 and dFm == 0.0:
             continue
+        ax, cf = s_axes[sid], s_coef[sid]
+        ra[0], ra[1], ra[2], rb[0], rb[1], rb[2] = q0, q1, q2, e0, e1, e2
         fu = 3 * cf[0] * u2 + 2 * cf[2] * u
         fv = 3 * cf[1] * v2_ + 2 * cf[3] * v
         fuu = 6 * cf[0] * u + 2 * cf[2]
@@ -524,14 +552,10 @@ def _eval_one(x, R, Q, J, jac, md, fm, cm, l0, kt, off, w3, w33):
     phi, ph, Tq, dTq, tau, q4 = w3[10], w3[11], w3[12], w3[13], w3[14], w3[15]
     for n in range(d_up.shape[0]):
         a, b = d_up[n], d_lo[n]
-        _attach(x, R, c, a, d_centre, n, pa, ra)
-        _lever(x, b, pa, rb)
-        _to_body(x, R, c, b, pa, P)
+        _relative_point(x, R, c, a, b, d_centre, n, pa, ra, rb, P)
         fr = d_frame[n]
         kq, kl, ks = d_k[n, 0], d_k[n, 1], d_k[n, 2]
-        r0 = (P[0] - d_centre[n, 0]) * fr[0, 0] + (P[1] - d_centre[n, 1]) * fr[0, 1] + (P[2] - d_centre[n, 2]) * fr[0, 2]
-        r1 = (P[0] - d_centre[n, 0]) * fr[1, 0] + (P[1] - d_centre[n, 1]) * fr[1, 1] + (P[2] - d_centre[n, 2]) * fr[1, 2]
-        r2 = (P[0] - d_centre[n, 0]) * fr[2, 0] + (P[1] - d_centre[n, 1]) * fr[2, 1] + (P[2] - d_centre[n, 2]) * fr[2, 2]
+        r0, r1, r2 = _frame_coords(P, d_centre[n], fr)
         cc = -r2
         if cc > 0.0:
             Fz, dFz = kq * (cc * cc) + kl * cc, -(2.0 * kq * cc + kl)
