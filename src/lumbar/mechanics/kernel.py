@@ -384,6 +384,47 @@ def _add_hat(J, bi, bj, f, sign, o1, o2):
 
 
 @_jit
+def _fibre_block(J, bi, bj, sign, beta, alpha, u, p, q):
+    """J[bi, :, bj, :] += sign * G1 K G2^T for a fibre's K = beta u u^T + alpha I (G = [I; [r]x], r1 = p of body
+    bi, r2 = q of body bj): beta g1 g2^T with g = (u, r x u), plus alpha [[I, -[q]x], [[p]x, (p.q) I - q p^T]]
+    (the same block as _add_gkg, from scalars)."""
+    g1 = (u[0], u[1], u[2], p[1] * u[2] - p[2] * u[1], p[2] * u[0] - p[0] * u[2], p[0] * u[1] - p[1] * u[0])
+    g2 = (u[0], u[1], u[2], q[1] * u[2] - q[2] * u[1], q[2] * u[0] - q[0] * u[2], q[0] * u[1] - q[1] * u[0])
+    sb, sa = sign * beta, sign * alpha
+    for k in range(6):
+        for m in range(6):
+            J[bi, k, bj, m] += sb * g1[k] * g2[m]
+    pq = p[0] * q[0] + p[1] * q[1] + p[2] * q[2]
+    for k in range(3):
+        J[bi, k, bj, k] += sa
+        J[bi, 3 + k, bj, 3 + k] += sa * pq
+        for m in range(3):
+            J[bi, 3 + k, bj, 3 + m] -= sa * q[k] * p[m]
+    J[bi, 0, bj, 4] += sa * q[2]
+    J[bi, 0, bj, 5] -= sa * q[1]
+    J[bi, 1, bj, 3] -= sa * q[2]
+    J[bi, 1, bj, 5] += sa * q[0]
+    J[bi, 2, bj, 3] += sa * q[1]
+    J[bi, 2, bj, 4] -= sa * q[0]
+    J[bi, 3, bj, 1] -= sa * p[2]
+    J[bi, 3, bj, 2] += sa * p[1]
+    J[bi, 4, bj, 0] += sa * p[2]
+    J[bi, 4, bj, 2] -= sa * p[0]
+    J[bi, 5, bj, 0] -= sa * p[1]
+    J[bi, 5, bj, 1] += sa * p[0]
+
+
+@_jit
+def _fibre_hatprod(J, body, sign, f, r):
+    """J[body, 3:, body, 3:] += sign * [f]x [r]x = sign * (r f^T - (f.r) I) (the fibre's geometric stiffness)."""
+    fr = f[0] * r[0] + f[1] * r[1] + f[2] * r[2]
+    for k in range(3):
+        J[body, 3 + k, body, 3 + k] -= sign * fr
+        for m in range(3):
+            J[body, 3 + k, body, 3 + m] += sign * r[k] * f[m]
+
+
+@_jit
 def _assemble_j(J, a, b, f, ra, rb, K, body_relative):
     """Jacobian blocks of one point element with force f on body a (lever ra), -f on body b (lever rb) and
     stiffness K = df/dp (world); ``body_relative``: the law is fixed in body b (facets, disc translation)."""
@@ -497,14 +538,17 @@ def _eval_one(x, R, Q, J, jac, md, fm, cm, l0, kt, off, w3, w33):
             continue
         alpha = -T / dn
         beta = T / dn - dT
-        f[0], f[1], f[2] = f0, f1, f2
-        ra[0], ra[1], ra[2] = ra0, ra1, ra2
-        rb[0], rb[1], rb[2] = rb0, rb1, rb2
-        tmp[0], tmp[1], tmp[2] = u0, u1, u2
-        for i in range(3):
-            for j in range(3):
-                K[i, j] = beta * tmp[i] * tmp[j] + (alpha if i == j else 0.0)
-        _assemble_j(J, a, b, f, ra, rb, K, False)
+        ut, ft = (u0, u1, u2), (f0, f1, f2)
+        rat, rbt = (ra0, ra1, ra2), (rb0, rb1, rb2)
+        if a >= 0:
+            _fibre_block(J, a, a, 1.0, beta, alpha, ut, rat, rat)
+            _fibre_hatprod(J, a, 1.0, ft, rat)
+        if b >= 0:
+            _fibre_block(J, b, b, 1.0, beta, alpha, ut, rbt, rbt)
+            _fibre_hatprod(J, b, -1.0, ft, rbt)
+        if a >= 0 and b >= 0:
+            _fibre_block(J, a, b, -1.0, beta, alpha, ut, rat, rbt)
+            _fibre_block(J, b, a, -1.0, beta, alpha, ut, rbt, rat)
     # ---- facet contact: penalty on the gap to the lower body's cubic surface
     for n in range(k_a.shape[0]):
         a, b = k_a[n], k_b[n]
