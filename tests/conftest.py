@@ -166,6 +166,10 @@ def pytest_collection_finish(session):
     if session.config.option.collectonly or not any(DAG_FIXTURES & set(getattr(i, "fixturenames", ()))
                                                     for i in items):
         return
+    # compile the solver's numba kernels here (or load them from their on-disk cache) before the Snakemake jobs
+    # start: they then load the cache instead of each compiling at the same time
+    from lumbar.mechanics import kernel
+    kernel.warm_up()
     factory = session.config._tmp_path_factory
     _start_dag("first", factory.mktemp("dag") / "repo")
     if any(i.name == "test_dag_reproducible_byte_identical" for i in items):

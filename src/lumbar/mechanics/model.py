@@ -25,12 +25,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import so3
+from . import kernel, so3
 from .elements.disc import disc_axial_force, disc_torque
 from .elements.facet import FacetSurface, contact_penalty
 from .elements.ligament import rupp_force, slack_length, softplus_force
 
-LAW_SOFTPLUS, LAW_RUPP, LAW_CABLE = 0, 1, 2
+LAW_SOFTPLUS, LAW_RUPP, LAW_CABLE = kernel.LAW_SOFTPLUS, kernel.LAW_RUPP, kernel.LAW_CABLE
 GROUND = -1
 
 
@@ -326,7 +326,16 @@ class SpineModel:
         return T * self.f_scale, dT * self.f_scale
 
     def evaluate(self, x, R, loads=None, fmask=1.0, cmask=1.0, jacobian=True, params=None):
-        """Residual Q (B, nb, 6) and Jacobian dQ/d(dx, dtheta) (B, nb, 6, nb, 6).
+        """Residual Q (B, nb, 6) and Jacobian dQ/d(dx, dtheta) (B, nb, 6, nb, 6) (None without ``jacobian``).
+
+        On the compiled core (:mod:`lumbar.mechanics.kernel`) when it is active, else on the numpy reference
+        :meth:`evaluate_reference` (same arguments, same results up to round-off)."""
+        if kernel.active():
+            return kernel.evaluate(self, x, R, loads, fmask, cmask, jacobian, params)
+        return self.evaluate_reference(x, R, loads, fmask, cmask, jacobian, params)
+
+    def evaluate_reference(self, x, R, loads=None, fmask=1.0, cmask=1.0, jacobian=True, params=None):
+        """Residual Q (B, nb, 6) and Jacobian dQ/d(dx, dtheta) (B, nb, 6, nb, 6): the vectorised numpy reference.
 
         ``loads`` (B, nb, 6): external force and moment (about the reference point) per body.
         ``fmask`` (B, nf) / ``cmask`` (B, nc): element weights per scenario (broadcastable).

@@ -12,7 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import so3
+from . import kernel, so3
+from .model import SpineModel
 
 log = logging.getLogger(__name__)
 
@@ -70,7 +71,7 @@ def _modified_newton_step(A, Q, nb):
     stiffnesses are comparable before the eigenvalue test.
     """
     n = A.shape[-1]
-    S = np.tile(np.r_[np.ones(3), np.full(3, 1.0 / LENGTH_SCALE)], nb)
+    S = _scaling(nb)
     As = A * S[:, None] * S[None, :]
     sym = 0.5 * (As + np.swapaxes(As, -1, -2))
     lam = np.linalg.eigvalsh(sym)[:, 0]
@@ -81,9 +82,35 @@ def _modified_newton_step(A, Q, nb):
     return d.reshape(-1, nb, 6)
 
 
+def _regularisation(nb, damping):
+    return np.tile(np.repeat(np.asarray(damping, float)[:2], 3), nb)
+
+
+def _scaling(nb):
+    """Variable scaling of the modified Newton step: rotations by LENGTH_SCALE."""
+    return np.tile(np.repeat([1.0, 1.0 / LENGTH_SCALE], 3), nb)
+
+
 def newton(model, x, R, loads, fmask=1.0, cmask=1.0, params=None, max_iter=50, tol_force=1e-8,
            tol_moment=1e-8, max_step_trans=1e-3, max_step_rot=0.05, damping=(1.0, 1e-6)):
     """Damped modified Newton on a batch; returns (x, R, converged, res_f, res_m, iterations).
+
+    A :class:`lumbar.mechanics.model.SpineModel` is solved on the compiled core when it is active
+    (:func:`lumbar.mechanics.kernel.newton`: the same iteration, scenario by scenario); any other model (e.g. the
+    muscle model, which adds its own terms to the SpineModels' residuals) and the reference mode run
+    :func:`newton_reference`."""
+    if isinstance(model, SpineModel) and type(model).evaluate is SpineModel.evaluate and kernel.active():
+        nb = x.shape[1]
+        return kernel.newton(model, x, R, loads, fmask, cmask, params, max_iter, tol_force, tol_moment,
+                             max_step_trans, max_step_rot, _regularisation(nb, damping), _scaling(nb), LENGTH_SCALE)
+    return newton_reference(model, x, R, loads, fmask, cmask, params, max_iter, tol_force, tol_moment,
+                            max_step_trans, max_step_rot, damping)
+
+
+def newton_reference(model, x, R, loads, fmask=1.0, cmask=1.0, params=None, max_iter=50, tol_force=1e-8,
+                     tol_moment=1e-8, max_step_trans=1e-3, max_step_rot=0.05, damping=(1.0, 1e-6)):
+    """Damped modified Newton on a batch, vectorised numpy (the reference of the compiled core); returns
+    (x, R, converged, res_f, res_m, iterations).
 
     The line search evaluates its trial states with the Jacobian, so an accepted trial (the
     usual case, full step) provides the residual and Jacobian of the next iteration.
@@ -95,7 +122,7 @@ def newton(model, x, R, loads, fmask=1.0, cmask=1.0, params=None, max_iter=50, t
     iters = np.zeros(B, int)
     res_f = np.full(B, np.inf)
     res_m = np.full(B, np.inf)
-    reg = np.tile(np.r_[np.full(3, damping[0]), np.full(3, damping[1])], nb)
+    reg = _regularisation(nb, damping)
 
     def sub(idx):
         return (_take(loads, idx, B), _take(fmask, idx, B), _take(cmask, idx, B), _take_params(params, idx, B))

@@ -1,0 +1,897 @@
+"""Compiled core of the equilibrium solver: force evaluation, Jacobian assembly and the damped Newton step,
+per scenario, in numba (machine code cached on disk, ``cache=True``).
+
+The reference is the vectorised numpy path (:meth:`lumbar.mechanics.model.SpineModel.evaluate_reference` and
+``lumbar.mechanics.solve.newton_reference``); this module computes the same quantities with the same formulas,
+element by element, and runs the same Newton iteration (modified Newton with the same eigenvalue shift, step
+limits and backtracking line search) scenario by scenario: both paths give the same equilibria, iteration counts
+and flags up to round-off (tests/test_kernel.py checks 1e-9 relative). What makes it fast: no per-call numpy
+overhead (the batched numpy path spends most of its time in small array operations), slack fibres and open
+contact points skipped (they add exact zeros), the Jacobian assembled from one 3x3 stiffness per element, and a
+Cholesky test instead of an eigenvalue decomposition for the modified-Newton shift (the eigenvalues are computed
+only where the test fails, i.e. where the shift is needed).
+
+Nothing of the model is frozen: :func:`model_data` reads the model's current arrays at every call, so callers may
+change ``f_par``, ``f_l0``, ``f_scale``, ``k_stiff``, a disc's ``k_shear`` ... in place between calls.
+
+Switch: the environment variable ``LUMBAR_KERNEL`` (``compiled``, the default, or ``reference``) at import, or
+:func:`set_mode` / :func:`use` at run time. Without numba the reference path runs (:func:`active` is False) and
+one warning says so.
+"""
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+try:  # numba is pinned (environment.txt); without it the numpy reference path runs
+    from numba import njit
+    HAVE_NUMBA = True
+except ImportError:  # pragma: no cover - exercised only in an environment without the pin
+    HAVE_NUMBA = False
+
+    def njit(*args, **kwargs):
+        if args and callable(args[0]):
+            return args[0]
+        return lambda f: f
+
+# machine code cached beside this file (or in NUMBA_CACHE_DIR); numpy's error model: a division by zero gives
+# inf/nan as in the reference path instead of raising
+_jit = njit(cache=True, error_model="numpy")
+LAW_SOFTPLUS, LAW_RUPP, LAW_CABLE = 0, 1, 2
+MODES = ("compiled", "reference")
+_state = {"mode": os.environ.get("LUMBAR_KERNEL", "compiled"), "warned": False}
+if _state["mode"] not in MODES:
+    raise ValueError(f"environment variable LUMBAR_KERNEL={_state['mode']!r}; expected one of {MODES}")
+
+
+def set_mode(mode: str) -> str:
+    """Select the solver core for this process: ``compiled`` or ``reference``; returns the previous mode."""
+    if mode not in MODES:
+        raise ValueError(f"solver kernel mode {mode!r}; expected one of {MODES}")
+    old, _state["mode"] = _state["mode"], mode
+    return old
+
+
+def mode() -> str:
+    return _state["mode"]
+
+
+@contextlib.contextmanager
+def use(mode_name: str):
+    """``with use("reference"): ...`` runs the block on the given solver core."""
+    old = set_mode(mode_name)
+    try:
+        yield
+    finally:
+        set_mode(old)
+
+
+def active() -> bool:
+    """True when the compiled core serves ``SpineModel.evaluate`` and ``solve.newton``."""
+    if _state["mode"] != "compiled":
+        return False
+    if not HAVE_NUMBA:
+        if not _state["warned"]:
+            log.warning("numba is not installed (pinned in environment.txt): the equilibrium solver runs on its "
+                        "numpy reference path, several times slower; pip install -r environment.txt")
+            _state["warned"] = True
+        return False
+    return True
+
+
+# ---------------------------------------------------------------------------------------------------- packing
+def _f64(a, shape=None):
+    """A C-contiguous, writeable float64 array (one compiled signature for every caller: numba types read-only and
+    writeable arrays apart, and a broadcast view is read-only)."""
+    a = np.asarray(a, dtype=np.float64)
+    if shape is not None:
+        a = a.reshape(shape)
+    f = a.flags
+    return a if f.c_contiguous and f.writeable else np.array(a, dtype=np.float64, order="C")
+
+
+def _i64(a):
+    a = np.asarray(a, dtype=np.int64)
+    f = a.flags
+    return a if f.c_contiguous and f.writeable else np.array(a, dtype=np.int64, order="C")
+
+
+_TORQUE_ORDER = ("lateral_bending", "flexion", "extension", "axial_rotation")
+
+
+def model_data(model) -> tuple:
+    """The model's current element arrays as one tuple of contiguous arrays (read at every call, never cached)."""
+    surfs = model.surfaces
+    discs = model.discs
+    ns, nd = len(surfs), len(discs)
+    return (
+        _f64(model.c, (-1, 3)),
+        _i64(model.f_a), _i64(model.f_b), _f64(model.f_sa, (-1, 3)), _f64(model.f_sb, (-1, 3)),
+        _f64(model.f_extra), _i64(model.f_law), _f64(model.f_par, (-1, 5)), _f64(model.f_scale),
+        float(model.slack_width_pct),
+        _i64(model.k_a), _i64(model.k_b), _f64(model.k_s, (-1, 3)), _i64(model.k_surf), _f64(model.k_stiff),
+        float(model.contact_eps),
+        _f64([s.origin for s in surfs], (ns, 3)), _f64([s.axes for s in surfs], (ns, 3, 3)),
+        _f64([s.coef for s in surfs], (ns, 5)),
+        _i64([d.upper for d in discs]), _i64([d.lower for d in discs]),
+        _f64([d.centre for d in discs], (nd, 3)), _f64([d.frame for d in discs], (nd, 3, 3)),
+        _f64([(d.k_quadratic, d.k_linear, d.k_shear) for d in discs], (nd, 3)),
+        _f64([[d.torque[k] for k in _TORQUE_ORDER] for d in discs], (nd, 4, 3)),
+    )
+
+
+def _rows(a, B, n):
+    """A per-scenario weight array (scalar, (n,), (B, 1), (B, n), ...) as (1, n) or (B, n)."""
+    a = np.asarray(a, dtype=np.float64)
+    if a.ndim >= 2 and a.shape[0] == B and B > 1:
+        return _f64(np.broadcast_to(a.reshape(B, -1), (B, n)))
+    return _f64(np.broadcast_to(a.reshape(-1) if a.ndim else a, (n,))[None])
+
+
+def scenario_data(model, B, loads, fmask, cmask, params) -> tuple:
+    """Per-scenario arrays (rows 1 or B): loads, fibre and contact weights, slack lengths, disc tension, offset."""
+    nb, nf, nc, nd = model.nb, model.nf, model.nc, model.nd
+    params = params or {}
+    if loads is None:
+        L = np.zeros((1, nb, 6))
+    else:
+        L = np.asarray(loads, dtype=np.float64)
+        L = _f64(L if L.ndim == 3 and L.shape[0] in (1, B) else np.broadcast_to(L, (B, nb, 6)))
+    fm = _rows(fmask, B, nf)
+    cm = _rows(cmask, B, nc)
+    l0 = np.asarray(model.f_l0, dtype=np.float64)
+    sc = params.get("fibre_l0_scale")
+    l0 = _f64(l0[None] if sc is None else np.broadcast_to(l0 * np.asarray(sc, float).reshape(B, -1), (B, nf)))
+    kt = params.get("k_tension")
+    if kt is None:
+        kt = _f64([d.k_tension for d in model.discs], (1, nd))
+    else:
+        kt = np.reshape(np.asarray(kt, float), (-1, 1))
+        kt = _f64(np.broadcast_to(kt, (kt.shape[0], nd)))
+    off = params.get("disc_phi_offset")
+    off = np.zeros((1, 3)) if off is None else _f64(off, (-1, 3))
+    return L, fm, cm, l0, kt, off
+
+
+# ---------------------------------------------------------------------------------------------------- SO(3)
+@_jit
+def _exp(w, out):
+    """Rotation matrix of rotation vector w (as scipy's Rotation.from_rotvec(w).as_matrix())."""
+    angle = np.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+    if angle <= 1e-3:
+        a2 = angle * angle
+        scale = 0.5 - a2 / 48.0 + a2 * a2 / 3840.0
+    else:
+        scale = np.sin(angle / 2.0) / angle
+    x, y, z, q = scale * w[0], scale * w[1], scale * w[2], np.cos(angle / 2.0)
+    x2, y2, z2, w2 = x * x, y * y, z * z, q * q
+    xy, zw, xz, yw, yz, xw = x * y, z * q, x * z, y * q, y * z, x * q
+    out[0, 0] = x2 - y2 - z2 + w2
+    out[1, 0] = 2.0 * (xy + zw)
+    out[2, 0] = 2.0 * (xz - yw)
+    out[0, 1] = 2.0 * (xy - zw)
+    out[1, 1] = -x2 + y2 - z2 + w2
+    out[2, 1] = 2.0 * (yz + xw)
+    out[0, 2] = 2.0 * (xz + yw)
+    out[1, 2] = 2.0 * (yz - xw)
+    out[2, 2] = -x2 - y2 + z2 + w2
+
+
+@_jit
+def _log(Rm, out, out4):
+    """Rotation vector of rotation matrix Rm (quaternion route, as scipy's Rotation.from_matrix().as_rotvec())."""
+    q = out4
+    tr = Rm[0, 0] + Rm[1, 1] + Rm[2, 2]
+    choice = 3
+    best = tr
+    for i in range(3):
+        if Rm[i, i] > best:
+            best = Rm[i, i]
+            choice = i
+    if choice != 3:
+        i = choice
+        j = (i + 1) % 3
+        k = (j + 1) % 3
+        q[i] = 1.0 - tr + 2.0 * Rm[i, i]
+        q[j] = Rm[j, i] + Rm[i, j]
+        q[k] = Rm[k, i] + Rm[i, k]
+        q[3] = Rm[k, j] - Rm[j, k]
+    else:
+        q[0] = Rm[2, 1] - Rm[1, 2]
+        q[1] = Rm[0, 2] - Rm[2, 0]
+        q[2] = Rm[1, 0] - Rm[0, 1]
+        q[3] = 1.0 + tr
+    nq = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    for i in range(4):
+        q[i] /= nq
+    if q[3] < 0.0:
+        for i in range(4):
+            q[i] = -q[i]
+    angle = 2.0 * np.arctan2(np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]), q[3])
+    if angle <= 1e-3:
+        a2 = angle * angle
+        scale = 2.0 + a2 / 12.0 + 7.0 * a2 * a2 / 2880.0
+    else:
+        scale = angle / np.sin(angle / 2.0)
+    for i in range(3):
+        out[i] = scale * q[i]
+
+
+@_jit
+def _jl_inv(phi, out, work):
+    """Inverse left Jacobian of SO(3) at phi (lumbar.mechanics.so3.left_jacobian_inverse)."""
+    theta = np.sqrt(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2])
+    if theta < 1e-4:
+        coef = 1.0 / 12.0 + theta ** 2 / 720.0
+    else:
+        coef = 1.0 / theta ** 2 - (1.0 + np.cos(theta)) / (2.0 * theta * np.sin(theta))
+    K = work
+    K[0, 0], K[1, 1], K[2, 2] = 0.0, 0.0, 0.0
+    K[0, 1], K[0, 2], K[1, 0] = -phi[2], phi[1], phi[2]
+    K[1, 2], K[2, 0], K[2, 1] = -phi[0], -phi[1], phi[0]
+    for i in range(3):
+        for j in range(3):
+            k2 = K[i, 0] * K[0, j] + K[i, 1] * K[1, j] + K[i, 2] * K[2, j]
+            out[i, j] = (1.0 if i == j else 0.0) - 0.5 * K[i, j] + coef * k2
+
+
+# ---------------------------------------------------------------------------------------------------- assembly
+@_jit
+def _attach(x, R, c, body, S, row, p, r):
+    """World point p of body-fixed reference point S[row] on ``body`` and its lever arm r about the body's point
+    (the point itself for ground)."""
+    if body < 0:
+        for i in range(3):
+            p[i] = S[row, i]
+            r[i] = S[row, i]
+    else:
+        s0, s1, s2 = S[row, 0] - c[body, 0], S[row, 1] - c[body, 1], S[row, 2] - c[body, 2]
+        for i in range(3):
+            r[i] = R[body, i, 0] * s0 + R[body, i, 1] * s1 + R[body, i, 2] * s2
+            p[i] = x[body, i] + r[i]
+
+
+@_jit
+def _point(x, R, c, body, S, row):
+    """(p, r) as six scalars: world point of reference point S[row] on ``body`` and its lever arm (see _attach)."""
+    if body < 0:
+        return S[row, 0], S[row, 1], S[row, 2], S[row, 0], S[row, 1], S[row, 2]
+    s0, s1, s2 = S[row, 0] - c[body, 0], S[row, 1] - c[body, 1], S[row, 2] - c[body, 2]
+    r0 = R[body, 0, 0] * s0 + R[body, 0, 1] * s1 + R[body, 0, 2] * s2
+    r1 = R[body, 1, 0] * s0 + R[body, 1, 1] * s1 + R[body, 1, 2] * s2
+    r2 = R[body, 2, 0] * s0 + R[body, 2, 1] * s1 + R[body, 2, 2] * s2
+    return x[body, 0] + r0, x[body, 1] + r1, x[body, 2] + r2, r0, r1, r2
+
+
+@_jit
+def _frame_coords(P, o, A):
+    """Coordinates of point P in the frame with origin o and rows A (the rows' directions)."""
+    d0, d1, d2 = P[0] - o[0], P[1] - o[1], P[2] - o[2]
+    return (d0 * A[0, 0] + d1 * A[0, 1] + d2 * A[0, 2], d0 * A[1, 0] + d1 * A[1, 1] + d2 * A[1, 2],
+            d0 * A[2, 0] + d1 * A[2, 1] + d2 * A[2, 2])
+
+
+@_jit
+def _in_body(x, R, c, body, p0, p1, p2):
+    """(lever arm of world point p about ``body``'s reference point, reference-frame coordinates of p in ``body``)
+    as six scalars (see _lever, _to_body)."""
+    if body < 0:
+        return p0, p1, p2, p0, p1, p2
+    e0, e1, e2 = p0 - x[body, 0], p1 - x[body, 1], p2 - x[body, 2]
+    return (e0, e1, e2, R[body, 0, 0] * e0 + R[body, 1, 0] * e1 + R[body, 2, 0] * e2 + c[body, 0],
+            R[body, 0, 1] * e0 + R[body, 1, 1] * e1 + R[body, 2, 1] * e2 + c[body, 1],
+            R[body, 0, 2] * e0 + R[body, 1, 2] * e1 + R[body, 2, 2] * e2 + c[body, 2])
+
+
+@_jit
+def _lever(x, body, p, r):
+    """Lever arm of world point p about ``body``'s reference point (the point itself for ground)."""
+    for i in range(3):
+        r[i] = p[i] if body < 0 else p[i] - x[body, i]
+
+
+@_jit
+def _to_body(x, R, c, body, p, P):
+    """Reference-frame coordinates in ``body`` of world point p."""
+    if body < 0:
+        for i in range(3):
+            P[i] = p[i]
+    else:
+        for i in range(3):
+            P[i] = (R[body, 0, i] * (p[0] - x[body, 0]) + R[body, 1, i] * (p[1] - x[body, 1])
+                    + R[body, 2, i] * (p[2] - x[body, 2])) + c[body, i]
+
+
+@_jit
+def _relative_point(x, R, c, a, b, S, row, p, ra, rb, P):
+    """Point S[row] carried by body a: world point p, its lever arms ra, rb about bodies a and b, and its
+    reference-frame coordinates P in body b (where a law fixed in body b reads it)."""
+    _attach(x, R, c, a, S, row, p, ra)
+    _lever(x, b, p, rb)
+    _to_body(x, R, c, b, p, P)
+
+
+@_jit
+def _rot(R, body, v, out):
+    if body < 0:
+        for i in range(3):
+            out[i] = v[i]
+    else:
+        for i in range(3):
+            out[i] = R[body, i, 0] * v[0] + R[body, i, 1] * v[1] + R[body, i, 2] * v[2]
+
+
+@_jit
+def _add_force(Q, body, f, r, sign):
+    if body >= 0:
+        Q[body, 0] += sign * f[0]
+        Q[body, 1] += sign * f[1]
+        Q[body, 2] += sign * f[2]
+        Q[body, 3] += sign * (r[1] * f[2] - r[2] * f[1])
+        Q[body, 4] += sign * (r[2] * f[0] - r[0] * f[2])
+        Q[body, 5] += sign * (r[0] * f[1] - r[1] * f[0])
+
+
+@_jit
+def _add_gkg(J, bi, bj, K, r1, r2, sign):
+    """J[bi, :, bj, :] += sign * G1 K G2^T with G = [I; [r]x]:
+    [[K, -K [r2]x], [[r1]x K, -[r1]x K [r2]x]]."""
+    for rr in range(3):
+        # row rr of [r1]x K is (r1 x K[:, c])[rr] for each column c; row rr of -K [r2]x is r2 x K[rr, :] and of
+        # -[r1]x K [r2]x is r2 x ([r1]x K)[rr, :]
+        i1, i2 = (rr + 1) % 3, (rr + 2) % 3
+        k0, k1, k2 = K[rr, 0], K[rr, 1], K[rr, 2]
+        m0 = r1[i1] * K[i2, 0] - r1[i2] * K[i1, 0]
+        m1 = r1[i1] * K[i2, 1] - r1[i2] * K[i1, 1]
+        m2 = r1[i1] * K[i2, 2] - r1[i2] * K[i1, 2]
+        J[bi, rr, bj, 0] += sign * k0
+        J[bi, rr, bj, 1] += sign * k1
+        J[bi, rr, bj, 2] += sign * k2
+        J[bi, rr, bj, 3] += sign * (r2[1] * k2 - r2[2] * k1)
+        J[bi, rr, bj, 4] += sign * (r2[2] * k0 - r2[0] * k2)
+        J[bi, rr, bj, 5] += sign * (r2[0] * k1 - r2[1] * k0)
+        J[bi, 3 + rr, bj, 0] += sign * m0
+        J[bi, 3 + rr, bj, 1] += sign * m1
+        J[bi, 3 + rr, bj, 2] += sign * m2
+        J[bi, 3 + rr, bj, 3] += sign * (r2[1] * m2 - r2[2] * m1)
+        J[bi, 3 + rr, bj, 4] += sign * (r2[2] * m0 - r2[0] * m2)
+        J[bi, 3 + rr, bj, 5] += sign * (r2[0] * m1 - r2[1] * m0)
+
+
+@_jit
+def _add_hatprod(J, bi, bj, a, b, sign):
+    """J[bi, 3:, bj, 3:] += sign * [a]x [b]x = sign * (b a^T - (a.b) I)."""
+    ab = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    for i in range(3):
+        for j in range(3):
+            J[bi, 3 + i, bj, 3 + j] += sign * (b[i] * a[j] - (ab if i == j else 0.0))
+
+
+@_jit
+def _add_hat(J, bi, bj, f, sign, o1, o2):
+    """J[bi, o1:o1+3, bj, o2:o2+3] += sign * [f]x."""
+    J[bi, o1 + 0, bj, o2 + 1] += -sign * f[2]
+    J[bi, o1 + 0, bj, o2 + 2] += sign * f[1]
+    J[bi, o1 + 1, bj, o2 + 0] += sign * f[2]
+    J[bi, o1 + 1, bj, o2 + 2] += -sign * f[0]
+    J[bi, o1 + 2, bj, o2 + 0] += -sign * f[1]
+    J[bi, o1 + 2, bj, o2 + 1] += sign * f[0]
+
+
+@_jit
+def _fibre_block(J, bi, bj, sign, beta, alpha, u, p, q):
+    """J[bi, :, bj, :] += sign * G1 K G2^T for a fibre's K = beta u u^T + alpha I (G = [I; [r]x], r1 = p of body
+    bi, r2 = q of body bj): beta g1 g2^T with g = (u, r x u), plus alpha [[I, -[q]x], [[p]x, (p.q) I - q p^T]]
+    (the same block as _add_gkg, from scalars)."""
+    g1 = (u[0], u[1], u[2], p[1] * u[2] - p[2] * u[1], p[2] * u[0] - p[0] * u[2], p[0] * u[1] - p[1] * u[0])
+    g2 = (u[0], u[1], u[2], q[1] * u[2] - q[2] * u[1], q[2] * u[0] - q[0] * u[2], q[0] * u[1] - q[1] * u[0])
+    sb, sa = sign * beta, sign * alpha
+    for k in range(6):
+        for m in range(6):
+            J[bi, k, bj, m] += sb * g1[k] * g2[m]
+    pq = p[0] * q[0] + p[1] * q[1] + p[2] * q[2]
+    for k in range(3):
+        J[bi, k, bj, k] += sa
+        J[bi, 3 + k, bj, 3 + k] += sa * pq
+        for m in range(3):
+            J[bi, 3 + k, bj, 3 + m] -= sa * q[k] * p[m]
+    J[bi, 0, bj, 4] += sa * q[2]
+    J[bi, 0, bj, 5] -= sa * q[1]
+    J[bi, 1, bj, 3] -= sa * q[2]
+    J[bi, 1, bj, 5] += sa * q[0]
+    J[bi, 2, bj, 3] += sa * q[1]
+    J[bi, 2, bj, 4] -= sa * q[0]
+    J[bi, 3, bj, 1] -= sa * p[2]
+    J[bi, 3, bj, 2] += sa * p[1]
+    J[bi, 4, bj, 0] += sa * p[2]
+    J[bi, 4, bj, 2] -= sa * p[0]
+    J[bi, 5, bj, 0] -= sa * p[1]
+    J[bi, 5, bj, 1] += sa * p[0]
+
+
+@_jit
+def _fibre_hatprod(J, body, sign, f, r):
+    """J[body, 3:, body, 3:] += sign * [f]x [r]x = sign * (r f^T - (f.r) I) (the fibre's geometric stiffness)."""
+    fr = f[0] * r[0] + f[1] * r[1] + f[2] * r[2]
+    for k in range(3):
+        J[body, 3 + k, body, 3 + k] -= sign * fr
+        for m in range(3):
+            J[body, 3 + k, body, 3 + m] += sign * r[k] * f[m]
+
+
+@_jit
+def _assemble_j(J, a, b, f, ra, rb, K, body_relative):
+    """Jacobian blocks of one point element with force f on body a (lever ra), -f on body b (lever rb) and
+    stiffness K = df/dp (world); ``body_relative``: the law is fixed in body b (facets, disc translation)."""
+    if a >= 0:
+        _add_gkg(J, a, a, K, ra, ra, 1.0)
+        _add_hatprod(J, a, a, f, ra, 1.0)
+    if b >= 0:
+        _add_gkg(J, b, b, K, rb, rb, 1.0)
+        if body_relative:
+            _add_hat(J, b, b, f, 1.0, 0, 3)
+            _add_hat(J, b, b, f, -1.0, 3, 0)
+            _add_hatprod(J, b, b, rb, f, 1.0)
+        else:
+            _add_hatprod(J, b, b, f, rb, -1.0)
+    if a >= 0 and b >= 0:
+        _add_gkg(J, a, b, K, ra, rb, -1.0)
+        _add_gkg(J, b, a, K, rb, ra, -1.0)
+        if body_relative:
+            _add_hat(J, a, b, f, -1.0, 0, 3)
+            _add_hatprod(J, a, b, ra, f, -1.0)
+            _add_hat(J, b, a, f, 1.0, 3, 0)
+            _add_hatprod(J, b, a, f, ra, -1.0)
+
+
+@_jit
+def _assemble(Q, J, jac, a, b, f, ra, rb, K, body_relative):
+    """One point element (see SpineModel._assemble of the reference path)."""
+    _add_force(Q, a, f, ra, 1.0)
+    _add_force(Q, b, f, rb, -1.0)
+    if jac:
+        _assemble_j(J, a, b, f, ra, rb, K, body_relative)
+
+
+@_jit
+def _tension(law, length, l0, P, row, width):
+    """Fibre law value and derivative d/d(length) before the fibre's scale (SpineModel._tension_raw); the law's
+    parameters are row ``row`` of P."""
+    par0, par1, par2, par3, par4 = P[row, 0], P[row, 1], P[row, 2], P[row, 3], P[row, 4]
+    if law == LAW_SOFTPLUS:
+        eps = (length / l0 - 1.0) * 100.0
+        if eps <= 0.0:
+            return 0.0, 0.0
+        z = (eps + par1) / par3
+        e = np.exp(-abs(z))                  # softplus and its derivative, the logistic function, from one exp
+        F = par0 * (max(z, 0.0) + np.log1p(e)) + par2
+        dF = par0 / par3 * (1.0 / (1.0 + e) if z >= 0.0 else e / (1.0 + e))
+        if not F > 0.0:
+            F, dF = 0.0, 0.0
+        if width <= 0.0:
+            s, ds = 1.0, 0.0
+        else:
+            t = min(eps / width, 1.0)
+            s = t * t * (3.0 - 2.0 * t)
+            ds = 6.0 * t * (1.0 - t) / width if eps < width else 0.0
+        return s * F, (ds * F + s * dF) * 100.0 / l0
+    if law == LAW_RUPP:
+        dl = length - l0
+        if dl > 0.0 and dl < par0:
+            return par3 * dl ** par2, par2 * par3 * dl ** (par2 - 1.0)
+        if dl >= par0:
+            return par1 + par4 * (dl - par0), par4
+        return 0.0, 0.0
+    return par0, 0.0
+
+
+@_jit
+def _torque_angle(phi, p):
+    z = phi ** 3 / p[1]
+    t = np.tanh(z)
+    return p[0] * t + p[2] * phi, p[0] * (1.0 - t ** 2) * 3.0 * phi ** 2 / p[1] + p[2]
+
+
+@_jit
+def _eval_one(x, R, Q, J, jac, md, fm, cm, l0, kt, off, w3, w33):
+    """Residual Q (nb, 6) (pre-filled with the loads) and Jacobian J (nb, 6, nb, 6) (zeroed) of one scenario;
+    w3 (16, 4) and w33 (8, 3, 3) are work space."""
+    (c, f_a, f_b, f_sa, f_sb, f_extra, f_law, f_par, f_scale, width,
+     k_a, k_b, k_s, k_surf, k_stiff, ceps, s_orig, s_axes, s_coef,
+     d_up, d_lo, d_centre, d_frame, d_k, d_torque) = md
+    pa, ra, rb, P, f, tmp, v0, v1, v2 = w3[0], w3[2], w3[3], w3[4], w3[5], w3[6], w3[7], w3[8], w3[9]
+    K = w33[0]
+    # ---- fibres: K = dT u u^T + T/|d| (I - u u^T) with the sign of a pulling element
+    for n in range(f_a.shape[0]):
+        a, b = f_a[n], f_b[n]
+        pa0, pa1, pa2, ra0, ra1, ra2 = _point(x, R, c, a, f_sa, n)
+        pb0, pb1, pb2, rb0, rb1, rb2 = _point(x, R, c, b, f_sb, n)
+        d0, d1, d2 = pa0 - pb0, pa1 - pb1, pa2 - pb2
+        dn = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        T, dT = _tension(f_law[n], dn + f_extra[n], l0[n], f_par, n, width)
+        T = T * f_scale[n] * fm[n]
+        dT = dT * f_scale[n] * fm[n]
+        if T == 0.0 and dT == 0.0:
+            continue
+        u0, u1, u2 = d0 / dn, d1 / dn, d2 / dn
+        f0, f1, f2 = -T * u0, -T * u1, -T * u2
+        if a >= 0:
+            Q[a, 0] += f0
+            Q[a, 1] += f1
+            Q[a, 2] += f2
+            Q[a, 3] += ra1 * f2 - ra2 * f1
+            Q[a, 4] += ra2 * f0 - ra0 * f2
+            Q[a, 5] += ra0 * f1 - ra1 * f0
+        if b >= 0:
+            Q[b, 0] -= f0
+            Q[b, 1] -= f1
+            Q[b, 2] -= f2
+            Q[b, 3] -= rb1 * f2 - rb2 * f1
+            Q[b, 4] -= rb2 * f0 - rb0 * f2
+            Q[b, 5] -= rb0 * f1 - rb1 * f0
+        if not jac:
+            continue
+        alpha = -T / dn
+        beta = T / dn - dT
+        ut, ft = (u0, u1, u2), (f0, f1, f2)
+        rat, rbt = (ra0, ra1, ra2), (rb0, rb1, rb2)
+        if a >= 0:
+            _fibre_block(J, a, a, 1.0, beta, alpha, ut, rat, rat)
+            _fibre_hatprod(J, a, 1.0, ft, rat)
+        if b >= 0:
+            _fibre_block(J, b, b, 1.0, beta, alpha, ut, rbt, rbt)
+            _fibre_hatprod(J, b, -1.0, ft, rbt)
+        if a >= 0 and b >= 0:
+            _fibre_block(J, a, b, -1.0, beta, alpha, ut, rat, rbt)
+            _fibre_block(J, b, a, -1.0, beta, alpha, ut, rbt, rat)
+    # ---- facet contact: penalty on the gap to the lower body's cubic surface
+    for n in range(k_a.shape[0]):
+        a, b = k_a[n], k_b[n]
+        # scalars until the point is known to touch (array-writing helpers cost more than the arithmetic)
+        p0, p1, p2, q0, q1, q2 = _point(x, R, c, a, k_s, n)
+        e0, e1, e2, P0, P1, P2 = _in_body(x, R, c, b, p0, p1, p2)
+        sid = k_surf[n]
+        d0, d1, d2 = P0 - s_orig[sid, 0], P1 - s_orig[sid, 1], P2 - s_orig[sid, 2]
+        u = d0 * s_axes[sid, 0, 0] + d1 * s_axes[sid, 0, 1] + d2 * s_axes[sid, 0, 2]
+        v = d0 * s_axes[sid, 1, 0] + d1 * s_axes[sid, 1, 1] + d2 * s_axes[sid, 1, 2]
+        w = d0 * s_axes[sid, 2, 0] + d1 * s_axes[sid, 2, 1] + d2 * s_axes[sid, 2, 2]
+        u2, v2_ = u * u, v * v
+        delta = -(w - (s_coef[sid, 0] * (u2 * u) + s_coef[sid, 1] * (v2_ * v) + s_coef[sid, 2] * u2
+                       + s_coef[sid, 3] * v2_ + s_coef[sid, 4]))
+        k = k_stiff[n]
+        if delta > 0.0 and delta < ceps:
+            Fm, dFm = k * (delta * delta) / (2 * ceps), k * delta / ceps
+        elif delta >= ceps:
+            Fm, dFm = k * (delta - ceps / 2), k
+        else:
+            continue
+        Fm = Fm * cm[n]
+        dFm = dFm * cm[n]
+        if Fm == 0.0 and dFm == 0.0:
+            continue
+        ax, cf = s_axes[sid], s_coef[sid]
+        ra[0], ra[1], ra[2], rb[0], rb[1], rb[2] = q0, q1, q2, e0, e1, e2
+        fu = 3 * cf[0] * u2 + 2 * cf[2] * u
+        fv = 3 * cf[1] * v2_ + 2 * cf[3] * v
+        fuu = 6 * cf[0] * u + 2 * cf[2]
+        fvv = 6 * cf[1] * v + 2 * cf[3]
+        for i in range(3):
+            tmp[i] = -fu * ax[0, i] - fv * ax[1, i] + ax[2, i]
+        _rot(R, b, tmp, v0)
+        _rot(R, b, ax[0], v1)
+        _rot(R, b, ax[1], v2)
+        w0, w1, w2 = -dFm, -Fm * fuu, -Fm * fvv
+        for i in range(3):
+            f[i] = Fm * v0[i]
+            for j in range(3):
+                K[i, j] = w0 * v0[i] * v0[j] + w1 * v1[i] * v1[j] + w2 * v2[i] * v2[j]
+        _assemble(Q, J, jac, a, b, f, ra, rb, K, True)
+    # ---- discs: translational spring in the disc frame, Eq. 3 torque per project axis
+    Ra, RB, Rrel, M, Ji = w33[1], w33[2], w33[3], w33[4], w33[5]
+    phi, ph, Tq, dTq, tau, q4 = w3[10], w3[11], w3[12], w3[13], w3[14], w3[15]
+    for n in range(d_up.shape[0]):
+        a, b = d_up[n], d_lo[n]
+        _relative_point(x, R, c, a, b, d_centre, n, pa, ra, rb, P)
+        fr = d_frame[n]
+        kq, kl, ks = d_k[n, 0], d_k[n, 1], d_k[n, 2]
+        r0, r1, r2 = _frame_coords(P, d_centre[n], fr)
+        cc = -r2
+        if cc > 0.0:
+            Fz, dFz = kq * (cc * cc) + kl * cc, -(2.0 * kq * cc + kl)
+        else:
+            Fz, dFz = -kt[n] * r2, -kt[n]
+        _rot(R, b, fr[0], v0)
+        _rot(R, b, fr[1], v1)
+        _rot(R, b, fr[2], v2)
+        F0, F1 = -ks * r0, -ks * r1
+        for i in range(3):
+            f[i] = F0 * v0[i] + F1 * v1[i] + Fz * v2[i]
+            for j in range(3):
+                K[i, j] = -ks * v0[i] * v0[j] - ks * v1[i] * v1[j] + dFz * v2[i] * v2[j]
+        _assemble(Q, J, jac, a, b, f, ra, rb, K, True)
+        for i in range(3):
+            for j in range(3):
+                Ra[i, j] = R[a, i, j] if a >= 0 else (1.0 if i == j else 0.0)
+                RB[i, j] = R[b, i, j] if b >= 0 else (1.0 if i == j else 0.0)
+        for i in range(3):
+            for j in range(3):
+                Rrel[i, j] = RB[0, i] * Ra[0, j] + RB[1, i] * Ra[1, j] + RB[2, i] * Ra[2, j]
+        _log(Rrel, phi, q4)
+        for i in range(3):
+            ph[i] = phi[i] - off[i]
+        tor = d_torque[n]
+        Tq[0], dTq[0] = _torque_angle(ph[0], tor[0])
+        if ph[1] >= 0.0:
+            Tq[1], dTq[1] = _torque_angle(ph[1], tor[1])
+        else:
+            Tq[1], dTq[1] = _torque_angle(ph[1], tor[2])
+        Tq[2], dTq[2] = _torque_angle(ph[2], tor[3])
+        for i in range(3):
+            tau[i] = RB[i, 0] * Tq[0] + RB[i, 1] * Tq[1] + RB[i, 2] * Tq[2]
+            if a >= 0:
+                Q[a, 3 + i] -= tau[i]
+            if b >= 0:
+                Q[b, 3 + i] += tau[i]
+        if not jac:
+            continue
+        _jl_inv(phi, Ji, w33[6])
+        for i in range(3):          # Rrel <- diag(dT) Jinv RB^T
+            for j in range(3):
+                Rrel[i, j] = dTq[i] * (Ji[i, 0] * RB[j, 0] + Ji[i, 1] * RB[j, 1] + Ji[i, 2] * RB[j, 2])
+        for i in range(3):
+            for j in range(3):
+                M[i, j] = RB[i, 0] * Rrel[0, j] + RB[i, 1] * Rrel[1, j] + RB[i, 2] * Rrel[2, j]
+        for i in range(3):
+            for j in range(3):
+                if a >= 0:
+                    J[a, 3 + i, a, 3 + j] -= M[i, j]
+                if a >= 0 and b >= 0:
+                    J[a, 3 + i, b, 3 + j] += M[i, j]
+                    J[b, 3 + i, a, 3 + j] += M[i, j]
+                if b >= 0:
+                    J[b, 3 + i, b, 3 + j] -= M[i, j]
+        if b >= 0:
+            _add_hat(J, b, b, tau, -1.0, 3, 3)
+            if a >= 0:
+                _add_hat(J, a, b, tau, 1.0, 3, 3)
+
+
+@_jit
+def evaluate_batch(x, R, L, fm, cm, l0, kt, off, jac, md, Q, J):
+    """Q (B, nb, 6) and, with ``jac``, J (B, nb, 6, nb, 6) (both written here) of a batch."""
+    w3, w33 = np.empty((16, 4)), np.empty((8, 3, 3))
+    for s in range(x.shape[0]):
+        Q[s] = L[s if L.shape[0] > 1 else 0]
+        if jac:
+            J[s] = 0.0
+        _eval_one(x[s], R[s], Q[s], J[s] if jac else J[0], jac, md, fm[s if fm.shape[0] > 1 else 0],
+                  cm[s if cm.shape[0] > 1 else 0], l0[s if l0.shape[0] > 1 else 0],
+                  kt[s if kt.shape[0] > 1 else 0], off[s if off.shape[0] > 1 else 0], w3, w33)
+
+
+def evaluate(model, x, R, loads=None, fmask=1.0, cmask=1.0, jacobian=True, params=None):
+    """Compiled ``SpineModel.evaluate`` (same arguments and results as the reference path)."""
+    x, R = _f64(x), _f64(R)
+    B, nb = x.shape[0], model.nb
+    L, fm, cm, l0, kt, off = scenario_data(model, B, loads, fmask, cmask, params)
+    Q = np.empty((B, nb, 6))
+    J = np.empty((B, nb, 6, nb, 6)) if jacobian else np.zeros((1, nb, 6, nb, 6))
+    evaluate_batch(x, R, L, fm, cm, l0, kt, off, bool(jacobian), model_data(model), Q, J)
+    return Q, (J if jacobian else None)
+
+
+# ---------------------------------------------------------------------------------------------------- Newton
+@_jit
+def _cholesky_ok(A, shift, W):
+    """True if A - shift*I is positive definite (Cholesky without pivoting; W is work space)."""
+    n = A.shape[0]
+    for i in range(n):
+        for j in range(i + 1):
+            s = A[i, j] - (shift if i == j else 0.0)
+            for k in range(j):
+                s -= W[i, k] * W[j, k]
+            if i == j:
+                if not s > 0.0:
+                    return False
+                W[i, i] = np.sqrt(s)
+            else:
+                W[i, j] = s / W[j, j]
+    return True
+
+
+@_jit
+def _lu_solve(A, bvec, out):
+    """Solve A out = bvec by LU with partial pivoting (A and bvec are overwritten)."""
+    n = A.shape[0]
+    for k in range(n):
+        p = k
+        big = abs(A[k, k])
+        for i in range(k + 1, n):
+            if abs(A[i, k]) > big:
+                big = abs(A[i, k])
+                p = i
+        if p != k:
+            for j in range(n):
+                A[k, j], A[p, j] = A[p, j], A[k, j]
+            bvec[k], bvec[p] = bvec[p], bvec[k]
+        for i in range(k + 1, n):
+            m = A[i, k] / A[k, k]
+            A[i, k] = m
+            for j in range(k + 1, n):
+                A[i, j] -= m * A[k, j]
+            bvec[i] -= m * bvec[k]
+    for i in range(n - 1, -1, -1):
+        s = bvec[i]
+        for j in range(i + 1, n):
+            s -= A[i, j] * out[j]
+        out[i] = s / A[i, i]
+
+
+@_jit
+def _merit(Q, lscale):
+    m1 = 0.0
+    m2 = 0.0
+    for k in range(Q.shape[0]):
+        for i in range(3):
+            m1 += Q[k, i] ** 2
+            m2 += (Q[k, 3 + i] / lscale) ** 2
+    return m1 + m2
+
+
+@_jit
+def _norms(Q):
+    rf = 0.0
+    rm = 0.0
+    for k in range(Q.shape[0]):
+        for i in range(3):
+            v = abs(Q[k, i])
+            if v > rf or v != v:
+                rf = v
+            v = abs(Q[k, 3 + i])
+            if v > rm or v != v:
+                rm = v
+    if rf != rf or rm != rm:
+        return np.nan if rf != rf else rf, np.nan if rm != rm else rm
+    return rf, rm
+
+
+@_jit
+def _step(J, Q, reg, S, A, sym, W, rhs, d):
+    """Modified Newton step (lumbar.mechanics.solve._modified_newton_step): solve (-J + diag(reg)) d = Q in
+    scaled variables, shifting the scaled symmetric part to positive definite where it is not."""
+    n = reg.shape[0]
+    for i in range(n):
+        for j in range(n):
+            A[i, j] = (-J[i // 6, i % 6, j // 6, j % 6] + (reg[i] if i == j else 0.0)) * S[i] * S[j]
+    scale = 0.0
+    for i in range(n):
+        for j in range(n):
+            sym[i, j] = 0.5 * (A[i, j] + A[j, i])
+        if abs(sym[i, i]) > scale:
+            scale = abs(sym[i, i])
+    finite = True
+    for i in range(n):
+        for j in range(n):
+            if not np.isfinite(sym[i, j]):
+                finite = False
+    mu = 0.0
+    if not finite:
+        mu = np.nan
+    elif not _cholesky_ok(sym, 1e-8 * scale, W):
+        lam = np.linalg.eigvalsh(sym)[0]
+        if lam < 1e-8 * scale:
+            mu = -lam + 1e-6 * scale
+    for i in range(n):
+        A[i, i] += mu
+        rhs[i] = S[i] * Q[i // 6, i % 6]
+    _lu_solve(A, rhs, W[0])
+    for i in range(n):
+        d[i // 6, i % 6] = W[0, i] * S[i]
+
+
+@_jit
+def newton_batch(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max_st, max_sr, reg, S, lscale,
+                 x, R, conv, res_f, res_m, iters):
+    """Damped modified Newton, scenario by scenario (lumbar.mechanics.solve.newton_reference, same steps)."""
+    B, nb = x0.shape[0], x0.shape[1]
+    n = 6 * nb
+    Q, Qt = np.empty((nb, 6)), np.empty((nb, 6))
+    J, Jt = np.empty((nb, 6, nb, 6)), np.empty((nb, 6, nb, 6))
+    A, sym, W = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
+    rhs, d = np.empty(n), np.empty((nb, 6))
+    xt, Rt, E = np.empty((nb, 3)), np.empty((nb, 3, 3)), np.empty((3, 3))
+    wv = np.empty(3)
+    w3, w33 = np.empty((16, 4)), np.empty((8, 3, 3))
+    for s in range(B):
+        Ls = L[s if L.shape[0] > 1 else 0]
+        fms, cms = fm[s if fm.shape[0] > 1 else 0], cm[s if cm.shape[0] > 1 else 0]
+        l0s, kts, offs = l0[s if l0.shape[0] > 1 else 0], kt[s if kt.shape[0] > 1 else 0], off[s if off.shape[0] > 1 else 0]
+        xs, Rs = x[s], R[s]
+        xs[:] = x0[s]
+        Rs[:] = R0[s]
+        Q[:] = Ls
+        J[:] = 0.0
+        _eval_one(xs, Rs, Q, J, True, md, fms, cms, l0s, kts, offs, w3, w33)
+        conv[s] = False
+        iters[s] = 0
+        res_f[s] = np.inf
+        res_m[s] = np.inf
+        for it in range(max_iter + 1):
+            rf, rm = _norms(Q)
+            res_f[s], res_m[s] = rf, rm
+            if rf < tol_f and rm < tol_m:
+                conv[s] = True
+                break
+            if it == max_iter:
+                break
+            _step(J, Q, reg, S, A, sym, W, rhs, d)
+            st = 0.0
+            sr = 0.0
+            for k in range(nb):
+                a1 = np.sqrt(d[k, 0] ** 2 + d[k, 1] ** 2 + d[k, 2] ** 2)
+                a2 = np.sqrt(d[k, 3] ** 2 + d[k, 4] ** 2 + d[k, 5] ** 2)
+                st = max(st, a1)
+                sr = max(sr, a2)
+            lim = max(1.0, max(st / max_st, sr / max_sr))
+            for k in range(nb):
+                for i in range(6):
+                    d[k, i] = d[k, i] / lim
+            m0 = _merit(Q, lscale)
+            alpha = 1.0
+            for ls in range(10):
+                for k in range(nb):
+                    for i in range(3):
+                        xt[k, i] = xs[k, i] + alpha * d[k, i]
+                        wv[i] = alpha * d[k, 3 + i]
+                    _exp(wv, E)
+                    for i in range(3):
+                        for j in range(3):
+                            Rt[k, i, j] = E[i, 0] * Rs[k, 0, j] + E[i, 1] * Rs[k, 1, j] + E[i, 2] * Rs[k, 2, j]
+                Qt[:] = Ls
+                Jt[:] = 0.0
+                _eval_one(xt, Rt, Qt, Jt, True, md, fms, cms, l0s, kts, offs, w3, w33)
+                if _merit(Qt, lscale) < m0 * (1.0 - 1e-4 * alpha) or ls == 9:
+                    break
+                alpha = 1.0 if ls == 8 else alpha * 0.5
+            xs[:] = xt
+            Rs[:] = Rt
+            Q[:] = Qt
+            J[:] = Jt
+            iters[s] += 1
+
+
+def newton(model, x, R, loads, fmask, cmask, params, max_iter, tol_force, tol_moment, max_step_trans,
+           max_step_rot, reg, S, length_scale):
+    """Compiled ``lumbar.mechanics.solve.newton`` (same arguments and results as the reference path)."""
+    x0, R0 = _f64(x), _f64(R)
+    B = x0.shape[0]
+    L, fm, cm, l0, kt, off = scenario_data(model, B, loads, fmask, cmask, params)
+    xo, Ro = np.empty_like(x0), np.empty_like(R0)
+    conv, res_f, res_m, iters = np.zeros(B, bool), np.empty(B), np.empty(B), np.zeros(B, np.int64)
+    newton_batch(x0, R0, L, fm, cm, l0, kt, off, model_data(model), int(max_iter), float(tol_force),
+                 float(tol_moment), float(max_step_trans), float(max_step_rot), _f64(reg), _f64(S),
+                 float(length_scale), xo, Ro, conv, res_f, res_m, iters)
+    return xo, Ro, conv, res_f, res_m, iters
+
+
+def warm_up() -> bool:
+    """Compile both kernels, or load them from the on-disk cache, on an empty one-body model (a process that is
+    about to start others, e.g. a test session before its Snakemake runs, calls this so that they all load the
+    cache instead of compiling at the same time). Returns whether the compiled core is active."""
+    if not active():
+        return False
+    f2, f3, i1 = np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros(0, np.int64)
+    md = (np.zeros((1, 3)), i1, i1.copy(), f2, f2.copy(), np.zeros(0), i1.copy(), np.zeros((0, 5)), np.zeros(0),
+          0.5, i1.copy(), i1.copy(), f2.copy(), i1.copy(), np.zeros(0), 5e-5, f2.copy(), f3, np.zeros((0, 5)),
+          i1.copy(), i1.copy(), f2.copy(), f3.copy(), f2.copy(), np.zeros((0, 4, 3)))
+    x, R = np.zeros((1, 1, 3)), np.eye(3)[None, None].copy()
+    rows = (np.zeros((1, 1, 6)), np.ones((1, 0)), np.ones((1, 0)), np.ones((1, 0)), np.zeros((1, 0)), np.zeros((1, 3)))
+    evaluate_batch(x, R, *rows, True, md, np.empty((1, 1, 6)), np.empty((1, 1, 6, 1, 6)))
+    newton_batch(x, R, *rows, md, 5, 1e-8, 1e-8, 1e-3, 0.05, np.ones(6), np.ones(6), 0.05, np.empty_like(x),
+                 np.empty_like(R), np.zeros(1, bool), np.empty(1), np.empty(1), np.zeros(1, np.int64))
+    return True

@@ -1,0 +1,227 @@
+"""The compiled solver core (lumbar.mechanics.kernel) against the numpy reference path: the same residuals and
+Jacobians, the same equilibria (1e-9 relative) on the L4-L5 unit (Visible Human, all stages, all directions), the
+L2-S1 model with cables and the muscle model's L1-S1 use; exact Jacobians of the compiled path against finite
+differences; model arrays changed in place between calls; per-fibre parameters; the switch; the on-disk cache."""
+import os
+import re
+import subprocess
+import tomllib
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lumbar.experiments import l2s1
+from lumbar.experiments.fsu import DIRECTIONS, build_fsu, range_of_motion
+from lumbar.geometry import load_geometry
+from lumbar.geometry.synthetic import symmetric_fsu
+from lumbar.inputs.tables import STAGES
+from lumbar.mechanics import kernel, so3
+from lumbar.mechanics.solve import solve
+
+from conftest import make_charset
+from test_model import _two_level_model, fd_jacobian, perturbed_state
+
+needs_numba = pytest.mark.skipif(not kernel.HAVE_NUMBA, reason="numba not installed (pinned in environment.txt)")
+ROOT = Path(__file__).resolve().parents[1]
+RTOL = 1e-9
+
+
+def both(m, *args, **kw):
+    with kernel.use("compiled"):
+        Qc, Jc = m.evaluate(*args, **kw)
+    Qr, Jr = m.evaluate_reference(*args, **kw)
+    return Qc, Jc, Qr, Jr
+
+
+def assert_same(a, b, rtol=RTOL):
+    """Equal to ``rtol`` of the array's largest magnitude (round-off of differently ordered sums)."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    assert a.shape == b.shape
+    scale = max(np.abs(b).max(initial=0.0), 1e-300)
+    assert np.abs(a - b).max(initial=0.0) <= rtol * scale, np.abs(a - b).max() / scale
+
+
+def _rich_params(m, B, rng):
+    """Every ``params`` extension, masks with arbitrary weights, and per-fibre law parameters and slack lengths
+    that differ inside a group (as a per-fibre calibration would write them)."""
+    m.f_par[:, 1] += rng.uniform(-0.5, 0.5, m.nf) * (m.f_law == kernel.LAW_SOFTPLUS)
+    m.f_l0[:] *= rng.uniform(0.995, 1.005, m.nf)
+    params = {"k_tension": rng.uniform(0, 2e6, B), "disc_phi_offset": rng.normal(0, 0.01, (B, 3)),
+              "fibre_l0_scale": rng.uniform(0.98, 1.02, (B, m.nf))}
+    return params, rng.uniform(0, 1.5, (B, m.nf)), rng.uniform(0, 2, (B, m.nc))
+
+
+@needs_numba
+@pytest.mark.parametrize("case", ["fsu", "two_bodies_softplus", "two_bodies_rupp"])
+def test_compiled_residual_and_jacobian_equal_the_reference(charset, case):
+    m = (build_fsu(symmetric_fsu(), charset).model if case == "fsu"
+         else _two_level_model(charset, case.rsplit("_", 1)[1]))
+    x, R, loads = perturbed_state(m, 5, 3)
+    params, fm, cm = _rich_params(m, 5, np.random.default_rng(1))
+    Qc, Jc, Qr, Jr = both(m, x, R, loads, fm, cm, params=params)
+    assert m.contact_forces(x, R).max() > 0 and np.abs(Jr).max() > 0
+    assert_same(Qc, Qr)
+    assert_same(Jc, Jr)
+    Qn, Jn = m.evaluate(x, R, loads, fm, cm, jacobian=False, params=params)
+    assert Jn is None
+    assert_same(Qn, Qr)
+
+
+@needs_numba
+@pytest.mark.parametrize("case", ["fsu", "two_bodies_rupp"])
+def test_compiled_jacobian_matches_finite_differences(charset, case):
+    """The compiled path's analytic Jacobian (with every params extension and weighted masks) against central
+    differences of the compiled residual."""
+    m = (build_fsu(symmetric_fsu(), charset).model if case == "fsu" else _two_level_model(charset, "rupp"))
+    x, R, loads = perturbed_state(m, 3, 5)
+    params, fm, cm = _rich_params(m, 3, np.random.default_rng(2))
+    kw = dict(fmask=fm, cmask=cm, params=params)
+    with kernel.use("compiled"):
+        assert kernel.active()
+        _, J = m.evaluate(x, R, loads, **kw)
+        Jfd = fd_jacobian(m, x, R, loads, **kw)
+    assert np.abs(J - Jfd).max() < 1e-8 * np.abs(J).max() + 1e-4
+
+
+@needs_numba
+def test_model_arrays_changed_in_place_are_read_at_every_call(charset):
+    """The calibration writes f_par rows, f_scale, f_l0, k_stiff and a disc's k_shear between calls: the compiled
+    path follows each change (equals the reference after it and differs from the result before it)."""
+    m = build_fsu(symmetric_fsu(), charset).model
+    x, R, loads = perturbed_state(m, 2, 7)
+    T = m.fibre_state(x, R)[2]
+    sel = m.f_group == m.f_group[np.argmax(T.min(0))]          # a group taut in both states
+    assert T[:, sel].min() > 0
+    changes = [lambda: m.f_par.__setitem__((sel, 1), m.f_par[sel, 1] + 2.0),
+               lambda: m.f_scale.__setitem__(sel, m.f_scale[sel] * 3.0),
+               lambda: m.f_l0.__setitem__(slice(None), m.f_l0 * 0.99),
+               lambda: m.k_stiff.__setitem__(slice(None), m.k_stiff * 5.0),
+               lambda: setattr(m.discs[0], "k_shear", m.discs[0].k_shear * 4.0),
+               lambda: m.discs[0].torque.__setitem__("flexion", (1.0, 0.01, 50.0))]
+    for change in changes:
+        before = m.evaluate(x, R, loads)[1]
+        change()
+        Qc, Jc, Qr, Jr = both(m, x, R, loads)
+        assert_same(Qc, Qr)
+        assert_same(Jc, Jr)
+        assert np.abs(Jc - before).max() > 1e-6 * np.abs(before).max()
+
+
+def _rom_tables(fsu, **kw):
+    out = {}
+    for mode in kernel.MODES:
+        with kernel.use(mode):
+            out[mode] = range_of_motion(fsu, **kw)
+    return out["compiled"], out["reference"]
+
+
+@needs_numba
+def test_same_equilibria_on_the_visible_human_unit_all_stages_all_directions(charset):
+    geo = load_geometry("visible_human", levels=["L4-L5"])
+    fsu = build_fsu(geo, charset)
+    c, r = _rom_tables(fsu, moments_nm=(1, 5, 10), directions=tuple(DIRECTIONS), stages=STAGES)
+    assert len(c) == len(STAGES) * len(DIRECTIONS) * 3 and c["converged"].all()
+    assert (c["iterations"] == r["iterations"]).all()
+    assert (c["converged"] == r["converged"]).all() and (c["valid"] == r["valid"]).all()
+    for col in ("rom_deg", "rot_x_deg", "rot_y_deg", "rot_z_deg", "trans_x_mm", "trans_y_mm", "trans_z_mm",
+                "disc_compression_mm"):
+        assert_same(c[col], r[col])
+
+
+@needs_numba
+def test_same_equilibria_on_the_l2s1_model_with_cables():
+    geo = load_geometry("default", levels=list(l2s1.LEVELS))
+    spine = l2s1.build_l2s1(geo, make_charset("calibrated"), l2s1.derive_cables())
+    sols = {}
+    for mode in kernel.MODES:
+        with kernel.use(mode):
+            sols[mode] = l2s1.solve_scenarios(spine, tol_force=1e-7, tol_moment=1e-7)
+    c, r = sols["compiled"], sols["reference"]
+    assert spine.model.nb == 4 and c.converged.all() and (c.converged == r.converged).all()
+    assert_same(c.x, r.x)
+    assert_same(so3.log(c.R), so3.log(r.R))
+
+
+@needs_numba
+def test_same_residual_and_jacobian_in_the_muscle_model(model):
+    """The muscle model (L1-S1, several free bodies) sums SpineModel.evaluate of its levels and cables with its
+    own terms: the same numbers on both paths."""
+    rng = np.random.default_rng(4)
+    x, R = model.reference_state(2)
+    x = x + rng.normal(0, 2e-4, x.shape)
+    R = so3.exp(rng.normal(0, 0.03, (2, model.nb, 3))) @ R
+    F, P = model.load_arrays(["upright_standing", "crate_close"])
+    params = {"activation": rng.uniform(0, 0.2, (2, model.ms.n)), "force_vec": F, "force_pt": P}
+    out = {}
+    for mode in kernel.MODES:
+        with kernel.use(mode):
+            out[mode] = model.evaluate(x, R, params=params, levels=True)
+    for a, b in zip(out["compiled"], out["reference"]):
+        assert_same(a, b)
+
+
+@needs_numba
+def test_reference_mode_runs_the_numpy_path(charset, monkeypatch):
+    m = build_fsu(symmetric_fsu(), charset).model
+    calls = []
+    real = type(m).evaluate_reference
+    monkeypatch.setattr(type(m), "evaluate_reference", lambda self, *a, **k: calls.append(1) or real(self, *a, **k))
+    with kernel.use("reference"):
+        r = solve(m, np.zeros((1, 1, 6)))
+    assert r.converged.all() and calls
+    calls.clear()
+    with kernel.use("compiled"):
+        solve(m, np.zeros((1, 1, 6)))
+    assert not calls
+    with pytest.raises(ValueError, match="reference"):
+        kernel.set_mode("fast")
+
+
+def test_without_numba_the_reference_path_runs_and_says_so(monkeypatch, caplog):
+    monkeypatch.setattr(kernel, "HAVE_NUMBA", False)
+    monkeypatch.setitem(kernel._state, "warned", False)
+    with kernel.use("compiled"):
+        assert not kernel.active()
+        assert not kernel.active()
+    assert caplog.text.count("numba is not installed") == 1
+
+
+@needs_numba
+def test_a_fresh_process_loads_the_compiled_kernels_from_the_cache(charset):
+    """After one use here (compiling or loading), a new interpreter finds both kernels in the on-disk cache and
+    compiles nothing; ``kernel.warm_up`` (what the test session runs before its Snakemake jobs) loads the one
+    signature that the model's calls use."""
+    m = build_fsu(symmetric_fsu(), charset).model
+    with kernel.use("compiled"):
+        solve(m, np.zeros((1, 1, 6)))
+        m.evaluate(*m.reference_state(1))
+    code = ("import numpy as np; from lumbar.mechanics import kernel; from lumbar.mechanics.solve import solve; "
+            "from lumbar.experiments.fsu import build_fsu; from lumbar.geometry.synthetic import symmetric_fsu; "
+            "from lumbar.inputs.characteristics import load_characteristic_set as L; "
+            "m = build_fsu(symmetric_fsu(), L('calibrated')).model; kernel.warm_up(); solve(m, np.zeros((1, 1, 6))); "
+            "m.evaluate(*m.reference_state(1)); "
+            "print([(sum(f.stats.cache_hits.values()), sum(f.stats.cache_misses.values()), len(f.signatures)) "
+            "for f in (kernel.newton_batch, kernel.evaluate_batch)])")
+    r = subprocess.run([sys.executable, "-c", code], env={**os.environ, "LUMBAR_KERNEL": "compiled"},
+                       capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert r.stdout.strip() == "[(1, 0, 1), (1, 0, 1)]", r.stdout     # warm_up has the callers' signature
+
+
+def test_numba_is_pinned_in_environment_conda_env_and_pyproject():
+    """environment.txt and workflow/envs/lumbar.yaml pin the same numba (and its llvmlite; the equality of the two
+    files is test_workflow's), pyproject requires at least that major.minor, and the installed numba is the pin
+    (the other tests of this file skip without numba; this one fails)."""
+    pins = dict(ln.strip().split("==") for ln in (ROOT / "environment.txt").read_text().splitlines()
+                if ln.strip() and not ln.startswith("#"))
+    assert "numba" in pins and "llvmlite" in pins
+    env = (ROOT / "workflow" / "envs" / "lumbar.yaml").read_text()
+    assert f"numba=={pins['numba']}" in env and f"llvmlite=={pins['llvmlite']}" in env
+    deps = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["dependencies"]
+    (low,) = [re.fullmatch(r"numba>=([0-9.]+)", d).group(1) for d in deps if d.startswith("numba")]
+    assert low == ".".join(pins["numba"].split(".")[:2])
+    assert kernel.HAVE_NUMBA, "numba is not installed: pip install -r environment.txt"
+    import numba
+    assert numba.__version__ == pins["numba"]
