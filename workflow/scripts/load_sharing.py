@@ -37,15 +37,15 @@ if snakemake.rule == "load_sharing_curves":
     comp = LS.axial_compression_curve(fsu, forces_n=np.arange(0.0, ls["compression_max_n"] + 1e-9,
                                                               ls["compression_step_n"]), max_iter=s["max_iter"])
     comp.insert(0, "set", set_name)
-    bad = curves[curves["moment_balance_residual_nm"] > 1e-6]
+    bad = curves[curves["converged"] & (curves["moment_balance_residual_nm"] > 1e-6)]
     if len(bad):
         raise RuntimeError(f"set {set_name}: the structures' moments do not balance the applied moment in {len(bad)} "
-                           f"steps (largest residual {bad['moment_balance_residual_nm'].max():.3g} N*m)")
+                           f"converged steps (largest residual {bad['moment_balance_residual_nm'].max():.3g} N*m)")
     n_jump, n_bad = int(curves["jump"].sum()), int((~curves["converged"]).sum())
     log.info("set %s: %d curve steps (%d stages x %d directions), %d jumps >= %g deg, %d not converged; moment "
-             "balance <= %.1e N*m; facet share of a %g N follower load %.3f", set_name, len(curves),
+             "balance of the converged steps <= %.1e N*m; facet share of a %g N follower load %.3f", set_name, len(curves),
              len(ls["stages"]), len(LS.CURVE_DIRECTIONS), n_jump, LS.JUMP_DEG, n_bad,
-             curves["moment_balance_residual_nm"].max(), comp["force_n"].iloc[-1], comp["facet_share"].iloc[-1])
+             curves.loc[curves["converged"], "moment_balance_residual_nm"].max(), comp["force_n"].iloc[-1], comp["facet_share"].iloc[-1])
     write_table_atomic(curves, snakemake.output.curves)
     write_table_atomic(comp, snakemake.output.compression)
 elif snakemake.rule == "load_sharing_summary":

@@ -220,7 +220,7 @@ def moment_rotation_curves(fsu: FSU, moments_nm=None, directions=CURVE_DIRECTION
         else c, kind="stable").reset_index(drop=True)
     bad = ~df["converged"]
     if bad.any():
-        log.warning("moment-rotation curves: %d of %d steps did not converge (flagged converged=False)",
+        log.info("moment-rotation curves: %d of %d steps did not converge (flagged converged=False)",
                     int(bad.sum()), len(df))
     return df
 
