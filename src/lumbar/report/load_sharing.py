@@ -7,7 +7,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .sections import ReportBuilder, _read_csv, fmt, report_section
+import pandas as pd
+
+from .sections import ReportBuilder, fmt, report_section
 
 ADM = "results/calibration/admissibility.csv"
 SUMMARY = "results/load_sharing/load_sharing_summary.csv"
@@ -26,18 +28,18 @@ DIRECTION_NAMES = {"flexion": "flexion", "extension": "extension", "lateral_bend
 def _summary_sentence(b: ReportBuilder) -> str:
     parts = []
     if b.has(ADM):
-        a = _read_csv(b.path(ADM))
+        a = pd.read_csv(b.path(ADM))
         failed = a[~a["passed"].astype(bool)]
         parts.append(f"The calibrated unit passes {len(a) - len(failed)} of {len(a)} admissibility criteria"
                      + (f" (not: {'; '.join(sorted(set(failed['criterion'])))})" if len(failed) else "") + ".")
     if b.has(MULTI):
-        m = _read_csv(b.path(MULTI))
+        m = pd.read_csv(b.path(MULTI))
         jump = m["largest_jump_deg"].max()
         parts.append(f"With its characteristics unchanged, {int(m['within'].sum())} of {len(m)} ROM values of the "
                      f"other levels lie within 25 % of Yamamoto et al. (1989); the largest rotation jump between two "
                      f"load steps at any level is {fmt(jump)} deg.")
     if b.has(CABLES):
-        c = _read_csv(b.path(CABLES))
+        c = pd.read_csv(b.path(CABLES))
         n = c[(c["load_case"] == "neutral") & (c["muscle_setup"] == "all")]
         if len(n):
             r = n.iloc[0]
@@ -59,7 +61,7 @@ def load_sharing_section(b: ReportBuilder):
     b.figure("results/figures/load_sharing_shares.png", "Moment carried by each structure, calibrated unit.")
     b.heading("How the calibrated unit shares the moment")
     if b.has(SUMMARY):
-        s = _read_csv(b.path(SUMMARY))
+        s = pd.read_csv(b.path(SUMMARY))
         cal = s[(s["set"] == "calibrated") & (s["stage"] == "intact")]
         top = cal[cal["moment_nm"] == cal["moment_nm"].max()]
         cols = [c for c in (f"{k}_share" for k in STRUCTURES) if c in top.columns]
@@ -83,7 +85,7 @@ def load_sharing_section(b: ReportBuilder):
     b.csv_table(COMPRESSION, "Pure axial (follower) load: shares of disc and facets per characteristic set", False,
                 columns=None)
     if b.has(CABLES):
-        c = _read_csv(b.path(CABLES))
+        c = pd.read_csv(b.path(CABLES))
         n = c[c["load_case"] == "neutral"]
         b.table_block("Where the wire-cable forces go at L4-L5 (neutral position, calibrated set, L2-S1 model)",
                       ["muscle set-up", "cable total [N]", "disc [N]", "facets [N]", "ligaments [N]", "disc share [%]",
@@ -103,7 +105,7 @@ def load_sharing_section(b: ReportBuilder):
                 columns=["level", "direction", "sim_deg", "measured_deg", "ratio", "within", "largest_jump_deg"])
     b.figure("results/figures/multilevel_rom.png", "Other levels with the L4-L5 characteristics unchanged.")
     if b.has(MULTI_ADM):
-        a = _read_csv(b.path(MULTI_ADM))
+        a = pd.read_csv(b.path(MULTI_ADM))
         per = a.groupby("level", sort=False)["passed"].agg(["sum", "count"])
         failed = a[~a["passed"].astype(bool)]
         b.table_block("Admissibility criteria per level (calibrated characteristics unchanged)",
