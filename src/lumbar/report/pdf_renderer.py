@@ -251,7 +251,7 @@ def story(doc: Doc, builder: ReportBuilder) -> list:
                 w, h = im.size
             scale = min(width / w, 150 * mm / h)
             if b.label == "Fig. R":        # the first page's figure: as large as page 1 allows below the abstract
-                scale = min(width / w, 160 * mm / h)
+                scale = min(width / w, 145 * mm / h)
             out.append(KeepTogether([Spacer(1, 4), Image(str(p), width=w * scale, height=h * scale),
                                      Paragraph(f"<b>{_pdf_text(b.label)}</b> {_pdf_text(b.caption)}", st["cap"]),
                                      Spacer(1, 6)]))
