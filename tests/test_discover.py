@@ -401,7 +401,7 @@ def test_reject_malformed_value_in_in_vivo_table(tmp_path):
     with pytest.raises(D.DiscoveryInputError) as e:
         D.read_measured(p)
     assert str(e.value) == (f"{p}, row 1, column 'idp_in_vivo_mpa': got 'abc', which is not a number; expected a "
-                            "finite number in [0, 100] (in-vivo IDP [MPa])")
+                            "finite number >= 0 (in-vivo IDP [MPa])")
 
 
 IV_HEAD = "activity,idp_sim_mpa,idp_in_vivo_mpa,source,converged\n"
@@ -412,9 +412,9 @@ NA_HEAD = "stage,lordosis_deg,lordosis_sd_deg\n"
     (IV_HEAD + "standing,0.5,0.5,x,yes\n",
      "row 1, column 'converged': got 'yes'; expected one of 'False', 'True', 'false', 'true' (not empty)"),
     (IV_HEAD + "standing,inf,0.5,x,True\n",
-     "row 1, column 'idp_sim_mpa': got non-finite value 'inf'; expected a finite number in [0, 100] (or empty)"),
+     "row 1, column 'idp_sim_mpa': got non-finite value 'inf'; expected a finite number >= 0 (or empty)"),
     (IV_HEAD + "standing,,0.5,x,True\n",
-     "row 1, column 'idp_sim_mpa': empty on a converged row; expected a finite number in [0, 100]"),
+     "row 1, column 'idp_sim_mpa': empty on a converged row; expected a finite number >= 0"),
     (IV_HEAD + "standing,0.5,0.5,x,True\nsitting,0.4,0.5,x\n",
      "row 2, column 'converged': 4 field(s) but the header has 5; expected one value per header column"),
     (NA_HEAD + "wo_cl,0.66,\nwo_va,2.2,0\n",
