@@ -47,8 +47,11 @@ batched forward model per experiment), :mod:`.fit` (:func:`discover`: fit, test,
 from __future__ import annotations
 
 from .benchmark import (
+                        OUT_OF_LIBRARY,
                         TARGETS,
+                        FixtureSpecimens,
                         benchmark_cases,
+                        job_cases,
                         benchmark_magnitudes,
                         benchmark_settings,
                         make_hidden_effect_dataset,
@@ -82,7 +85,7 @@ from .problems import (
 )
 from .report import REAL_DATA_COLUMNS, real_data_summary, run, section_markdown, write_outputs
 
-__all__ = ["TARGETS", "benchmark_cases", "benchmark_magnitudes", "benchmark_settings", "make_hidden_effect_dataset",
+__all__ = ["OUT_OF_LIBRARY", "FixtureSpecimens", "job_cases", "TARGETS", "benchmark_cases", "benchmark_magnitudes", "benchmark_settings", "make_hidden_effect_dataset",
            "run_benchmark_cases", "summarise_benchmark", "main", "INTERNAL_SETTINGS", "DiscoveryInputError",
            "default_settings", "detect_experiment", "discovery_settings", "read_measured", "discover", "D2",
            "Problem", "build_problem", "fsu_variants_from_config", "idp_forward", "idp_model_table", "idp_problem",

@@ -18,7 +18,7 @@ log = logging.getLogger(__name__)
 
 #: discovery settings that are not configuration keys; every other setting and its default is owned by the
 #: ``discovery`` section of the configuration schema (:func:`lumbar.inputs.config.schema_defaults`)
-INTERNAL_SETTINGS = dict(seed=0, fine_candidates=2)
+INTERNAL_SETTINGS = dict(seed=0, fine_candidates=0)
 
 
 class DiscoveryInputError(ValueError):
