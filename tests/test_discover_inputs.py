@@ -149,6 +149,17 @@ def test_range_from_one_specimen_and_sd_from_one_specimen_are_refused(tmp_path):
         D.read_measured(write(tmp_path, df))
 
 
+def test_a_small_rom_at_a_small_moment_is_read_with_a_warning(tmp_path):
+    """One noisy ROM of 0 deg at 2.5 N*m (possible: a stiff direction, noise, values clipped at 0) is flagged, not
+    refused; the table in radians (every value low) is refused above."""
+    df = rom_base()
+    df.loc[7, ["rom_mean_deg", "rom_min_deg"]] = 0.0
+    exp, t = D.read_measured(write(tmp_path, df))
+    assert t["rom_mean_deg"].iat[7] == 0.0
+    assert any("row 8, column 'rom_mean_deg'" in w and "below the plausible range" in w
+               for w in t.attrs["input_warnings"])
+
+
 def test_many_specimens_are_read_with_a_warning(tmp_path):
     df = idp_base()
     df.loc[5, "n_specimens"] = 700
@@ -311,12 +322,14 @@ def _correct_reading(kind, text, df) -> list[str]:
     key = list(spec.unique.columns)
     if df.duplicated(key).any():
         problems.append("repeated key accepted")
+    warns = df.attrs.get("input_warnings", [])
     for rng in T.plausible_ranges(kind, df):
         if rng.column in df:
             v = df[rng.column].to_numpy(float)
             out = np.isfinite(v) & ((v < np.nan_to_num(rng.lo, nan=-np.inf)) | (v > np.nan_to_num(rng.hi, nan=np.inf)))
-            if out.any():
-                problems.append(f"implausible {rng.column} accepted: {v[out]}")
+            for i in np.flatnonzero(out):         # accepted only with a warning naming row and column
+                if not any(f"row {i + 1}, column '{rng.column}'" in w for w in warns):
+                    problems.append(f"implausible {rng.column} = {v[i]} (row {i + 1}) accepted without a warning")
     if "n_specimens" in df and (df["n_specimens"] > T.PLAUSIBILITY_FACTOR * 10).any() and \
             not any("n_specimens" in w for w in df.attrs.get("input_warnings", [])):
         problems.append("a count beyond the sourced studies without a warning")

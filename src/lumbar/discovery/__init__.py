@@ -83,11 +83,11 @@ from .problems import (
                         rom_problem,
                         solve_idp_model,
 )
-from .report import REAL_DATA_COLUMNS, real_data_summary, run, section_markdown, write_outputs
+from .report import REAL_DATA_COLUMNS, benchmark_paragraph, real_data_summary, run, section_markdown, write_outputs
 
 __all__ = ["OUT_OF_LIBRARY", "FixtureSpecimens", "job_cases", "TARGETS", "benchmark_cases", "benchmark_magnitudes", "benchmark_settings", "make_hidden_effect_dataset",
            "run_benchmark_cases", "summarise_benchmark", "main", "INTERNAL_SETTINGS", "DiscoveryInputError",
            "default_settings", "detect_experiment", "discovery_settings", "read_measured", "discover", "D2",
            "Problem", "build_problem", "fsu_variants_from_config", "idp_forward", "idp_model_table", "idp_problem",
            "in_vivo_problem", "neutral_problem", "read_segment_loads", "resolve_charset", "rom_problem",
-           "solve_idp_model", "REAL_DATA_COLUMNS", "real_data_summary", "run", "section_markdown", "write_outputs"]
+           "solve_idp_model", "benchmark_paragraph", "REAL_DATA_COLUMNS", "real_data_summary", "run", "section_markdown", "write_outputs"]

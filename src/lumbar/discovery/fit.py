@@ -342,7 +342,8 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
     p_nuis, p_fit = {}, {}
     if not too_few and B > 0 and nv >= 2:
         if bank is not None:
-            Yb, Sb = null_datasets(problem, bank, null_model, B, rng)
+            # the reference path when the problem carries new specimens for every null table (tests)
+            Yb, Sb = null_datasets(problem, bank, null_model, B, rng, fresh=problem.meta.get("null_fresh"))
         else:
             Yb, Sb = _resample(problem, r, np.sqrt(c_hat0), B, rng)
         boot = _statistics(curves, nuis, r, Yb, 1.0 / Sb ** 2, valid)

@@ -92,7 +92,7 @@ def _candidates(s, experiment):
     return names
 
 
-def rom_problem(df, config, solver_kw=None) -> Problem:
+def rom_problem(df, config, solver_kw=None, bank=None) -> Problem:
     s = discovery_settings(config)
     fv = fsu_variants_from_config(config)
     keys = df[["stage", "direction", "moment_nm"]].reset_index(drop=True)
@@ -122,12 +122,18 @@ def rom_problem(df, config, solver_kw=None) -> Problem:
                    _grouped_folds(cells, s["cv_folds"]),
                    meta={"n_per_row": n, "has_range": has_range, "spec_sd": spec_sd,
                          "sigma_floor": float(s["sigma_floor_deg"]), "groups": keys["direction"].to_numpy(str),
-                         "bank": _bank("stepwise_rom", keys, config, s),
+                         "bank": _bank("stepwise_rom", keys, config, s, bank),
                          "design_keys": design, "design_forward": design_forward})
 
 
-def _bank(experiment, keys, config, s):
-    """The null bank of the problem (``discovery.null_specimens`` specimens), None when that is 0."""
+def _bank(experiment, keys, config, s, bank=None):
+    """The null bank of the problem: ``bank`` (a :class:`lumbar.discovery.specimens.SpecimenBank` covering the
+    table's scenarios) when given, else ``discovery.null_specimens`` virtual specimens; None when that is 0."""
+    if bank is not None:
+        a = bank.align(keys)
+        if a is None:
+            raise ValueError(f"the given specimen bank does not cover every scenario of the {experiment} table")
+        return a
     K = int(s["null_specimens"])
     return bank_for(experiment, keys, config, K) if K > 0 else None
 
@@ -194,7 +200,7 @@ def solve_idp_model(config):
     return sim
 
 
-def idp_problem(df, config, model=None) -> Problem:
+def idp_problem(df, config, model=None, bank=None) -> Problem:
     s = discovery_settings(config)
     model = idp_model_table(config) if model is None else model
     d = df.reset_index(drop=True).merge(model, on=["muscle_setup", "load_case"], how="left", validate="one_to_one")
@@ -223,7 +229,7 @@ def idp_problem(df, config, model=None) -> Problem:
                    _grouped_folds(list(d["muscle_setup"]), s["cv_folds"]),
                    meta={"idp_per_newton_pa": per_n, "n_per_row": n.astype(int), "has_range": n > 1,
                          "spec_sd": np.where(n > 1, d["idp_sd_mpa"].to_numpy(float), np.nan),
-                         "sigma_floor": float(s["sigma_floor_mpa"]), "bank": _bank("idp_invitro", keys, config, s),
+                         "sigma_floor": float(s["sigma_floor_mpa"]), "bank": _bank("idp_invitro", keys, config, s, bank),
                          "design_keys": mk[["muscle_setup", "load_case"]], "design_forward": design_forward})
 
 
@@ -290,11 +296,11 @@ def in_vivo_problem(df, config, segment_loads=None) -> Problem:
 
 def build_problem(experiment, df, config, **kw) -> Problem:
     if experiment == "stepwise_rom":
-        return rom_problem(df, config, kw.get("solver_kw"))
+        return rom_problem(df, config, kw.get("solver_kw"), kw.get("bank"))
     if experiment == "neutral_angle":
         return neutral_problem(df, config)
     if experiment == "idp_invitro":
-        return idp_problem(df, config, kw.get("idp_model"))
+        return idp_problem(df, config, kw.get("idp_model"), kw.get("bank"))
     if experiment == "in_vivo":
         return in_vivo_problem(df, config, kw.get("segment_loads"))
     raise ValueError(f"unknown experiment {experiment!r}")

@@ -19,12 +19,18 @@ measurement noise, summarised as the table is":
   keep the table's sigma). The bank mean r is itself uncertain (K specimens): the mean's deviation from r is scaled
   by ``sqrt((K + n) / (K - n))``, which gives it the variance sigma^2 (1/n + 1/K) that a table of n new specimens has
   about r (for draws without replacement from K; with replacement, when K < n, ``sqrt((1 + n/K) K / (K - 1))``).
+  The bank's between-specimen variance is uncertain too (K - 1 degrees of freedom): each null table's specimen
+  deviations are scaled by its own draw of sqrt((K - 1) / chi2(K - 1)), so the null integrates over the variances a
+  bank of K is consistent with (a predictive draw; about 1.02 on average for K = 48, wider tails).
   This is the fast path; the reference path draws every null table from new specimens (``fresh=``: a second bank of
   at least B n specimens, partitioned), and ``tests/test_discover_null.py`` checks that both give the same p-values;
-* :func:`fit_null_noise` estimates ``lam``, ``a2`` and ``b2`` from the table's own spread (min/max or SD, per
-  specimen) against the bank's: a table that varies less than the virtual specimens shrinks their deviations
-  (``lam`` = sqrt of the mean ratio of the variances, no noise); one that varies more keeps ``lam`` = 1 and the
-  excess variance is measurement noise, additive plus multiplicative, fitted by non-negative least squares.
+* :func:`fit_null_noise` estimates ``a2`` and ``b2`` from the table's own spread (min/max or SD, per specimen)
+  against the bank's: where the table varies more than the virtual specimens, the excess variance is measurement
+  noise, additive plus multiplicative, fitted by non-negative least squares. The variation scale ``lam`` stays 1:
+  the rows of a table share its n specimens, so its spread says little more about the population's than n - 1
+  values would (a table of similar specimens would shrink the null and make it anti-conservative); a table that
+  varies less than the virtual specimens is reported (``table_to_bank_variance_ratio`` < 1) and tested against the
+  wider null, which errs on the side of naming nothing.
 """
 from __future__ import annotations
 
@@ -304,9 +310,15 @@ def fit_null_noise(spec_sd, bank: SpecimenBank, valid) -> NullModel:
     s2 = spec_sd[ok] ** 2
     ratio = float(np.mean(s2 / v[ok]))
     if ratio < 1.0:
-        return NullModel(lam=float(np.sqrt(ratio)), spread_ratio=ratio, rows_with_spread=int(ok.sum()))
-    A = np.column_stack([np.ones(ok.sum()), r[ok] ** 2]) / s2[:, None]
-    coef, _ = nnls(A, (s2 - v[ok]) / s2)
+        return NullModel(spread_ratio=ratio, rows_with_spread=int(ok.sum()))
+    # rows weighted by their expected variance (bank + mean excess), not by their own noisy s^2: a row whose few
+    # specimens happen to be alike must not pull the fit below zero
+    expect = v[ok] + max(float(np.mean(s2 - v[ok])), 0.0)
+    A = np.column_stack([np.ones(ok.sum()), r[ok] ** 2]) / expect[:, None]
+    norm = np.linalg.norm(A, axis=0)
+    norm = np.where(norm > 0, norm, 1.0)
+    coef, _ = nnls(A / norm, (s2 - v[ok]) / expect)                        # columns scaled for nnls
+    coef = coef / norm
     return NullModel(1.0, float(coef[0]), float(coef[1]), ratio, int(ok.sum()))
 
 
@@ -336,6 +348,8 @@ def null_datasets(problem, bank: SpecimenBank, model: NullModel, B: int, rng: np
         A = bank.values[idx]
     use = (np.arange(N)[:, None] < npr[None, :])[None]
     S = model.lam * (A - r)
+    if fresh is None and bank.K > 3:
+        S = S * np.sqrt((bank.K - 1) / rng.chisquare(bank.K - 1, B))[:, None, None]
     fin = np.isfinite(S) & use
     E = np.sqrt(model.a2 + model.b2 * np.where(np.isfinite(r), r, 0.0) ** 2) * rng.standard_normal((B, N, n))
     V = r + S + E

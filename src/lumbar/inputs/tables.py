@@ -370,9 +370,11 @@ def check_measured(kind: str, df: pd.DataFrame, path) -> list[str]:
     """Refuse a measured table whose values lie outside the physiological ranges of :func:`plausible_ranges`, or
     whose spread contradicts its own mean and specimen count; name the unit the values look like where one fits.
 
-    Raises :class:`lumbar.inputs.io.TableError` (file, 1-based data row, column, expected form); returns warnings
-    for what is unusual but possible (more specimens than F x the largest sourced study; an IDP table whose
-    largest value stays below the sourced range with no unit that explains it)."""
+    Raises :class:`lumbar.inputs.io.TableError` (file, 1-based data row, column, expected form) for a value above
+    its range, and for a column mostly below it when a unit confusion explains that; returns warnings for what is
+    unusual but possible (a few values below the range, e.g. a small noisy ROM at a small moment; more specimens
+    than F x the largest sourced study; a table whose largest value stays below the sourced range with no unit
+    that explains it), each naming file, row and column."""
     warnings_: list[str] = []
     for rng in plausible_ranges(kind, df):
         if rng.column not in df:
@@ -380,19 +382,29 @@ def check_measured(kind: str, df: pd.DataFrame, path) -> list[str]:
         v = df[rng.column].to_numpy(float)
         lo = np.where(np.isfinite(rng.lo), rng.lo, -np.inf)
         hi = np.where(np.isfinite(rng.hi), rng.hi, np.inf)
-        bad = np.isfinite(v) & ((v < lo) | (v > hi))
-        small = rng.table_min is not None and np.isfinite(v).any() and np.nanmax(np.abs(v)) < rng.table_min
-        if not (bad.any() or small):
+        fin = np.isfinite(v)
+        above, below = fin & (v > hi), fin & (v < lo)
+        small = rng.table_min is not None and fin.any() and np.nanmax(np.abs(v)) < rng.table_min
+        if not (above.any() or below.any() or small):
             continue
         hint = _unit_hint(v, lo, hi, rng.table_min, rng.unit)
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
+        # refused: a value above the range, or most of the column below it with a unit that explains it; a few
+        # values below it (a small ROM at a small moment, measured with noise) are possible: flagged
+        refuse = above if above.any() else below if (hint and below.sum() >= 0.5 * fin.sum()) else None
+        for i in (np.flatnonzero(below) if refuse is None else []):
+            at = f" at {df['moment_nm'].iat[i]:g} N*m" if "moment_nm" in df else ""
+            warnings_.append(f"{path}, row {i + 1}, column '{rng.column}': {v[i]:g} {rng.unit}{at} is below the "
+                             f"plausible range [{lo[i]:.3g}, {hi[i]:.3g}] {rng.unit} ({rng.derivation}); read as given")
+        if refuse is not None:
+            i = int(np.flatnonzero(refuse)[0])
             at = f" at {df['moment_nm'].iat[i]:g} N*m" if "moment_nm" in df else ""
             where = (f"[{lo[i]:.3g}, {hi[i]:.3g}] {rng.unit}" if np.isfinite(lo[i]) else
                      f"at most {hi[i]:.3g} {rng.unit}")
             raise TableError(path, f"got {v[i]:g} {rng.unit}{at}, outside the plausible range {where}"
                              + (f"; {hint}" if hint else ""), row=i + 1,
                              column=rng.column, expected=f"a value within the plausible range ({rng.derivation})")
+        if not small:
+            continue
         i = int(np.nanargmax(np.abs(v)))
         text = (f"the largest value of the column is {v[i]:g} {rng.unit}, below {rng.table_min:.3g} {rng.unit}, "
                 f"the smallest plausible largest value")
