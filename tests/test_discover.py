@@ -285,7 +285,7 @@ def test_benchmark_cases_seeds_magnitudes_and_nulls():
 
 def test_benchmark_summary_false_positive_rate_interval_and_power():
     bench = pd.DataFrame({"case": list("abcdefghi"), "experiment": "stepwise_rom",
-                          "category": ["library"] * 4 + ["null"] * 2 + ["out_of_library"] * 3,
+                          "category": ["library"] * 4 + ["no_effect"] * 2 + ["out_of_library"] * 3,
                           "hidden_effect": ["itl", "itl", "itl", "itl", "none", "none", "disc_scale", "disc_scale",
                                             "disc_scale"],
                           "magnitude_label": ["near0.25", "near0.25", "m1", "m1", "none", "none", "x0.7", "x0.7",

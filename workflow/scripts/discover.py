@@ -102,8 +102,8 @@ elif rule == "discovery_benchmark":
     write_json_atomic(summary, snakemake.output.summary, allow_nan=True)
     write_text_atomic("## Discrepancy benchmark\n\n" + summary["paragraph"] + "\n", snakemake.output.paragraph)
     plot_benchmark(bench, summary, snakemake.output.figure)
-    log.info("benchmark: %d nulls, false-positive rate %.3f (95%% CI %s); library at m1/m2 named %s; out of library "
-             "unnamed %s; null p-values KS p %.3g; all targets met: %s", summary["n_null"],
+    log.info("benchmark: %d nulls, false-positive rate %s (95%% CI %s); library at m1/m2 named %s; out of library "
+             "unnamed %s; null p-values KS p %s; all targets met: %s", summary["n_null"],
              summary["false_positive_rate"], summary["false_positive_rate_95ci"],
              summary["library_at_benchmark_magnitudes"]["rate"], summary["out_of_library_unnamed"]["rate"],
              summary["null_p_values"]["ks_p"], summary["all_pass"])

@@ -9,7 +9,7 @@ jitter, ligament, disc and facet spread) of the nominal model, drawn without rep
 are drawn per fixture from the configured ranges, summarised in the experiment's schema (ROM mean, min, max;
 IDP mean, SD). Three kinds of case:
 
-* ``null``: no effect; the correct answer is "nothing named";
+* ``no_effect`` (the null tables): no effect; the correct answer is "nothing named";
 * ``library``: an effect of :mod:`lumbar.experiments.effects` at its benchmark magnitudes (``m1``, ``m2``) and near
   threshold (``near<f>`` = f x the smallest); correct = that effect named. ROM: solved in every specimen
   (``lumbar.experiments.virtual_experiment.rom_specimens``); IDP: applied to every specimen's IDP with its own disc
@@ -87,7 +87,8 @@ def _ool_label(name, m):
 
 
 def benchmark_cases(config) -> pd.DataFrame:
-    """Every benchmark case: (case, experiment, category, hidden_effect, magnitude_label, magnitude, seed);
+    """Every benchmark case: (case, experiment, category (no_effect | library | out_of_library; "null" would read
+    as a missing value from a CSV), hidden_effect, magnitude_label, magnitude, seed);
     ``n_seeds`` per library effect and magnitude, ``n_null`` null tables alternating between the experiments,
     ``n_ool_seeds`` per out-of-library cause and magnitude (generator virtual_specimens only)."""
     b = benchmark_settings(config)
@@ -103,7 +104,7 @@ def benchmark_cases(config) -> pd.DataFrame:
                     rows.append((f"{name}_{x}_{lab}_s{k + 1}", x, "library", name, lab, mag))
     for k in range(int(b["n_null"])):
         x = exps[k % len(exps)]
-        rows.append((f"null_{x}_{k + 1}", x, "null", "none", "none", 0.0))
+        rows.append((f"null_{x}_{k + 1}", x, "no_effect", "none", "none", 0.0))
     if b["generator"] == "virtual_specimens":
         for name in b["out_of_library"] or []:
             o = OUT_OF_LIBRARY[name]
@@ -123,7 +124,7 @@ def benchmark_cases(config) -> pd.DataFrame:
 def job_cases(cases: pd.DataFrame, job: str) -> pd.DataFrame:
     """The cases of one benchmark job: a library effect's name, "null" or "out_of_library"."""
     if job == "null":
-        return cases[cases["category"] == "null"]
+        return cases[cases["category"] == "no_effect"]
     if job == "out_of_library":
         return cases[cases["category"] == "out_of_library"]
     return cases[(cases["category"] == "library") & (cases["hidden_effect"] == job)]
@@ -247,7 +248,7 @@ def make_hidden_effect_dataset(config, experiment, effect, magnitude, seed, idp_
     unit = fx.EFFECTS[effect].unit if effect in fx.EFFECTS else ""
     if specimens is not None or b["generator"] == "virtual_specimens":
         if case is None:
-            cat = "null" if effect == "none" else "library" if effect in fx.EFFECTS else "out_of_library"
+            cat = "no_effect" if effect == "none" else "library" if effect in fx.EFFECTS else "out_of_library"
             case = pd.Series({"experiment": experiment, "category": cat, "hidden_effect": effect,
                               "magnitude": magnitude, "magnitude_label": str(magnitude)})
             case = next(pd.DataFrame([case]).itertuples(index=False))
@@ -311,7 +312,7 @@ def run_benchmark_cases(config, cases: pd.DataFrame, fixture_dir, out_dir=None, 
     s = discovery_settings(config)
     b = benchmark_settings(config)
     if "category" not in cases:
-        cases = cases.assign(category=np.where(cases["hidden_effect"] == "none", "null", "library"))
+        cases = cases.assign(category=np.where(cases["hidden_effect"] == "none", "no_effect", "library"))
     need_idp = (cases["experiment"] == "idp_invitro").any()
     if need_idp and idp_model is None:
         idp_model = idp_model_table(config)
@@ -382,9 +383,9 @@ def summarise_benchmark(bench: pd.DataFrame, generator="virtual_specimens") -> d
     m1, m2), out-of-library causes left unnamed (each with a 95 % Clopper-Pearson interval), the power curve per
     effect and magnitude, the uniformity of the null p-values (KS), and the targets (:data:`TARGETS`)."""
     if "category" not in bench:
-        bench = bench.assign(category=np.where(bench["hidden_effect"] == "none", "null", "library"))
+        bench = bench.assign(category=np.where(bench["hidden_effect"] == "none", "no_effect", "library"))
     lib = bench[bench["category"] == "library"]
-    nul = bench[bench["category"] == "null"]
+    nul = bench[bench["category"] == "no_effect"]
     ool = bench[bench["category"] == "out_of_library"]
     k_fp = int((nul["named_effect"] != "none").sum())
     at_mag = lib[lib["magnitude_label"].astype(str).str.match(r"^m\d+$")] if "magnitude_label" in lib else lib

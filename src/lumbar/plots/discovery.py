@@ -145,13 +145,13 @@ def plot_benchmark(bench: pd.DataFrame, summary: dict, path):
     null p-values against the uniform distribution."""
     fig, axes = subplots(1, 3, figsize=(16, 5.0), constrained_layout=True)
     ax = axes[0]
-    cats = ["null", "library", "out_of_library"]
+    cats = ["no_effect", "library", "out_of_library"]
     kinds = ["named (correct)", "named (wrong)", "nuisance", "unexplained", "nothing named"]
     colors = ["tab:green", "tab:red", "tab:blue", "tab:orange", "0.7"]
     dec = bench.get("decision", pd.Series([""] * len(bench))).astype(str)
     counts = np.zeros((len(cats), len(kinds)))
     for i, cat in enumerate(cats):
-        g = bench["category"] == cat if "category" in bench else bench["hidden_effect"].eq("none") == (cat == "null")
+        g = bench["category"] == cat if "category" in bench else bench["hidden_effect"].eq("none") == (cat == "no_effect")
         named = bench["named_effect"] != "none"
         ok = bench["correct"].astype(bool)
         counts[i] = [(g & named & ok).sum(), (g & named & ~ok).sum(), (g & ~named & dec.str.startswith("nuisance")).sum(),
@@ -185,7 +185,7 @@ def plot_benchmark(bench: pd.DataFrame, summary: dict, path):
     ax.legend(fontsize=6)
     ax.set_title("power curve per effect (95 % Clopper-Pearson intervals)", fontsize=9)
     ax = axes[2]
-    nul = bench[(bench["category"] == "null") if "category" in bench else bench["hidden_effect"].eq("none")]
+    nul = bench[(bench["category"] == "no_effect") if "category" in bench else bench["hidden_effect"].eq("none")]
     pv = np.sort(nul["p_value"].to_numpy(float))
     pv = pv[np.isfinite(pv)]
     if len(pv):
