@@ -12,7 +12,7 @@ from ..experiments import effects as fx
 from .detect import default_settings
 from .nuisance import families, multiple_correlation
 from .problems import Problem
-from .specimens import D2, fit_null_noise, null_datasets
+from .specimens import D2, Metric, fit_null_noise, null_datasets, specimen_metric
 
 
 # ------------------------------------------------------------------ fitting and scoring
@@ -138,30 +138,41 @@ def _resample(problem, center, scale, B, rng):
     return Y, SIG
 
 
-def _statistics(curves, nuis, r, Y, W, valid):
-    """Every model's fit to the tables Y (B, n) with weights W: the specimen-mean prediction r ("none": chi2_r and
-    the overdispersion c0 = max(1, chi2_r / (n - 1))), each candidate (best grid value: chi2, theta, LR statistic
-    T_c = (chi2_r - chi2_c) / c0) and each nuisance family (chi2, parameters, T)."""
-    nv = int(valid.sum())
-    chi_r = _chi2_surface(r[None, :], Y, W, valid)[0]
-    c0 = np.maximum(1.0, chi_r / max(nv - 1, 1))
+def _statistics(curves_w, nuis_w, r_w, Y_w, normalise=True):
+    """Every model's fit to the tables Y_w (B, p), all in the metric's space (:class:`lumbar.discovery.specimens.
+    Metric`: the chi-square is a plain sum of squares there): the null prediction r ("none": chi2_r and the
+    overdispersion c0 = max(1, chi2_r / (p - 1)), 1 without ``normalise``), each candidate (best value of its dense
+    curve: chi2, theta, LR statistic T_c = (chi2_r - chi2_c) / c0) and each nuisance family (least-squares
+    parameters, chi2, T)."""
+    nv = Y_w.shape[1]
+    chi_r = ((Y_w - r_w) ** 2).sum(1)
+    c0 = np.maximum(1.0, chi_r / max(nv - 1, 1)) if normalise else np.ones_like(chi_r)
     out = {"chi_r": chi_r, "c0": c0, "chi_c": {}, "th_c": {}, "T_c": {}, "chi_n": {}, "par_n": {}, "T_n": {}}
-    for c, (td, D) in curves.items():
-        chi = _chi2_surface(D, Y, W, valid)
+    ones, allv = np.ones_like(Y_w), np.ones(nv, bool)
+    for c, (td, D) in curves_w.items():
+        chi = _chi2_surface(D, Y_w, ones, allv)
         k = chi.argmin(0)
         out["chi_c"][c] = chi[k, np.arange(chi.shape[1])]
         out["th_c"][c] = td[k]
         out["T_c"][c] = np.maximum(chi_r - out["chi_c"][c], 0.0) / c0
-    for nu in nuis:
-        p, chi = nu.fit(r, Y, W, valid)
-        out["par_n"][nu.name], out["chi_n"][nu.name] = p, chi
-        out["T_n"][nu.name] = np.maximum(chi_r - chi, 0.0) / c0
+    for name, (nu, X_w) in nuis_w.items():
+        target = Y_w if nu.kind == "scale" else Y_w - r_w
+        p, *_ = np.linalg.lstsq(X_w, target.T, rcond=None)
+        chi = ((target.T - X_w @ p) ** 2).sum(0)
+        out["par_n"][name], out["chi_n"][name] = p.T, chi
+        out["T_n"][name] = np.maximum(chi_r - chi, 0.0) / c0
     return out
 
 
 def _p(null, obs):
     """Bootstrap p-value (1 + #{null >= obs}) / (B + 1)."""
     return float((1 + np.sum(null >= obs - 1e-12)) / (len(null) + 1))
+
+
+def _ref_value(c):
+    """A candidate's reference magnitude (its first benchmark magnitude, or half its upper bound)."""
+    e = fx.EFFECTS[c]
+    return float(np.clip(e.magnitudes[0] if e.magnitudes else 0.5 * e.bounds[1], *e.bounds))
 
 
 def _sensitivities(curves, cands, sig, valid):
@@ -275,6 +286,10 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
     r = np.where(np.isfinite(bank.mean), bank.mean, np.nan) if bank is not None else base.copy()
     shift = r - base
     valid = np.isfinite(base) & np.isfinite(y) & np.isfinite(sig) & np.isfinite(r)
+    # the null model's name among the explanations, and what the null tables are made of
+    none_label = "specimen-mean shift" if bank is not None else "nominal model"
+    null_text = ("the nominal model with specimen variation" if bank is not None else
+                 "the nominal model and the measurement noise")
     yr = y - np.where(valid, shift, 0.0)           # the data relative to the shift: the candidates' grids fit it
     z0 = (base - y) / sig
     chi_nominal = float((z0[valid] ** 2).sum())
@@ -307,11 +322,47 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
             est[c], _ = _spline_fit(th, P, yr, w, lo, hi, valid)
     # ---- statistics of every model on the data (dense spline curves on top of the specimen-mean shift)
     curves = {c: (lambda td, D: (td, D + shift))(*_dense(*curves_raw[c], *fx.EFFECTS[c].bounds)) for c in cands}
-    nuis = families(problem, valid)
-    obs = _statistics(curves, nuis, r, y[None, :], w[None, :], valid)
+    too_few = int(valid.sum()) < int(s["min_rows"])
+    nuis = families(problem, valid) if not too_few else []
+    # the metric of the tests: the table's standard errors, decorrelated by the specimens' correlation (the bank's,
+    # shrunk, with the fitted noise); independent rows without a bank
+    null_model = None
+    if bank is not None:
+        null_model = fit_null_noise(problem.meta.get("spec_sd", np.full(len(y), np.nan)), bank, valid)
+    metric = (specimen_metric(bank, null_model, sig, valid) if bank is not None and valid.sum() >= 3
+              else Metric(valid, sig))
+    r0 = np.where(valid, r, 0.0)
+    curves_w = {c: (td, metric(np.where(np.isfinite(D), D, r0 + 10.0 * sig))) for c, (td, D) in curves.items()}
+    r_w = metric(r0)[0]
+    nuis_w = {nu.name: (nu, metric(nu.columns(r0).T).T) for nu in nuis}
+
+    def stats(Y, cands_=None, nuis_=None):
+        cw_ = curves_w if cands_ is None else {c: curves_w[c] for c in cands_}
+        nw_ = nuis_w if nuis_ is None else {n: nuis_w[n] for n in nuis_}
+        return _statistics(cw_, nw_, r_w, metric(np.where(np.isfinite(Y), Y, r0)), normalise=bank is None)
+
+    obs = stats(y[None, :])
     T_obs = {c: float(v[0]) for c, v in obs["T_c"].items()}
     cand_rank = sorted(cands, key=lambda c: -T_obs[c])
     best = cand_rank[0] if cand_rank else None
+    # the estimates in the metric of the tests: the spline's chi-square minimised around the dense grid's optimum
+    y_w = metric(np.where(np.isfinite(y), y, r0))[0]
+    for c in cands:
+        th, P = curves_raw[c]
+        ok = np.isfinite(P).all(0)
+        if ok.all() and len(th) >= 2:
+            spline = CubicSpline(th, P, axis=0)
+            lo, hi = fx.EFFECTS[c].bounds
+            t0 = float(obs["th_c"][c][0])
+            j = int(np.searchsorted(th, t0))
+            a, b = th[max(j - 1, 0)], th[min(j + 1, len(th) - 1)]
+
+            def f(t, spline=spline):
+                return float(((metric(spline(t) + shift) - y_w) ** 2).sum())
+
+            res = minimize_scalar(f, bounds=(max(a, lo), min(b, hi)), method="bounded",
+                                  options={"xatol": 1e-6 * (hi - lo)})
+            est[c] = float(res.x) if res.fun <= f(t0) else t0
     # batch 3: the exact model at the best candidate's estimate (its refit), on top of the specimen-mean shift; the
     # other candidates' refits are their splines at their estimates
     exact = {}
@@ -335,10 +386,7 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
     B = int(s["n_bootstrap"])
     c_hat0 = float(obs["c0"][0])
     rng = np.random.default_rng([int(s.get("seed", 0)), 15])
-    null_model = None
-    if bank is not None:
-        null_model = fit_null_noise(problem.meta.get("spec_sd", np.full(len(y), np.nan)), bank, valid)
-    p_adj, p_raw, Tmax_null, boot, Yb, Sb = {}, {}, np.array([]), None, None, None
+    p_adj, p_raw, Tmax_null, boot, Yb, Sb, Yf, Sf = {}, {}, np.array([]), None, None, None, None, None
     p_nuis, p_fit = {}, {}
     if not too_few and B > 0 and nv >= 2:
         if bank is not None:
@@ -346,7 +394,12 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
             Yb, Sb = null_datasets(problem, bank, null_model, B, rng, fresh=problem.meta.get("null_fresh"))
         else:
             Yb, Sb = _resample(problem, r, np.sqrt(c_hat0), B, rng)
-        boot = _statistics(curves, nuis, r, Yb, 1.0 / Sb ** 2, valid)
+        # the goodness-of-fit (adequacy) tests take the null at face value: without specimens, the table's stated
+        # noise (the LR tests above use it x sqrt(c), robust to a table noisier than it says); with specimens the
+        # same null tables
+        Yf, Sf = (Yb, Sb) if bank is not None else _resample(problem, r, 1.0, B, rng)
+        fit0 = stats(Yf, cands_=[], nuis_=[]) if bank is None else None
+        boot = stats(Yb)
         if cands:
             Tmax_null = np.max(np.vstack([boot["T_c"][c] for c in cands]), axis=0)
             for c in cands:
@@ -355,10 +408,12 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
         if nuis:
             Tn_max = np.max(np.vstack([boot["T_n"][nu.name] for nu in nuis]), axis=0)
             p_nuis = {nu.name: _p(Tn_max, float(obs["T_n"][nu.name][0])) for nu in nuis}
-        p_fit["specimen_mean"] = _p(boot["chi_r"], float(obs["chi_r"][0]))
+        p_fit["specimen_mean"] = _p((boot if fit0 is None else fit0)["chi_r"], float(obs["chi_r"][0]))
     # ---- nuisance models: refits, the best one (AIC with the overdispersion of "none"), equivalence with candidates
     S = _sensitivities(curves, cands, sig, valid)
-    aic = {"specimen-mean shift": float(obs["chi_r"][0]) / c_hat0}
+    S_w = {c: (lambda td, D: D[np.abs(td - _ref_value(c)).argmin()] - D[np.abs(td).argmin()])(*curves_w[c])
+           for c in cands}
+    aic = {none_label: float(obs["chi_r"][0]) / c_hat0}
     nres = {}
     for nu in nuis:
         par = obs["par_n"][nu.name][0]
@@ -370,12 +425,13 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
                          "aic": aic[nu.name], "lr_statistic": float(obs["T_n"][nu.name][0]),
                          "p_value": p_nuis.get(nu.name), "gap": float(np.sqrt(np.mean(zn[valid] ** 2))) if nv else None,
                          "equivalent_candidates": []}
-    equiv = {c: [nu.name for nu in nuis if (lambda m: np.isfinite(m) and m >= float(s["max_correlation"]))(
-        multiple_correlation(S[c], nu.basis(r, sig, valid)))] for c in cands}
+    ncorr = {c: {nu.name: multiple_correlation(S_w[c], nuis_w[nu.name][1]) for nu in nuis} for c in cands}
+    equiv = {c: [n for n, m in ncorr[c].items() if np.isfinite(m) and m >= float(s["max_correlation"])]
+             for c in cands}
     for c, names in equiv.items():
         for nm in names:
             nres[nm]["equivalent_candidates"].append(c)
-    best_nuisance = min(aic, key=lambda k: (aic[k], k != "specimen-mean shift"))
+    best_nuisance = min(aic, key=lambda k: (aic[k], k != none_label))
     # ---- ranking (by the LR statistic), confidence among the candidates, diagnostics
     chat = max(1.0, min(chi.values()) / max(nv - 1, 1))
     score = {m: _qaicc(v, 0 if m == "none" else 1, nv, chat) for m, v in chi.items()}
@@ -385,6 +441,8 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
     cw = {c: float(v / tot) for c, v in cw.items()} if tot > 0 else {}
     cv = _cross_validate(problem, cands, grids, coarse, fine_theta, fine, exact, yr, w, sig, valid, gap_before) \
         if nv >= 3 else {"none": gap_before}
+    zr_ = (r - y) / sig
+    gap_null = float(np.sqrt(np.mean(zr_[valid] ** 2))) if nv else float("nan")    # against the null prediction
     gap_after_best = float("nan")
     if best is not None and best in exact:
         zb = (exact[best] - y) / sig
@@ -395,29 +453,29 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
     fam = {nu.name: nu for nu in nuis}
     if best is not None and boot is not None:
         allowed = {k: v for k, v in aic.items() if k not in equiv.get(best, [])}
-        versus = min(allowed, key=lambda k: (allowed[k], k != "specimen-mean shift"))
-        if versus == "specimen-mean shift":
+        versus = min(allowed, key=lambda k: (allowed[k], k != none_label))
+        if versus == none_label:
             p_vs, D_obs = p_adj.get(best), T_obs[best]
         else:
             nu = fam[versus]
-            Yn, Sn = nu.transform(Yb, Sb, r, obs["par_n"][versus][0])
-            bn = _statistics(curves, [nu], r, Yn, 1.0 / Sn ** 2, valid)
+            Yn, _ = nu.transform(Yb, Sb, r, obs["par_n"][versus][0])
+            bn = stats(Yn, nuis_=[versus])
 
             def dstat(st):
-                cn = np.maximum(1.0, st["chi_n"][versus] / max(nv - 1 - nu.k, 1))
+                cn = np.maximum(1.0, st["chi_n"][versus] / max(nv - 1 - nu.k, 1)) if bank is None else 1.0
                 return (st["chi_n"][versus] - np.min(np.vstack([st["chi_c"][c] for c in cands]), axis=0)) / cn
 
             D_obs = float(dstat(obs)[0])
             p_vs = _p(dstat(bn), D_obs)
         # adequacy of the best candidate: null tables shifted by its refit effect, refitted
         if best in exact and np.isfinite(exact[best][valid]).all():
-            Yc = Yb + (exact[best] - r)[None, :]
-            bc = _statistics({best: curves[best]}, [], r, Yc, 1.0 / Sb ** 2, valid)
+            Yc = Yf + (exact[best] - r)[None, :]
+            bc = stats(Yc, cands_=[best], nuis_=[])
             p_fit["best_candidate"] = _p(bc["chi_c"][best], float(obs["chi_c"][best][0]))
-    if boot is not None and best_nuisance != "specimen-mean shift":
+    if boot is not None and best_nuisance != none_label:
         nu = fam[best_nuisance]
-        Yn, Sn = nu.transform(Yb, Sb, r, obs["par_n"][best_nuisance][0])
-        bn = _statistics({}, [nu], r, Yn, 1.0 / Sn ** 2, valid)
+        Yn, _ = nu.transform(Yf, Sf, r, obs["par_n"][best_nuisance][0])
+        bn = stats(Yn, cands_=[], nuis_=[best_nuisance])
         p_fit["best_nuisance"] = _p(bn["chi_n"][best_nuisance], float(obs["chi_n"][best_nuisance][0]))
     elif "specimen_mean" in p_fit:
         p_fit["best_nuisance"] = p_fit["specimen_mean"]
@@ -430,9 +488,9 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
         reasons.append(f"too few rows: {nv} scenario(s) compared, at least {int(s['min_rows'])} needed to test "
                        f"{len(cands)} candidate(s) against the measurement noise; nothing can be named from these data")
     else:
-        if not gap_before > s["min_gap"]:
-            reasons.append(f"gap_before {gap_before:.2f} <= min_gap {s['min_gap']:g}: model and data agree within "
-                           f"the measurement uncertainty")
+        if not gap_null > s["min_gap"]:
+            reasons.append(f"gap {gap_null:.2f} against {'the mean of virtual specimens' if bank is not None else 'the nominal model'}"
+                           f" <= min_gap {s['min_gap']:g}: model and data agree within the measurement uncertainty")
         if not p_adj.get(best, 1.0) < alpha:
             reasons.append(f"p = {p_adj.get(best, float('nan')):.3g} for {best} (max-T over {len(cands)} candidates, "
                            f"{B} null tables{' of virtual specimens' if bank is not None else ''}) is not below alpha "
@@ -444,7 +502,7 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
             reasons.append(f"the refit of {best} leaves a misfit the null tables do not have (p = "
                            f"{fmt_p(p_fit.get('best_candidate'))} < alpha {alpha:g}): part of the discrepancy is not "
                            f"this effect")
-        red = 1 - gap_after_best / gap_before if gap_before > 0 else 0.0
+        red = 1 - gap_after_best / gap_null if gap_null > 0 else 0.0
         if not red >= s["min_gap_reduction"]:
             reasons.append(f"refit reduces the gap by {100 * red:.0f}% < {100 * s['min_gap_reduction']:.0f}%")
     named = best if best is not None and not reasons else None
@@ -453,21 +511,22 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
     elif too_few or best is None:
         decision = "nothing named: " + "; ".join(reasons)
     elif p_fit.get("specimen_mean", 0.0) >= alpha:
-        decision = ("nuisance: specimen-mean shift" if gap_before > s["min_gap"] else "nothing named")
-        reasons.append(f"the table is consistent with the nominal model and specimen variation (goodness of fit p = "
+        shifted = bank is not None and gap_before > s["min_gap"]
+        decision = "nuisance: specimen-mean shift" if shifted else "nothing named"
+        reasons.append(f"the table is consistent with {null_text} (goodness of fit p = "
                        f"{fmt_p(p_fit.get('specimen_mean'))})" + (
                            f"; its gap to the nominal model ({gap_before:.2f}) is what the mean of varied specimens "
-                           f"gives" if gap_before > s["min_gap"] else ""))
-    elif (best_nuisance != "specimen-mean shift" and p_nuis.get(best_nuisance, 1.0) < alpha
+                           f"gives" if shifted else ""))
+    elif (best_nuisance != none_label and p_nuis.get(best_nuisance, 1.0) < alpha
           and p_fit.get("best_nuisance", 0.0) >= alpha):
         decision = f"nuisance: {nres[best_nuisance]['description']}"
-        reasons.append(f"the table differs from the nominal model with specimen variation (p = "
+        reasons.append(f"the table differs from {null_text} (p = "
                        f"{fmt_p(p_fit.get('specimen_mean'))}); '{nres[best_nuisance]['description']}' explains it "
-                       f"(p = {fmt_p(p_nuis.get(best_nuisance))} against the specimen mean, its refit consistent with "
+                       f"(p = {fmt_p(p_nuis.get(best_nuisance))} against the null model, its refit consistent with "
                        f"its null tables, p = {fmt_p(p_fit.get('best_nuisance'))}); no library effect does better")
     else:
         decision = "unexplained"
-        reasons.append(f"the table differs from the nominal model with specimen variation (p = "
+        reasons.append(f"the table differs from {null_text} (p = "
                        f"{fmt_p(p_fit.get('specimen_mean'))}), and neither a library effect nor a nuisance explanation "
                        f"(best '{nres[best_nuisance]['description'] if best_nuisance in nres else best_nuisance}', "
                        f"refit p = {fmt_p(p_fit.get('best_nuisance'))}) accounts for it: something is missing that "
@@ -503,12 +562,12 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
     ident = _identifiability(problem, cands, S, s, cache) \
         if len(cands) >= 2 and nv >= 1 else {"correlation": {}, "max_correlation": float(s["max_correlation"]),
                                              "non_separable": []}
-    ident["nuisance_correlation"] = {c: {nu.name: multiple_correlation(S[c], nu.basis(r, sig, valid)) for nu in nuis}
-                                     for c in cands}
+    ident["nuisance_correlation"] = ncorr
     ranking = [["none", 0.0]] + [[c, T_obs[c]] for c in cand_rank]
     ranking = sorted(ranking, key=lambda kv: -kv[1])
     kind = ("virtual_specimens" if bank is not None else "gaussian")
-    null_desc = ({"kind": kind, "specimens": bank.K, "bank": bank.source} | null_model.describe(problem.unit)
+    null_desc = ({"kind": kind, "specimens": bank.K, "bank": bank.source,
+                  "correlation_shrinkage": metric.shrinkage} | null_model.describe(problem.unit)
                  if bank is not None else {"kind": kind, "noise_scale": float(np.sqrt(c_hat0))})
     gr = float(np.sqrt(np.mean(zr[valid] ** 2))) if nv else float("nan")
     res = {
@@ -550,7 +609,7 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
         "gap_before_rms": rms_phys0, "gap_after_rms": rms_phys1,
         "gap_specimen_mean": gr,
         "gap_nuisance": float(np.sqrt(np.mean(zn[valid] ** 2))) if nv else float("nan"),
-        "gap_reduction": (1 - gap_after / gap_before) if gap_before > 0 else 0.0,
+        "gap_reduction": (1 - gap_after / gap_null) if named and gap_null > 0 else 0.0,
         "ranking": ranking,
         "confidence": cw.get(named) if named else None,
         "confidence_definition": ("probability of the named effect among the candidates: weights exp(-chi2_c / "

@@ -10,8 +10,8 @@ no specimens):
 * for the stepwise-reduction ROM also ``scale per direction`` and ``offset per direction`` (one parameter per loading
   direction of the table: a per-axis calibration, a direction-dependent stiffness).
 
-Each is linear in its parameters, so it is fitted in closed form (weighted least squares, the weights of the
-chi-square) on every bootstrap table at once. A candidate effect is named only when it beats the best of them by the
+Each is linear in its parameters, so it is fitted in closed form (least squares in the metric of the tests,
+:class:`lumbar.discovery.specimens.Metric`) on every bootstrap table at once. A candidate effect is named only when it beats the best of them by the
 same bootstrap likelihood-ratio test (:func:`lumbar.discovery.fit.discover`)."""
 from __future__ import annotations
 
@@ -34,27 +34,12 @@ class Nuisance:
     def k(self) -> int:
         return len(self.labels)
 
-    def _onehot(self, valid):
+    def columns(self, r):
+        """The family's design (n, k): the change of the prediction per unit of each parameter (scale: r in the
+        group's rows; offset: 1 there)."""
         G = np.zeros((len(self.groups), self.k))
         G[np.arange(len(self.groups)), self.groups] = 1.0
-        return G * valid[:, None]
-
-    def fit(self, r, Y, W, valid):
-        """Least-squares parameters (B, k) and chi-square (B,) for the tables Y (B, n) with weights W."""
-        G = self._onehot(valid)
-        r0 = np.where(valid, r, 0.0)
-        Yv, Wv = np.where(valid, Y, 0.0), np.where(valid, W, 0.0)
-        if self.kind == "scale":
-            num, den = (Wv * r0 * Yv) @ G, (Wv * r0 ** 2) @ G
-            with np.errstate(invalid="ignore", divide="ignore"):
-                p = np.where(den > 0, num / den, 1.0)
-        else:
-            num, den = (Wv * (Yv - r0)) @ G, Wv @ G
-            with np.errstate(invalid="ignore", divide="ignore"):
-                p = np.where(den > 0, num / den, 0.0)
-        pred = self.predict(r0, p)
-        chi = (Wv * (Yv - pred) ** 2).sum(1)
-        return p, chi
+        return G * np.asarray(r, float)[:, None] if self.kind == "scale" else G
 
     def predict(self, r, p):
         """Prediction(s) for parameters p (k,) or (B, k)."""
@@ -69,12 +54,6 @@ class Nuisance:
             return Y * per_row, SIG * np.abs(per_row)
         return Y + per_row, SIG
 
-    def basis(self, r, sig, valid):
-        """Sensitivity basis (n, k) in units of the standard errors (what a unit change of each parameter does)."""
-        G = self._onehot(valid)
-        col = np.where(valid, r, 0.0) if self.kind == "scale" else np.where(valid, 1.0, 0.0)
-        return G * (col / sig)[:, None]
-
     def describe(self, p, unit) -> str:
         p = np.asarray(p, float)
         if self.k == 1:
@@ -87,6 +66,8 @@ def families(problem, valid) -> list[Nuisance]:
     """The nuisance families of a problem: uniform scale and offset; per direction for the stepwise-reduction ROM
     when the table has >= 2 directions with >= 2 compared rows each (and at least 2 rows more than parameters)."""
     n = len(problem.y)
+    if valid.sum() < 3:                 # a nuisance fitted to one or two rows explains nothing
+        return []
     one = np.zeros(n, int)
     out = [Nuisance("uniform scale", "scale", one, ("all",)), Nuisance("uniform offset", "offset", one, ("all",))]
     g = problem.meta.get("groups")

@@ -23,12 +23,14 @@ def _nuisance_lines(r) -> list[str]:
     """The nuisance comparison of a discovery as markdown: the specimen-mean prediction and every nuisance family
     (refit, LR statistic against the specimen mean, p-value, gap), the test of the best candidate against them."""
     sm = r.get("specimen_mean") or {}
-    lines = ["", "Nuisance explanations (fitted beside the candidates; the null hypothesis is the nominal model with "
-                 "specimen variation, " + _null_text(r) + "):", "",
+    specimens = (r.get("null_model") or {}).get("kind") == "virtual_specimens"
+    lines = ["", "Nuisance explanations (fitted beside the candidates; null hypothesis: " + _null_text(r) + "):", "",
              "| explanation | refit | LR statistic | p | gap | equivalent candidates |", "|---|---|---|---|---|---|",
-             f"| nominal model | - | - | - | {fmt(r['gap_before'], '.2f')} | |",
-             f"| specimen-mean shift | mean of the virtual specimens | 0 | {fmt(sm.get('p_fit'))} (fit) | "
-             f"{fmt(sm.get('gap'), '.2f')} | |"]
+             f"| nominal model | - | - | {fmt(sm.get('p_fit')) + ' (fit)' if not specimens else '-'} | "
+             f"{fmt(r['gap_before'], '.2f')} | |"]
+    if specimens:
+        lines.append(f"| specimen-mean shift | mean of the virtual specimens | 0 | {fmt(sm.get('p_fit'))} (fit) | "
+                     f"{fmt(sm.get('gap'), '.2f')} | |")
     for name, v in (r.get("nuisance") or {}).items():
         lines.append(f"| {name} | {v['description']} | {fmt(v['lr_statistic'], '.2f')} | {fmt(v['p_value'])} | "
                      f"{fmt(v['gap'], '.2f')} | {', '.join(v['equivalent_candidates'])} |")
@@ -44,9 +46,9 @@ def _nuisance_lines(r) -> list[str]:
 def _null_text(r) -> str:
     nm = r.get("null_model") or {}
     if nm.get("kind") == "virtual_specimens":
-        return (f"{nm['specimens']} virtual specimens resampled per null table, variation scale "
-                f"{nm['variation_scale']:.2f}, measurement noise {nm['noise_additive_sd']:.3g} {nm['unit']} + "
-                f"{100 * nm['noise_relative_sd']:.1f} %")
+        return (f"the nominal model with specimen variation: the table's specimens drawn from {nm['specimens']} "
+                f"virtual specimens per null table, measurement noise {nm['noise_additive_sd']:.3g} {nm['unit']} + "
+                f"{100 * nm['noise_relative_sd']:.1f} % fitted from the table's spread")
     return "no specimens in this experiment: the nominal model plus Gaussian noise"
 
 

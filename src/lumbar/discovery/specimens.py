@@ -369,3 +369,58 @@ def null_datasets(problem, bank: SpecimenBank, model: NullModel, B: int, rng: np
     SIG = np.where(hr[None, :] & (cnt > 1), np.maximum(spread, floor), problem.sigma[None, :])
     SIG = np.where(np.isfinite(SIG), SIG, problem.sigma[None, :])
     return Y, SIG
+
+
+# ------------------------------------------------------------------ the metric of the test statistics
+@dataclass
+class Metric:
+    """The quadratic form every test statistic uses: residuals in standard errors of the table's specimen mean
+    (``sig``, the table's own per-row uncertainty), decorrelated by ``linv`` = L^-1 (R = L L^T the correlation of
+    the table mean's deviations under the null; None = independent rows). ``metric(X)`` maps predictions or tables
+    (m, n) to (m, p) over the ``valid`` rows, where the chi-square is the plain sum of squares."""
+
+    valid: np.ndarray
+    sig: np.ndarray
+    linv: np.ndarray | None = None
+    shrinkage: float = float("nan")
+
+    def __call__(self, X):
+        X = np.atleast_2d(np.asarray(X, float))[:, self.valid] / self.sig[self.valid]
+        return X if self.linv is None else X @ self.linv.T
+
+
+def ledoit_wolf(Z):
+    """Ledoit-Wolf shrinkage of the correlation of the standardised samples Z (K, p) towards the identity:
+    (intensity in [0, 1], shrunk correlation). Ledoit & Wolf (2004), J Multivar Anal 88:365-411, Lemma 3.2 and
+    Theorem 3.1 with the identity (scaled by the mean variance, 1 here) as the target."""
+    K, p = Z.shape
+    S = Z.T @ Z / K
+    d2 = float(np.sum((S - np.eye(p)) ** 2)) / p
+    b2 = float(np.sum([np.sum((np.outer(z, z) - S) ** 2) for z in Z])) / p / K ** 2
+    lam = 1.0 if d2 <= 0 else min(b2, d2) / d2
+    return lam, (1 - lam) * S + lam * np.eye(p)
+
+
+#: least shrinkage of the specimens' correlation towards independent rows in the metric of the tests [-]: directions
+#: in which the virtual specimens hardly vary keep this share of every row's uncertainty, so that the table's own
+#: noise, estimated and not known (fit_null_noise), cannot make a small deviation there look enormous
+MIN_SHRINKAGE = 0.3
+
+
+def specimen_metric(bank: SpecimenBank, model: NullModel, sig, valid) -> Metric:
+    """The metric of a problem with a specimen bank: the correlation of a table mean's deviations from r under the
+    null, from the bank's specimens (standardised; Ledoit-Wolf shrinkage towards independent rows, at least
+    :data:`MIN_SHRINKAGE`: K specimens estimate a p x p correlation poorly when K is not much larger than p) and the
+    fitted independent measurement noise; the scale of each row is the table's own sigma. A specimen without
+    equilibrium in a row counts as no deviation there."""
+    r = bank.mean
+    X = np.where(np.isfinite(bank.values), bank.values - r, 0.0)[:, valid]
+    sd = X.std(0, ddof=1)
+    sd = np.where(sd > 0, sd, 1.0)
+    Z = (X - X.mean(0)) / sd
+    lam = max(ledoit_wolf(Z)[0], MIN_SHRINKAGE)
+    R = (1 - lam) * (Z.T @ Z / len(Z)) + lam * np.eye(Z.shape[1])
+    C = sd[:, None] * R * sd[None, :] + np.diag(model.a2 + model.b2 * r[valid] ** 2)
+    d = np.sqrt(np.diag(C))
+    L = np.linalg.cholesky(C / np.outer(d, d))
+    return Metric(valid, np.asarray(sig, float), np.linalg.inv(L), lam)
