@@ -308,6 +308,7 @@ def discovery_case_outputs(case):
 # the in-vitro IDP effects (lumbar.experiments.effects: kind "idp") and the out-of-library causes of each experiment
 # (lumbar.discovery.benchmark.OUT_OF_LIBRARY): which benchmark job needs which model and specimen files
 DISCOVERY_IDP_EFFECTS = ("axial_preload", "idp_moment_term", "disc_load_share")
+DISCOVERY_IDP_FIXTURE_PARTS = 4  # lumbar.discovery.benchmark.IDP_FIXTURE_PARTS
 DISCOVERY_OOL_EXPERIMENT = {
     "disc_scale": "stepwise_rom",
     "ligament_removed": "stepwise_rom",
@@ -360,7 +361,10 @@ def discovery_benchmark_banks(wildcards):
     out = [p for x in sorted(exps) for p in discovery_specimen_bank(x)]
     b = config["discovery"]["benchmark"]
     if "idp_invitro" in exps and b["generator"] == "virtual_specimens":
-        out.append("results/discrepancy/model/fixture_specimens_idp.csv")
+        out += [
+            f"results/discrepancy/model/fixture_specimens_idp_{k}.csv"
+            for k in range(DISCOVERY_IDP_FIXTURE_PARTS)
+        ]
     return out
 
 

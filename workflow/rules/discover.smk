@@ -30,7 +30,8 @@ rule discovery_specimen_bank:
         "../scripts/discover.py"
 
 
-# the virtual specimens the IDP fixtures of the benchmark are drawn from (a stream disjoint from the null bank's)
+# the virtual specimens the IDP fixtures of the benchmark are drawn from (a stream disjoint from the null bank's),
+# in parts (lumbar.discovery.benchmark.IDP_FIXTURE_PARTS), so both cores make them
 rule discovery_fixture_specimens_idp:
     input:
         geometry_inputs,
@@ -41,11 +42,13 @@ rule discovery_fixture_specimens_idp:
         calibrated=discovery_calibrated_tables(),
         cables=config["l2s1"]["cables"],
     output:
-        "results/discrepancy/model/fixture_specimens_idp.csv",
+        "results/discrepancy/model/fixture_specimens_idp_{part}.csv",
     log:
-        "logs/discovery_fixture_specimens_idp.log",
+        "logs/discovery_fixture_specimens_idp_{part}.log",
     benchmark:
-        "results/benchmarks/discovery_fixture_specimens_idp.tsv"
+        "results/benchmarks/discovery_fixture_specimens_idp_{part}.tsv"
+    wildcard_constraints:
+        part="[0-9]+",
     conda:
         "../envs/lumbar.yaml"
     params:

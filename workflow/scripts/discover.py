@@ -23,6 +23,7 @@ import time  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from lumbar import discovery as discover  # noqa: E402
+from lumbar.discovery import benchmark as discovery_benchmark  # noqa: E402
 from lumbar.discovery import specimens  # noqa: E402
 from lumbar.plots.discovery import plot_benchmark  # noqa: E402
 from lumbar.inputs.io import write_json_atomic, write_table_atomic, write_text_atomic  # noqa: E402
@@ -38,7 +39,7 @@ for p in inputs:
     for name in ("rom", "idp"):
         if Path(p).name == f"specimen_bank_{name}.csv":
             cfg["discovery"][f"specimen_bank_{name}"] = p
-fixture_idp = next((p for p in inputs if Path(p).name == "fixture_specimens_idp.csv"), None)
+fixture_idp = sorted(p for p in inputs if Path(p).name.startswith("fixture_specimens_idp_"))
 t0 = time.perf_counter()
 
 if rule == "discovery_idp_model":
@@ -55,14 +56,14 @@ elif rule == "discovery_specimen_bank":
     log.info("null bank %s: %d virtual specimens x %d scenarios, %d without equilibrium", experiment, K,
              len(bank) // max(K, 1), int(v.isna().sum()))
 elif rule == "discovery_fixture_specimens_idp":
-    b = discover.benchmark_settings(cfg)
-    t = specimens.idp_bank_table(cfg, int(b["fixture_specimens"]), specimens.FIXTURE_STREAM)
+    first, count = discovery_benchmark.fixture_part(cfg, int(snakemake.wildcards.part))
+    t = specimens.idp_bank_table(cfg, count, specimens.FIXTURE_STREAM, first=first)
     t["source"] = (f"virtual specimens of the nominal L2-S1 model, seed {specimens.bank_seed(cfg, specimens.FIXTURE_STREAM)}"
                    f" (lumbar.discovery.specimens.idp_bank_table): the benchmark's TEST FIXTURES are drawn from them; "
                    f"SURROGATE, not data")
     specimens.write_bank(t, snakemake.output[0])
-    log.info("IDP fixture specimens: %d x %d scenarios, %d without equilibrium", int(t["specimen"].nunique()),
-             len(t) // max(int(t["specimen"].nunique()), 1), int((~t["converged"].astype(bool)).sum()))
+    log.info("IDP fixture specimens %d-%d: %d scenarios each, %d specimen-scenarios without equilibrium", first,
+             first + count - 1, len(t) // max(count, 1), int((~t["converged"].astype(bool)).sum()))
 elif rule in ("discovery_default", "discovery_va_artefact", "discovery_in_vivo", "discovery_intact_rom"):
     if rule == "discovery_in_vivo":
         cfg["discovery"]["in_vivo_segment_loads"] = str(snakemake.input.segment_loads)
@@ -83,7 +84,7 @@ elif rule == "discovery_benchmark_job":
     sel = discover.job_cases(cases, job)
     if sel.empty:
         raise ValueError(f"benchmark job {job!r} has no case; hidden effects: {sorted(set(cases['hidden_effect']))}")
-    fixture_table = pd.read_csv(fixture_idp) if fixture_idp else None
+    fixture_table = pd.concat([pd.read_csv(p) for p in fixture_idp], ignore_index=True) if fixture_idp else None
     bench = discover.run_benchmark_cases(cfg, sel, snakemake.output.fixtures, worked_cases=1,
                                          fixture_idp=fixture_table)
     log.info("seconds per discovery: %s", bench.pop("seconds").round(2).tolist())   # timings only in the log

@@ -149,39 +149,79 @@ def _variant(case) -> tuple:
     return (), ()
 
 
+def null_pool(config, experiment) -> int:
+    """Fixture specimens the null tables of an experiment take: a disjoint block of the largest
+    ``n_specimens_range`` for each (a null table shares no specimen with another, as real tables share none; a
+    shared pool would give every null the pool's own offset from the population)."""
+    b = benchmark_settings(config)
+    cases = benchmark_cases(config)
+    k = int(((cases["category"] == "no_effect") & (cases["experiment"] == experiment)).sum())
+    return k * int(max(b["n_specimens_range"]))
+
+
+#: parts the IDP fixture specimens are made in (rule discovery_fixture_specimens_idp, one job each)
+IDP_FIXTURE_PARTS = 4
+
+
+def fixture_part(config, part) -> tuple[int, int]:
+    """(first specimen, count) of part ``part`` of the IDP fixture specimens."""
+    need = fixture_pool(config, "idp_invitro")
+    size = -(-need // IDP_FIXTURE_PARTS)
+    first = int(part) * size
+    return first, max(0, min(size, need - first))
+
+
+def fixture_pool(config, experiment) -> int:
+    """Fixture specimens a benchmark needs for an experiment: ``fixture_specimens`` for the library and
+    out-of-library cases (drawn without replacement per table, shared between tables), the null blocks."""
+    return max(int(benchmark_settings(config)["fixture_specimens"]), null_pool(config, experiment))
+
+
 class FixtureSpecimens:
-    """The virtual specimens the fixtures of one benchmark job are made of (``fixture_specimens`` of the
-    FIXTURE_STREAM): ROM per model variant (solved once per job, every variant of the job in one batch per
-    specimen), IDP from the per-specimen L2-S1 table (``idp_table``, the rule's file; built when not given)."""
+    """The virtual specimens the fixtures of one benchmark job are made of (the FIXTURE_STREAM): ROM per model
+    variant (solved once per job, every variant of the job in one batch per specimen), IDP from the per-specimen
+    L2-S1 table (``idp_table``, the rule's files; built when not given). Library and out-of-library tables draw
+    their specimens from the first ``fixture_specimens``; every null table has its own block (:func:`null_pool`)."""
 
     def __init__(self, config, cases: pd.DataFrame, idp_table: pd.DataFrame | None = None):
         self.config = config
         self.b = benchmark_settings(config)
         self.K = int(self.b["fixture_specimens"])
+        self.n_max = int(max(self.b["n_specimens_range"]))
         self.keys = rom_scenarios(config)
+        nulls = cases[cases["category"] == "no_effect"]
+        self.block = {c: i for x, g in nulls.groupby("experiment") for i, c in enumerate(g["case"])}
         rom = cases[cases["experiment"] == "stepwise_rom"]
         variants = list(dict.fromkeys(_variant(c) for c in rom.itertuples(index=False)))
         self.rom = {}
         if variants:
             t = time.perf_counter()
-            vals, _ = rom_bank(config, self.keys, self.K, FIXTURE_STREAM,
-                               [(dict(e), dict(m) or None) for e, m in variants])
+            library = bool((rom["category"] != "no_effect").any())
+            K = max(self.K if library else 0, self.n_max * int((rom["category"] == "no_effect").sum()))
+            vals, _ = rom_bank(config, self.keys, K, FIXTURE_STREAM, [(dict(e), dict(m) or None) for e, m in variants])
             self.rom = {v: vals[:, j, :] for j, v in enumerate(variants)}
-            log.info("fixture specimens: %d x %d ROM variant(s) x %d scenarios in %.1f s", self.K, len(variants),
+            log.info("fixture specimens: %d x %d ROM variant(s) x %d scenarios in %.1f s", K, len(variants),
                      len(self.keys), time.perf_counter() - t)
         self.idp = None
         if (cases["experiment"] == "idp_invitro").any():
-            t = idp_table if idp_table is not None else idp_bank_table(config, self.K, FIXTURE_STREAM)
-            t = t[t["specimen"] < self.K]
+            need = fixture_pool(config, "idp_invitro")
+            t = idp_table if idp_table is not None else idp_bank_table(config, need, FIXTURE_STREAM)
             K = int(t["specimen"].nunique())
-            if K < self.K:
-                raise ValueError(f"IDP fixture specimens: the table has {K}, the benchmark needs {self.K} "
-                                 f"(discovery.benchmark.fixture_specimens)")
+            if K < need or sorted(t["specimen"].unique()) != list(range(K)):
+                raise ValueError(f"IDP fixture specimens: the table has {K} (0..{K - 1} expected), the benchmark "
+                                 f"needs {need} (discovery.benchmark.fixture_specimens and the null blocks)")
+            t = t.sort_values(["specimen"], kind="stable")
             self.idp_keys = t[t["specimen"] == 0][["muscle_setup", "load_case"]].reset_index(drop=True)
             n = len(self.idp_keys)
-            t = t.sort_values("specimen", kind="stable")
             self.idp = {c: t[c].to_numpy(float).reshape(K, n) for c in ("idp_mpa", "disc_moment_sagittal_nm",
                                                                           "idp_per_newton_pa")}
+
+    def pick(self, case, n, rng):
+        """The specimens of a table: a null table's own block, else n of the first ``fixture_specimens``."""
+        if case.category == "no_effect" and getattr(case, "case", None) in self.block:
+            i = self.block[case.case]
+            return np.arange(i * self.n_max, i * self.n_max + n)
+        return rng.choice(self.K, size=n, replace=False)
 
     def values(self, case, rng) -> tuple[pd.DataFrame, np.ndarray]:
         """(scenario keys, per-specimen true values (K, n)) of a case, before noise."""
@@ -204,14 +244,14 @@ class FixtureSpecimens:
         return self.idp_keys, V
 
 
-def fixture_table(experiment, keys, V, rng, b) -> tuple[pd.DataFrame, dict]:
-    """One measured-schema table from the per-specimen values V (K, n): n specimens drawn without replacement,
-    multiplicative and additive noise (SDs drawn from the configured ranges), ROM clipped at 0 deg, summarised;
-    a specimen without equilibrium in a row is left out of it, a row fewer than half of them reached is left out
-    (as the surrogate generators do). Returns (table, what was drawn)."""
+def fixture_table(experiment, keys, V, rng, b, pick=None) -> tuple[pd.DataFrame, dict]:
+    """One measured-schema table from the per-specimen values V (K, n): n specimens (``pick(n, rng)`` or drawn
+    without replacement), multiplicative and additive noise (SDs drawn from the configured ranges), ROM clipped at
+    0 deg, summarised; a specimen without equilibrium in a row is left out of it, a row fewer than half of them
+    reached is left out (as the surrogate generators do). Returns (table, what was drawn)."""
     lo, hi = b["n_specimens_range"]
     n = int(rng.integers(int(lo), int(hi) + 1))
-    pick = rng.choice(V.shape[0], size=min(n, V.shape[0]), replace=False)
+    pick = pick(n, rng) if pick is not None else rng.choice(V.shape[0], size=min(n, V.shape[0]), replace=False)
     A = V[pick]
     rel = float(rng.uniform(*b["noise_rel_range"]))
     add = float(rng.uniform(*(b["noise_sd_deg_range"] if experiment == "stepwise_rom" else b["noise_sd_mpa_range"])))
@@ -255,7 +295,7 @@ def make_hidden_effect_dataset(config, experiment, effect, magnitude, seed, idp_
         if specimens is None:
             specimens = FixtureSpecimens(config, pd.DataFrame([case._asdict()]))
         keys, V = specimens.values(case, rng)
-        out, drawn = fixture_table(experiment, keys, V, rng, b)
+        out, drawn = fixture_table(experiment, keys, V, rng, b, pick=lambda n, g: specimens.pick(case, n, g))
         what = (f"out-of-library cause {effect} {case.magnitude_label} ({OUT_OF_LIBRARY[effect].description})"
                 if case.category == "out_of_library" else f"hidden effect {effect} = {magnitude:g} {unit}")
         out["kind"] = "surrogate"

@@ -157,15 +157,16 @@ def rom_bank(config, keys: pd.DataFrame, n_specimens: int, stream=NULL_STREAM, v
                          max_iter=int(((config or {}).get("solver") or {}).get("max_iter", 50)))
 
 
-def idp_bank_table(config, n_specimens: int, stream=NULL_STREAM, disc_scale=1.0) -> pd.DataFrame:
+def idp_bank_table(config, n_specimens: int, stream=NULL_STREAM, disc_scale=1.0, first=0) -> pd.DataFrame:
     """Per-specimen L2-S1 results of ``n_specimens`` virtual specimens of the discovery's nominal model
-    (``l2s1.variation``; see ``lumbar.experiments.virtual_experiment.idp_specimens``)."""
+    (``l2s1.variation``; see ``lumbar.experiments.virtual_experiment.idp_specimens``), from specimen ``first`` of
+    the stream on."""
     l2 = (config or {}).get("l2s1") or {}
     return idp_specimens(_geometry(config, LEVELS), _charset(config), bank_seed(config, stream), int(n_specimens),
                          _variation(config, "l2s1"), derive_cables(l2.get("cables")), l2.get("idp_formula", "paper1"),
                          l2.get("disc_area_m2", DISC_AREA_M2), ((config or {}).get("fsu") or {}).get(
                              "disc_shear_stiffness_n_per_m"), disc_scale=disc_scale,
-                         max_iter=int(((config or {}).get("solver") or {}).get("max_iter", 50)))
+                         max_iter=int(((config or {}).get("solver") or {}).get("max_iter", 50)), first=first)
 
 
 def rom_design(config, keys=None) -> pd.DataFrame:

@@ -388,10 +388,12 @@ def rom_specimens(geometry, charset, seed, n_specimens, scenarios, variation=Non
 
 
 def idp_specimens(geometry, charset, seed, n_specimens, variation=None, cables=None, idp_formula="paper1",
-                  disc_area_m2=DISC_AREA_M2, k_shear=None, disc_scale=1.0, max_iter=50, tol=1e-7) -> pd.DataFrame:
+                  disc_area_m2=DISC_AREA_M2, k_shear=None, disc_scale=1.0, max_iter=50, tol=1e-7,
+                  first=0) -> pd.DataFrame:
     """Per-specimen L2-S1 results (no measurement noise) of ``n_specimens`` virtual specimens, as
     :func:`idp_table` makes them (``virtual_specimen`` with ``specimen_rngs(seed, n)``, all four levels perturbed;
-    the first k specimens do not depend on ``n_specimens``); ``disc_scale``: every specimen's discs scaled by
+    the first k specimens do not depend on ``n_specimens``; ``first``: start at specimen ``first`` of the stream, so
+    a stream can be made in parts); ``disc_scale``: every specimen's discs scaled by
     :func:`modified_charset` (an out-of-library change). One row per specimen and scenario: specimen, muscle_setup,
     load_case, converged, idp_mpa (NaN without equilibrium), disc_axial_force_n, disc_moment_sagittal_nm and
     idp_per_newton_pa (the specimen's L4-L5 IDP per newton of disc force, for the IDP effects)."""
@@ -399,7 +401,7 @@ def idp_specimens(geometry, charset, seed, n_specimens, variation=None, cables=N
     v = _variation(variation)
     cables = derive_cables() if cables is None else cables
     out = []
-    for k, rng in enumerate(specimen_rngs(seed, int(n_specimens))):
+    for k, rng in enumerate(specimen_rngs(seed, int(first) + int(n_specimens))[int(first):], start=int(first)):
         geo_k, cs_k = virtual_specimen(geometry, charset, rng, v, levels=list(LEVELS))
         if disc_scale != 1.0:
             cs_k = modified_charset(cs_k, disc_scale=disc_scale)
