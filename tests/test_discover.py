@@ -35,21 +35,6 @@ def fv():
 
 
 # ------------------------------------------------------------------ fixtures of the L2-S1 and muscle-model schemas
-@pytest.fixture(scope="module")
-def idp_model_fixture():
-    """TEST FIXTURE in the schema of the nominal L2-S1 model table (rule discovery_idp_model): 49 scenarios
-    with a disc force and sagittal moment pattern like the solved model's (not data)."""
-    from lumbar.experiments.l2s1 import scenario_grid
-    grid = scenario_grid()
-    rng = np.random.default_rng(3)
-    F = 150 + 250 * rng.random(len(grid))
-    M = np.array([{"flexion": 0.0, "extension": -5.0}.get(lc, -1.5) for _, lc in grid]) + rng.normal(0, 0.8, len(grid))
-    per_n = 1.68 / 1.6e-3
-    return pd.DataFrame({"muscle_setup": [g[0] for g in grid], "load_case": [g[1] for g in grid],
-                         "converged": True, "idp_mpa": F * per_n / 1e6, "disc_axial_force_n": F,
-                         "disc_moment_sagittal_nm": M, "idp_per_newton_pa": per_n})
-
-
 def in_vivo_fixture(tmp_path, k_moment=0.0, seed=0):
     """TEST FIXTURE of the muscle model's output tables (contract of issue 5), with an optional hidden moment
     term: results/tables/in_vivo_validation.csv and muscle_model_segment_loads.csv schemas."""

@@ -102,13 +102,18 @@ def test_negative_mean_idp_is_refused(tmp_path):
         D.read_measured(write(tmp_path, df))
 
 
-def test_idp_table_in_kpa_is_refused_naming_kpa(tmp_path):
-    df = idp_base()
-    df[["idp_mean_mpa", "idp_sd_mpa"]] *= 1000.0                 # values 100-1000 read as MPa before
+@pytest.mark.parametrize("make, columns, convert, parts", [
+    (idp_base, ["idp_mean_mpa", "idp_sd_mpa"], lambda v: v * 1000.0,          # values 100-1000 read as MPa before
+     ["row 1, column 'idp_mean_mpa'", "look like kPa, not MPa", "wilke_idp_l4l5.csv"]),
+    (rom_base, ["rom_mean_deg", "rom_min_deg", "rom_max_deg"], np.radians,   # every value below 0.2 "deg"
+     ["row 1, column 'rom_mean_deg'", "look like radians, not deg", "yamamoto1989"]),
+], ids=["idp_in_kpa", "rom_in_radians"])
+def test_table_in_another_unit_is_refused_naming_the_unit(tmp_path, make, columns, convert, parts):
+    df = make()
+    df[columns] = convert(df[columns])
     with pytest.raises(D.DiscoveryInputError) as e:
         D.read_measured(write(tmp_path, df))
-    msg = str(e.value)
-    assert "column 'idp_mean_mpa'" in msg and "look like kPa, not MPa" in msg and "wilke_idp_l4l5.csv" in msg
+    assert all(x in str(e.value) for x in parts), str(e.value)
 
 
 def test_idp_sd_in_kpa_beside_a_mean_in_mpa_is_refused(tmp_path):
@@ -116,16 +121,6 @@ def test_idp_sd_in_kpa_beside_a_mean_in_mpa_is_refused(tmp_path):
     df["idp_sd_mpa"] = df["idp_sd_mpa"] * 20.0                   # larger than 7 pressures >= 0 can spread
     with pytest.raises(D.DiscoveryInputError, match=r"column 'idp_sd_mpa': SD .* is larger than 7 pressures >= 0"):
         D.read_measured(write(tmp_path, df))
-
-
-def test_rom_table_in_radians_is_refused_naming_radians(tmp_path):
-    df = rom_base()
-    for c in ("rom_mean_deg", "rom_min_deg", "rom_max_deg"):
-        df[c] = np.radians(df[c])                                 # every value below 0.2 "deg", up to 7.5 N*m
-    with pytest.raises(D.DiscoveryInputError) as e:
-        D.read_measured(write(tmp_path, df))
-    msg = str(e.value)
-    assert "row 1, column 'rom_mean_deg'" in msg and "look like radians, not deg" in msg and "yamamoto1989" in msg
 
 
 def test_neutral_angle_table_in_radians_is_refused(tmp_path):

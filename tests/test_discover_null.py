@@ -16,7 +16,6 @@ from scipy.stats import kstest, ks_2samp
 from lumbar import discovery as D
 from lumbar.discovery.specimens import SpecimenBank, null_datasets, fit_null_noise
 from lumbar.experiments import effects as fx
-from lumbar.experiments.l2s1 import scenario_grid
 
 #: Kolmogorov-Smirnov threshold for "the null p-values are uniform enough": the test of uniformity must not reject
 #: at the 1 % level (over 60 null tables of the synthetic population; the benchmark applies the same threshold to
@@ -25,17 +24,9 @@ KS_P_MIN = 0.01
 
 
 @pytest.fixture(scope="module")
-def model():
-    """TEST FIXTURE in the schema of the nominal L2-S1 model table: 49 scenarios, disc force and sagittal moment
-    patterns like the solved model's (not data)."""
-    grid = scenario_grid()
-    rng = np.random.default_rng(3)
-    F = 150 + 250 * rng.random(len(grid))
-    M = np.array([{"flexion": 0.0, "extension": -5.0}.get(lc, -1.5) for _, lc in grid]) + rng.normal(0, 0.8, len(grid))
-    per_n = 1.68 / 1.6e-3
-    return pd.DataFrame({"muscle_setup": [g[0] for g in grid], "load_case": [g[1] for g in grid],
-                         "converged": True, "idp_mpa": F * per_n / 1e6, "disc_axial_force_n": F,
-                         "disc_moment_sagittal_nm": M, "idp_per_newton_pa": per_n})
+def model(idp_model_fixture):
+    """The nominal L2-S1 model table (TEST FIXTURE of conftest.py)."""
+    return idp_model_fixture
 
 
 def population(model, K, seed):
