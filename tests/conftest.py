@@ -12,8 +12,11 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+import pandas as pd
 import pytest
 
+from lumbar.experiments.l2s1 import scenario_grid as l2s1_scenario_grid
 from lumbar.inputs.characteristics import load_characteristic_set
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -219,6 +222,20 @@ def dag_second_workdir(dag_workdir, tmp_path_factory) -> Path:
         run_dag(second)
         return second
     return _wait_dag("second")
+
+
+@pytest.fixture(scope="module")
+def idp_model_fixture():
+    """TEST FIXTURE in the schema of the nominal L2-S1 model table (rule discovery_idp_model): 49 scenarios with a
+    disc force and sagittal moment pattern like the solved model's (not data)."""
+    grid = l2s1_scenario_grid()
+    rng = np.random.default_rng(3)
+    F = 150 + 250 * rng.random(len(grid))
+    M = np.array([{"flexion": 0.0, "extension": -5.0}.get(lc, -1.5) for _, lc in grid]) + rng.normal(0, 0.8, len(grid))
+    per_n = 1.68 / 1.6e-3
+    return pd.DataFrame({"muscle_setup": [g[0] for g in grid], "load_case": [g[1] for g in grid],
+                         "converged": True, "idp_mpa": F * per_n / 1e6, "disc_axial_force_n": F,
+                         "disc_moment_sagittal_nm": M, "idp_per_newton_pa": per_n})
 
 
 @pytest.fixture(scope="session", name="model")

@@ -114,7 +114,8 @@ def test_dag_rerun_is_noop(dag_workdir):
 
 def test_dag_changed_characteristic_set_reruns_only_dependents(dag_workdir, tmp_path):
     """Dropping one literature set from characteristics.sets re-runs the jobs that use the set list
-    (fsu_rom, table4 and what depends on them), not geometry, calibration, surrogates or L2-S1."""
+    (fsu_rom, table4, the load-sharing summary over the sets and what depends on them), not geometry, calibration,
+    surrogates, L2-S1 or the load-sharing curves of the sets kept."""
     cfg = yaml.safe_load((dag_workdir / TEST_CONFIG).read_text())
     assert "rupp2015" in cfg["characteristics"]["sets"]
     cfg["characteristics"]["sets"] = [s for s in cfg["characteristics"]["sets"] if s != "rupp2015"]
@@ -123,10 +124,10 @@ def test_dag_changed_characteristic_set_reruns_only_dependents(dag_workdir, tmp_
     jobs = dry_jobs(dag_workdir, "--configfile", str(changed))
     rules = {r for r, _ in jobs}
     assert {"fsu_rom", "table4"} <= rules, jobs
-    dependents = dry_jobs(dag_workdir, "--forcerun", "fsu_rom", "table4")
+    dependents = dry_jobs(dag_workdir, "--forcerun", "fsu_rom", "table4", "load_sharing_summary")
     assert jobs <= dependents, f"re-run although independent of characteristics.sets: {sorted(jobs - dependents)}"
     for independent in ("fsu_geometry", "fig1_l4l5_model", "calibrate", "stepwise_reduction_surrogate",
-                        "stepwise_reduction_sim", "idp_surrogate", "l2s1_idp", "table5"):
+                        "stepwise_reduction_sim", "idp_surrogate", "l2s1_idp", "table5", "load_sharing_curves"):
         assert independent not in rules, jobs
 
 

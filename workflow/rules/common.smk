@@ -300,6 +300,11 @@ def discovery_config(wildcards):
     cfg = {k: config[k] for k in keys if k in config}
     # lumbar.discovery reads only characteristics.data_dir: a changed list of sets must not re-run discovery
     cfg["characteristics"] = {"data_dir": config["characteristics"]["data_dir"]}
+    # and of the stepwise-reduction section only the specimen variation (the ROM null bank's)
+    cfg["stepwise_reduction"] = {
+        "variation": config["stepwise_reduction"]["variation"],
+        "moments_nm": config["stepwise_reduction"]["moments_nm"],
+    }
     return cfg
 
 
@@ -326,24 +331,67 @@ def discovery_case_outputs(case):
     return out
 
 
+# the in-vitro IDP effects (lumbar.experiments.effects: kind "idp") and the out-of-library causes of each experiment
+# (lumbar.discovery.benchmark.OUT_OF_LIBRARY): which benchmark job needs which model and specimen files
+DISCOVERY_IDP_EFFECTS = ("axial_preload", "idp_moment_term", "disc_load_share")
+DISCOVERY_IDP_FIXTURE_PARTS = 4  # lumbar.discovery.benchmark.IDP_FIXTURE_PARTS
+DISCOVERY_OOL_EXPERIMENT = {
+    "disc_scale": "stepwise_rom",
+    "ligament_removed": "stepwise_rom",
+    "rom_scale_per_direction": "stepwise_rom",
+    "idp_scale": "idp_invitro",
+}
+
+
 def discovery_benchmark_jobs():
-    """One benchmark job per hidden effect, plus one for the null datasets."""
+    """One benchmark job per hidden effect, one for the null tables, one for the out-of-library causes."""
     b = config["discovery"]["benchmark"]
-    return list(b["effects"]) + (["null"] if b["n_null"] > 0 else [])
+    ool = b["generator"] == "virtual_specimens" and bool(discovery_job_experiments("out_of_library"))
+    return (
+        list(b["effects"])
+        + (["null"] if b["n_null"] > 0 else [])
+        + (["out_of_library"] if ool else [])
+    )
+
+
+def discovery_job_experiments(job):
+    """The experiments of a benchmark job's cases (lumbar.discovery.benchmark_cases)."""
+    b = config["discovery"]["benchmark"]
+    exps = [x for x in ("stepwise_rom", "idp_invitro") if x in b["experiments"]]
+    if job == "null":
+        return set(exps[: max(1, min(len(exps), b["n_null"]))])
+    if job == "out_of_library":
+        return {DISCOVERY_OOL_EXPERIMENT[o] for o in b["out_of_library"]} & set(exps)
+    return {"idp_invitro" if job in DISCOVERY_IDP_EFFECTS else "stepwise_rom"} & set(exps)
 
 
 def discovery_benchmark_idp_model(wildcards):
-    """The nominal L2-S1 model table, for the benchmark jobs with in-vitro IDP cases (lumbar.discovery.benchmark_cases:
-    the IDP effects, and the null datasets from the second one on, which alternate between the experiments).
-    """
-    b = config["discovery"]["benchmark"]
-    if "idp_invitro" not in b["experiments"]:
+    """The nominal L2-S1 model table, for the benchmark jobs with in-vitro IDP cases."""
+    if "idp_invitro" not in discovery_job_experiments(wildcards.job):
         return []
-    idp = wildcards.job in ("axial_preload", "idp_moment_term", "disc_load_share")
-    null = wildcards.job == "null" and (
-        b["experiments"] == ["idp_invitro"] or b["n_null"] >= 2
-    )
-    return ["results/discrepancy/model/idp_invitro_model.csv"] if idp or null else []
+    return ["results/discrepancy/model/idp_invitro_model.csv"]
+
+
+def discovery_specimen_bank(experiment):
+    """The null bank of virtual specimens of an experiment (rule discovery_specimen_bank), [] when the null has no
+    specimens (discovery.null_specimens: 0)."""
+    if config["discovery"]["null_specimens"] == 0:
+        return []
+    name = {"stepwise_rom": "rom", "idp_invitro": "idp"}[experiment]
+    return [f"results/discrepancy/model/specimen_bank_{name}.csv"]
+
+
+def discovery_benchmark_banks(wildcards):
+    """The null banks and fixture specimens a benchmark job reads."""
+    exps = discovery_job_experiments(wildcards.job)
+    out = [p for x in sorted(exps) for p in discovery_specimen_bank(x)]
+    b = config["discovery"]["benchmark"]
+    if "idp_invitro" in exps and b["generator"] == "virtual_specimens":
+        out += [
+            f"results/discrepancy/model/fixture_specimens_idp_{k}.csv"
+            for k in range(DISCOVERY_IDP_FIXTURE_PARTS)
+        ]
+    return out
 
 
 def discovery_final_outputs():
@@ -367,6 +415,7 @@ def discovery_final_outputs():
         "results/discrepancy/real_data_summary.csv",
         "results/discrepancy/benchmark.csv",
         "results/discrepancy/benchmark_summary.json",
+        "results/discrepancy/benchmark_section.md",
         "results/figures/discrepancy_benchmark.png",
     ]
 

@@ -1,6 +1,60 @@
 # Discrepancy discovery (issue 6): lumbar.discovery on the default stepwise-reduction table, the published
-# vertebral-arch artefact and the in-vivo validation of the muscle model; the hidden-effect benchmark
-# (test fixtures) split into one job per hidden effect (+ one for the null datasets).
+# vertebral-arch artefact and the in-vivo validation of the muscle model; the null hypothesis drawn from banks of
+# virtual specimens of the nominal model (rule discovery_specimen_bank); the benchmark (test fixtures from other
+# virtual specimens) split into one job per hidden effect, one for the null tables, one for the out-of-library causes.
+
+
+# the null bank: virtual specimens of the nominal model in every compared scenario (lumbar.discovery.specimens)
+rule discovery_specimen_bank:
+    input:
+        geometry_inputs,
+        characteristics=characteristics_dir(),
+        characteristic_tables=characteristic_tables(
+            config["characteristics"]["data_dir"]
+        ),
+        calibrated=discovery_calibrated_tables(),
+        cables=config["l2s1"]["cables"],
+    output:
+        "results/discrepancy/model/specimen_bank_{experiment}.csv",
+    log:
+        "logs/discovery_specimen_bank_{experiment}.log",
+    benchmark:
+        "results/benchmarks/discovery_specimen_bank_{experiment}.tsv"
+    wildcard_constraints:
+        experiment="rom|idp",
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        cfg=discovery_config,
+    script:
+        "../scripts/discover.py"
+
+
+# the virtual specimens the IDP fixtures of the benchmark are drawn from (a stream disjoint from the null bank's),
+# in parts (lumbar.discovery.benchmark.IDP_FIXTURE_PARTS), so both cores make them
+rule discovery_fixture_specimens_idp:
+    input:
+        geometry_inputs,
+        characteristics=characteristics_dir(),
+        characteristic_tables=characteristic_tables(
+            config["characteristics"]["data_dir"]
+        ),
+        calibrated=discovery_calibrated_tables(),
+        cables=config["l2s1"]["cables"],
+    output:
+        "results/discrepancy/model/fixture_specimens_idp_{part}.csv",
+    log:
+        "logs/discovery_fixture_specimens_idp_{part}.log",
+    benchmark:
+        "results/benchmarks/discovery_fixture_specimens_idp_{part}.tsv"
+    wildcard_constraints:
+        part="[0-9]+",
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        cfg=discovery_config,
+    script:
+        "../scripts/discover.py"
 
 
 rule discovery_idp_model:
@@ -35,6 +89,7 @@ rule discovery_default:
             config["characteristics"]["data_dir"]
         ),
         calibrated=discovery_calibrated_tables(),
+        bank=discovery_specimen_bank("stepwise_rom"),
     output:
         **discovery_case_outputs("default"),
     log:
@@ -82,6 +137,7 @@ rule discovery_intact_rom:
             config["characteristics"]["data_dir"]
         ),
         calibrated=discovery_calibrated_tables(),
+        bank=discovery_specimen_bank("stepwise_rom"),
     output:
         **discovery_case_outputs("intact_rom"),
     log:
@@ -144,6 +200,7 @@ rule discovery_benchmark_job:
         ),
         calibrated=discovery_calibrated_tables(),
         idp_model=discovery_benchmark_idp_model,
+        banks=discovery_benchmark_banks,
     output:
         table="results/discrepancy/benchmark/{job}.csv",
         fixtures=directory("results/discrepancy/benchmark/{job}_fixtures"),
@@ -182,6 +239,7 @@ rule discovery_benchmark:
             caption="../report/discrepancy_benchmark.rst",
             category="Discrepancy",
         ),
+        paragraph="results/discrepancy/benchmark_section.md",
     log:
         "logs/discovery_benchmark.log",
     conda:

@@ -8,38 +8,47 @@
    moments from the muscle model's segment loads) or the neutral lordotic angle per reduction stage
    (``stage, lordosis_deg, ...``: the vertebral-arch artefact). Bad files and columns are rejected before
    any computation.
-2. Residuals ``z = (model - measured) / sigma`` per scenario, sigma = the uncertainty of the measured mean:
-   ROM: (max - min) / d2(n) / sqrt(n) (range -> SD with the expected range of n normal samples), rows
-   without a range ``no_range_sd_deg``; IDP: SD / sqrt(n); in vivo and neutral angle: configured SDs
-   (none published). ``gap`` = RMS of z. Disagreement map: z by stage x (direction, moment), set-up x
-   load case, activity, or stage.
-3. Every candidate effect of :mod:`lumbar.experiments.effects` acting on the experiment is fitted (one bounded
-   parameter): one batched forward solve on a coarse parameter grid for all candidates together, a cubic
-   spline per scenario, ``scipy.optimize.minimize_scalar`` (bounded), one batched solve on a fine grid
-   around each optimum, and one exact solve at the estimates (3 batches in total).
-4. Decision (issue 15): the likelihood-ratio statistic of each candidate against "no effect",
-   ``T_c = (chi2_none - chi2_c) / c`` with the overdispersion of the no-effect model
-   ``c = max(1, chi2_none / (n - 1))``; its null distribution from a parametric bootstrap
-   (``n_bootstrap`` datasets from the project's generator around the nominal model: per row n virtual
-   specimens with the row's per-specimen spread, summarised as the experiment's table is; only the cached
-   grid solves are reused, no new forward solve); p-value = single-step max-T over the candidates
-   (corrected for their number). ``confidence`` = probability of the named effect among the candidates
-   (weights exp(-chi2_c / 2 c_best)); null when nothing is named. QAICc and grouped cross-validation are
-   reported as diagnostics.
-5. Naming rule: an effect is named only if the data have at least ``min_rows`` compared scenarios (fewer:
-   "too few rows", nothing named), gap_before > ``min_gap``, p < ``alpha`` and the refit reduces the gap by
-   ``min_gap_reduction``. Estimates on a bound (``at_bound``) and a gap after the refit still above
-   ``min_gap`` (``gap_after_above_threshold``) are flagged.
-6. Identifiability: the correlation of every pair of candidates' sensitivity vectors on the experiment; a
+2. Residuals ``z = (model - measured) / sigma`` per scenario, sigma = the uncertainty of the measured mean (the
+   variance of the specimen mean): ROM: (max - min) / d2(n) / sqrt(n) (range -> SD with the expected range of n
+   normal samples), rows without a range ``no_range_sd_deg``; IDP: SD / sqrt(n); in vivo and neutral angle:
+   configured SDs (none published). ``gap`` = RMS of z against the nominal model. Disagreement map: z by stage x
+   (direction, moment), set-up x load case, activity, or stage.
+3. The null hypothesis has specimens in it (:mod:`.specimens`): "the table's n virtual specimens of the nominal
+   model (the configured SpecimenVariation) plus measurement noise". Its prediction r is the mean of a bank of
+   ``null_specimens`` virtual specimens (nominal model + the specimen-mean shift of a nonlinear model); its null
+   tables are drawn from the bank (n specimens per table, the table's noise fitted from its spread, corrections
+   for the bank's size), summarised as the table is. Experiments without specimens (in vivo, neutral angle) keep
+   the nominal model plus Gaussian noise.
+4. Every candidate effect of :mod:`lumbar.experiments.effects` acting on the experiment is fitted on top of r (one
+   bounded parameter): one batched forward solve on a coarse grid (denser near 0) for all candidates together, a
+   cubic spline per scenario, ``scipy.optimize.minimize_scalar`` (bounded), and one exact solve at the best
+   candidate's estimate. Beside them, the nuisance explanations of :mod:`.nuisance` (uniform scale and offset of
+   the measured quantity; per direction for ROM) are fitted in closed form.
+5. Tests, all by the parametric bootstrap on the same null tables: the LR statistic of each candidate against r,
+   ``T_c = (chi2_r - chi2_c) / c`` with ``c = max(1, chi2_r / (n - 1))``, p-value = single-step max-T over the
+   candidates; the best candidate against the best nuisance explanation it is not equivalent to (tables of the
+   nuisance hypothesis: the null tables scaled or offset by its refit); the adequacy of each explanation (its
+   residual chi2 against its own tables).
+6. Decision: ``named: <effect>`` only if the data have at least ``min_rows`` compared scenarios, gap_before >
+   ``min_gap``, p < ``alpha``, the effect beats the best nuisance at ``alpha``, its refit is adequate and reduces the
+   gap by ``min_gap_reduction``. Otherwise ``named_effect`` is null and the decision says what the table is:
+   ``nothing named`` (consistent with the nominal model and specimen variation; ``nuisance: specimen-mean shift``
+   when its gap to the nominal model is what varied specimens give), ``nuisance: uniform scale 0.82`` (a nuisance
+   explains it), or ``unexplained`` (something is missing that the library does not hold). A candidate whose effect
+   on the experiment is a nuisance family (multiple correlation >= ``max_correlation``, e.g. an axial preload and a
+   uniform IDP offset) is named with that equivalence stated. Estimates on a bound are flagged.
+7. Identifiability: the correlation of every pair of candidates' sensitivity vectors on the experiment; a
    pair with |r| >= ``max_correlation`` is reported as not separable, with the ``n_next`` load cases of the
-   experiment's design space that separate it best ("measure next").
+   experiment's design space that separate it best ("measure next"); and each candidate's multiple correlation
+   with each nuisance family.
 
 Outputs in DIR: discovery.json, scenarios.csv, disagreement_map.png, ranking.png, before_after.png,
-section.md. The benchmark (hidden-effect fixtures) is :func:`make_hidden_effect_dataset` /
-:func:`run_benchmark_cases` / :func:`summarise_benchmark`.
+section.md. The benchmark (test fixtures from other virtual specimens: nulls, library effects, out-of-library causes)
+is :func:`make_hidden_effect_dataset` / :func:`run_benchmark_cases` / :func:`summarise_benchmark`.
 
 Modules: :mod:`.detect` (settings, reading and recognising a measured table), :mod:`.problems` (measured data +
-batched forward model per experiment), :mod:`.fit` (:func:`discover`: fit, test, name, identifiability),
+batched forward model per experiment), :mod:`.specimens` (the banks of virtual specimens and the null tables),
+:mod:`.nuisance` (nuisance explanations), :mod:`.fit` (:func:`discover`: fit, test, name, identifiability),
 :mod:`.report` (output files, :func:`run`, the summary of the real-data discoveries), :mod:`.benchmark`
 (hidden-effect fixtures), :mod:`.cli` (``python -m lumbar.discovery``); the candidate effects are
 :mod:`lumbar.experiments.effects`, the figures :mod:`lumbar.plots.discovery`. This package re-exports the public names.
@@ -47,8 +56,11 @@ batched forward model per experiment), :mod:`.fit` (:func:`discover`: fit, test,
 from __future__ import annotations
 
 from .benchmark import (
+                        OUT_OF_LIBRARY,
                         TARGETS,
+                        FixtureSpecimens,
                         benchmark_cases,
+                        job_cases,
                         benchmark_magnitudes,
                         benchmark_settings,
                         make_hidden_effect_dataset,
@@ -80,11 +92,11 @@ from .problems import (
                         rom_problem,
                         solve_idp_model,
 )
-from .report import REAL_DATA_COLUMNS, real_data_summary, run, section_markdown, write_outputs
+from .report import REAL_DATA_COLUMNS, benchmark_paragraph, real_data_summary, run, section_markdown, write_outputs
 
-__all__ = ["TARGETS", "benchmark_cases", "benchmark_magnitudes", "benchmark_settings", "make_hidden_effect_dataset",
+__all__ = ["OUT_OF_LIBRARY", "FixtureSpecimens", "job_cases", "TARGETS", "benchmark_cases", "benchmark_magnitudes", "benchmark_settings", "make_hidden_effect_dataset",
            "run_benchmark_cases", "summarise_benchmark", "main", "INTERNAL_SETTINGS", "DiscoveryInputError",
            "default_settings", "detect_experiment", "discovery_settings", "read_measured", "discover", "D2",
            "Problem", "build_problem", "fsu_variants_from_config", "idp_forward", "idp_model_table", "idp_problem",
            "in_vivo_problem", "neutral_problem", "read_segment_loads", "resolve_charset", "rom_problem",
-           "solve_idp_model", "REAL_DATA_COLUMNS", "real_data_summary", "run", "section_markdown", "write_outputs"]
+           "solve_idp_model", "benchmark_paragraph", "REAL_DATA_COLUMNS", "real_data_summary", "run", "section_markdown", "write_outputs"]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -11,11 +12,13 @@ import pandas as pd
 from ..inputs.config import schema_defaults
 from ..inputs.io import TableError, read_table
 from ..experiments.stepwise_reduction import read_experiment_table
-from ..inputs.tables import MEASURED
+from ..inputs.tables import MEASURED, check_measured
+
+log = logging.getLogger(__name__)
 
 #: discovery settings that are not configuration keys; every other setting and its default is owned by the
 #: ``discovery`` section of the configuration schema (:func:`lumbar.inputs.config.schema_defaults`)
-INTERNAL_SETTINGS = dict(seed=0, fine_candidates=2)
+INTERNAL_SETTINGS = dict(seed=0, fine_candidates=0)
 
 
 class DiscoveryInputError(ValueError):
@@ -81,17 +84,20 @@ def read_measured(path) -> tuple[str, pd.DataFrame]:
     """(experiment, validated table) of a measured/surrogate/fixture file; DiscoveryInputError if unusable.
 
     Every schema goes through :func:`lumbar.inputs.io.read_table`: a bad cell names the file, the 1-based data row, the
-    column and the expected form; ragged rows are rejected."""
+    column and the expected form; ragged rows and repeated scenarios are rejected. Then
+    :func:`lumbar.inputs.tables.check_measured` refuses values outside the sourced physiological ranges (naming the
+    unit they look like: radians, kPa, ...) and spreads a row's specimens cannot have; what is unusual but possible
+    is logged as a warning and kept in ``table.attrs["input_warnings"]`` (and in the discovery's result)."""
     p = Path(path)
     if not p.is_file():
         raise DiscoveryInputError(f"measured file not found: {p}")
+    _check_ragged(p)
     try:
         head = pd.read_csv(p, nrows=5)
     except (pd.errors.EmptyDataError, pd.errors.ParserError, UnicodeDecodeError) as e:
         raise DiscoveryInputError(f"{p}: not a readable CSV table ({type(e).__name__}); expected a CSV file with a "
                                   f"header row") from e
     exp = detect_experiment(head.columns, p)
-    _check_ragged(p)
     try:
         if exp == "stepwise_rom":
             df = read_experiment_table(p)
@@ -112,8 +118,15 @@ def read_measured(path) -> tuple[str, pd.DataFrame]:
         bad = np.flatnonzero(df["converged"].to_numpy(bool) & ~np.isfinite(df["idp_sim_mpa"].to_numpy(float)))
         if len(bad):
             raise DiscoveryInputError(f"{p}, row {bad[0] + 1}, column 'idp_sim_mpa': empty on a converged row; "
-                                      f"expected a finite number in [0, 100] (empty only where converged is False)")
+                                      f"expected a finite number >= 0 (empty only where converged is False)")
     if exp == "neutral_angle" and len(df) < 2:
         raise DiscoveryInputError(f"{p}: a neutral-angle table needs >= 2 stages (the first is the reference); "
                                   f"got {len(df)}")
+    try:
+        warns = check_measured(exp, df, p)
+    except TableError as e:
+        raise DiscoveryInputError(str(e)) from e
+    for w in warns:
+        log.warning("%s", w)
+    df.attrs["input_warnings"] = warns
     return exp, df

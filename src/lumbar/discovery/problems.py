@@ -21,12 +21,11 @@ from ..experiments.l2s1 import LEVELS, derive_cables, run_set
 from ..experiments.stepwise_reduction import scenario_grid
 from ..inputs.tables import SEGMENT_LOAD_COLUMNS
 from .detect import DiscoveryInputError, benchmark_settings, discovery_settings
+from .specimens import D2, bank_for, d2
 
 log = logging.getLogger(__name__)
 
 
-# expected range of n normal samples in SDs (d2 of quality control), n = 2..10
-D2 = {2: 1.128, 3: 1.693, 4: 2.059, 5: 2.326, 6: 2.534, 7: 2.704, 8: 2.847, 9: 2.970, 10: 3.078}
 
 
 # ------------------------------------------------------------------ problems (measured data + batched forward model)
@@ -93,7 +92,7 @@ def _candidates(s, experiment):
     return names
 
 
-def rom_problem(df, config, solver_kw=None) -> Problem:
+def rom_problem(df, config, solver_kw=None, bank=None) -> Problem:
     s = discovery_settings(config)
     fv = fsu_variants_from_config(config)
     keys = df[["stage", "direction", "moment_nm"]].reset_index(drop=True)
@@ -114,12 +113,29 @@ def rom_problem(df, config, solver_kw=None) -> Problem:
         rom, conv, _, _ = fv.simulate(design, values, **kw)
         return np.where(conv, rom, np.nan)
 
+    n = d0["n_specimens"].to_numpy(int)
+    with np.errstate(invalid="ignore"):
+        spec_sd = np.where(has_range, (d0["rom_max_deg"].to_numpy(float) - d0["rom_min_deg"].to_numpy(float))
+                           / d2(np.maximum(n, 2)), np.nan)
     return Problem("stepwise_rom", keys, d0["rom_mean_deg"].to_numpy(float), _rom_sigma(d0, s),
                    "deg", forward, _candidates(s, "stepwise_rom"), "stage", ["direction", "moment_nm"],
                    _grouped_folds(cells, s["cv_folds"]),
-                   meta={"n_per_row": d0["n_specimens"].to_numpy(int), "has_range": has_range,
-                         "sigma_floor": float(s["sigma_floor_deg"]),
+                   meta={"n_per_row": n, "has_range": has_range, "spec_sd": spec_sd,
+                         "sigma_floor": float(s["sigma_floor_deg"]), "groups": keys["direction"].to_numpy(str),
+                         "bank": _bank("stepwise_rom", keys, config, s, bank),
                          "design_keys": design, "design_forward": design_forward})
+
+
+def _bank(experiment, keys, config, s, bank=None):
+    """The null bank of the problem: ``bank`` (a :class:`lumbar.discovery.specimens.SpecimenBank` covering the
+    table's scenarios) when given, else ``discovery.null_specimens`` virtual specimens; None when that is 0."""
+    if bank is not None:
+        a = bank.align(keys)
+        if a is None:
+            raise ValueError(f"the given specimen bank does not cover every scenario of the {experiment} table")
+        return a
+    K = int(s["null_specimens"])
+    return bank_for(experiment, keys, config, K) if K > 0 else None
 
 
 def neutral_problem(df, config) -> Problem:
@@ -184,7 +200,7 @@ def solve_idp_model(config):
     return sim
 
 
-def idp_problem(df, config, model=None) -> Problem:
+def idp_problem(df, config, model=None, bank=None) -> Problem:
     s = discovery_settings(config)
     model = idp_model_table(config) if model is None else model
     d = df.reset_index(drop=True).merge(model, on=["muscle_setup", "load_case"], how="left", validate="one_to_one")
@@ -207,11 +223,13 @@ def idp_problem(df, config, model=None) -> Problem:
     def design_forward(values):
         return idp_forward(values, dbase, dM, per_n) / 1e6
 
-    return Problem("idp_invitro", d[["muscle_setup", "load_case"]], d["idp_mean_mpa"].to_numpy(float), sig, "MPa",
+    keys = d[["muscle_setup", "load_case"]]
+    return Problem("idp_invitro", keys, d["idp_mean_mpa"].to_numpy(float), sig, "MPa",
                    forward, _candidates(s, "idp_invitro"), "muscle_setup", ["load_case"],
                    _grouped_folds(list(d["muscle_setup"]), s["cv_folds"]),
                    meta={"idp_per_newton_pa": per_n, "n_per_row": n.astype(int), "has_range": n > 1,
-                         "sigma_floor": float(s["sigma_floor_mpa"]),
+                         "spec_sd": np.where(n > 1, d["idp_sd_mpa"].to_numpy(float), np.nan),
+                         "sigma_floor": float(s["sigma_floor_mpa"]), "bank": _bank("idp_invitro", keys, config, s, bank),
                          "design_keys": mk[["muscle_setup", "load_case"]], "design_forward": design_forward})
 
 
@@ -278,11 +296,11 @@ def in_vivo_problem(df, config, segment_loads=None) -> Problem:
 
 def build_problem(experiment, df, config, **kw) -> Problem:
     if experiment == "stepwise_rom":
-        return rom_problem(df, config, kw.get("solver_kw"))
+        return rom_problem(df, config, kw.get("solver_kw"), kw.get("bank"))
     if experiment == "neutral_angle":
         return neutral_problem(df, config)
     if experiment == "idp_invitro":
-        return idp_problem(df, config, kw.get("idp_model"))
+        return idp_problem(df, config, kw.get("idp_model"), kw.get("bank"))
     if experiment == "in_vivo":
         return in_vivo_problem(df, config, kw.get("segment_loads"))
     raise ValueError(f"unknown experiment {experiment!r}")

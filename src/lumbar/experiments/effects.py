@@ -271,12 +271,14 @@ class FsuVariants:
             R0[:, 0] = so3.exp(np.asarray(off, float))
         return x0, R0
 
-    def simulate(self, scen: pd.DataFrame, values: dict, max_iter=50, tol=1e-7):
+    def simulate(self, scen: pd.DataFrame, values: dict, max_iter=50, tol=1e-7, retry_load_steps=(4, 16)):
+        """``retry_load_steps``: load continuation for scenarios that fail at first (the solver's default; the
+        virtual-specimen banks of the discrepancy null pass fewer, a failing specimen scenario is a NaN there)."""
         scen = scen.reset_index(drop=True)
         stages = list(dict.fromkeys(scen["stage"]))
         fm, cm, params, G = self.masks_params(stages, values)
         S, n, m = len(stages), len(scen), self.model
-        kw = dict(max_iter=max_iter, tol_force=tol, tol_moment=tol)
+        kw = dict(max_iter=max_iter, tol_force=tol, tol_moment=tol, retry_load_steps=tuple(retry_load_steps))
         r0 = solve(m, np.zeros((G * S, m.nb, 6)), *self._start(params, G * S), fmask=fm, cmask=cm,
                    params=params, **kw)
         si = np.array([stages.index(s) for s in scen["stage"]])

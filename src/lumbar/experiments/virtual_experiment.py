@@ -21,7 +21,7 @@ import pandas as pd
 
 from . import effects as fx
 from .fsu import MAIN_DIRECTIONS, STAGES, build_fsu
-from ..mechanics.idp import idp_per_newton
+from ..mechanics.idp import DISC_AREA_M2, idp_per_newton
 from .l2s1 import LEVELS, derive_cables, run_set
 from .stepwise_reduction import simulate_stepwise_reduction
 
@@ -348,3 +348,90 @@ def idp_table(geometry, charset, seed, n_specimens=7, variation=None, noise_sd_m
         log.warning("%d IDP row(s) have fewer than %d specimens (non-converged specimens dropped)", reduced,
                     n_specimens)
     return out[~empty].reset_index(drop=True)
+
+
+# ---------------------------------------------------------------- per-specimen responses (discrepancy discovery)
+def modified_charset(charset, disc_scale=1.0, remove_ligaments=()):
+    """A characteristic set changed in a way the effect registry (:mod:`lumbar.experiments.effects`) does not hold,
+    for the out-of-library cases of the discrepancy benchmark: the disc's torque laws (p1, p3 of Eq. 3), axial and
+    shear stiffness scaled by ``disc_scale`` (stiffer > 1, softer < 1); the ligaments ``remove_ligaments`` left out
+    (``lumbar.experiments.fsu.add_level`` builds no fibres for a kind without a law)."""
+    f = float(disc_scale)
+    if not np.isfinite(f) or f <= 0:
+        raise ValueError(f"disc_scale must be finite and > 0, got {disc_scale!r}")
+    unknown = sorted(set(remove_ligaments) - set(charset.ligaments))
+    if unknown:
+        raise ValueError(f"cannot remove ligament(s) {unknown}: the set has {sorted(charset.ligaments)}")
+    disc = charset.disc
+    if f != 1.0:
+        torque = {d: (p1 * f, p2, p3 * f) for d, (p1, p2, p3) in disc.torque.items()}
+        kw = dict(torque=torque, k_axial_quadratic=disc.k_axial_quadratic * f, k_axial_linear=disc.k_axial_linear * f,
+                  k_shear=None if disc.k_shear is None else disc.k_shear * f)
+        disc = dataclasses.replace(disc, **kw) if dataclasses.is_dataclass(disc) else _ns_replace(disc, **kw)
+    ligs = {k: v for k, v in charset.ligaments.items() if k not in set(remove_ligaments)}
+    if dataclasses.is_dataclass(charset):
+        return dataclasses.replace(charset, disc=disc, ligaments=ligs)
+    return _ns_replace(charset, disc=disc, ligaments=ligs)
+
+
+def rom_specimens(geometry, charset, seed, n_specimens, scenarios, variation=None, variants=(({}, None),),
+                  level="L4-L5", k_shear=None, max_iter=50, tol=1e-7, retry_load_steps=()):
+    """ROM [deg] of ``n_specimens`` virtual specimens (no measurement noise) in every scenario of ``scenarios``
+    (stage, direction, moment_nm), for every model variant: ``variants`` = [(effects {name: value} of
+    :data:`lumbar.experiments.effects.SOLVER_EFFECTS`, modification dict of :func:`modified_charset` or None)].
+
+    Specimen k is ``virtual_specimen(geometry, charset, rng_k)`` with ``rng_k`` from ``specimen_rngs(seed, n)``, the
+    same specimens for every variant and for every call with that seed (the first k specimens do not depend on
+    ``n_specimens``); the variants sharing a modification are solved as one
+    :class:`lumbar.experiments.effects.FsuVariants` batch per specimen. Returns (rom (K, G, n) with NaN where a
+    specimen has no equilibrium, converged (K, G, n))."""
+    _check_design(n_specimens, 0.0, "noise", "deg")
+    v = _variation(variation)
+    scen = scenarios.reset_index(drop=True)
+    variants = list(variants)
+    groups: dict = {}
+    for j, (eff, mod) in enumerate(variants):
+        groups.setdefault(tuple(sorted((mod or {}).items())), []).append(j)
+    K, G, n = int(n_specimens), len(variants), len(scen)
+    rom, conv = np.full((K, G, n), np.nan), np.zeros((K, G, n), bool)
+    for k, rng in enumerate(specimen_rngs(seed, K)):
+        geo_k, cs_k = virtual_specimen(geometry, charset, rng, v, levels=[level])
+        for mod, js in groups.items():
+            cs_m = modified_charset(cs_k, **dict(mod)) if mod else cs_k
+            fv = fx.FsuVariants(build_fsu(geo_k, cs_m, level, k_shear=k_shear))
+            names = sorted({name for j in js for name in variants[j][0]})
+            values = {name: np.array([float(variants[j][0].get(name, 0.0)) for j in js]) for name in names}
+            if not values:
+                values = {}
+            r, c, _, _ = fv.simulate(scen, values, max_iter=max_iter, tol=tol, retry_load_steps=retry_load_steps)
+            if not values:
+                r, c = np.broadcast_to(r, (len(js), n)), np.broadcast_to(c, (len(js), n))
+            rom[k, js], conv[k, js] = np.where(c, r, np.nan), c
+    return rom, conv
+
+
+def idp_specimens(geometry, charset, seed, n_specimens, variation=None, cables=None, idp_formula="paper1",
+                  disc_area_m2=DISC_AREA_M2, k_shear=None, disc_scale=1.0, max_iter=50, tol=1e-7,
+                  first=0) -> pd.DataFrame:
+    """Per-specimen L2-S1 results (no measurement noise) of ``n_specimens`` virtual specimens, as
+    :func:`idp_table` makes them (``virtual_specimen`` with ``specimen_rngs(seed, n)``, all four levels perturbed;
+    the first k specimens do not depend on ``n_specimens``; ``first``: start at specimen ``first`` of the stream, so
+    a stream can be made in parts); ``disc_scale``: every specimen's discs scaled by
+    :func:`modified_charset` (an out-of-library change). One row per specimen and scenario: specimen, muscle_setup,
+    load_case, converged, idp_mpa (NaN without equilibrium), disc_axial_force_n, disc_moment_sagittal_nm and
+    idp_per_newton_pa (the specimen's L4-L5 IDP per newton of disc force, for the IDP effects)."""
+    _check_design(n_specimens, 0.0, "noise", "MPa")
+    v = _variation(variation)
+    cables = derive_cables() if cables is None else cables
+    out = []
+    for k, rng in enumerate(specimen_rngs(seed, int(first) + int(n_specimens))[int(first):], start=int(first)):
+        geo_k, cs_k = virtual_specimen(geometry, charset, rng, v, levels=list(LEVELS))
+        if disc_scale != 1.0:
+            cs_k = modified_charset(cs_k, disc_scale=disc_scale)
+        sim, _ = run_set(geo_k, cs_k, cables, idp_formula=idp_formula, k_shear=k_shear, max_iter=max_iter, tol=tol)
+        d = sim[["muscle_setup", "load_case", "converged", "idp_mpa", "disc_axial_force_n",
+                 "disc_moment_sagittal_nm"]].copy()
+        d.insert(0, "specimen", k)
+        d["idp_per_newton_pa"] = idp_per_newton(idp_formula, geo_k.levels["L4-L5"].disc_csa, disc_area_m2)
+        out.append(d)
+    return pd.concat(out, ignore_index=True)

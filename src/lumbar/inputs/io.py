@@ -43,6 +43,7 @@ import pandas as pd
 
 __all__ = [
     "Column",
+    "UniqueKey",
     "TableSchema",
     "TableError",
     "OutputError",
@@ -145,13 +146,26 @@ class Column:
 
 
 @dataclass(frozen=True)
+class UniqueKey:
+    """Columns whose values identify a row: a second row with the same values is an error (a duplicated
+    scenario would silently enter a fit twice). ``label`` names the key in the message ("scenario"),
+    ``column`` is the column the error names, ``expected`` the expected form."""
+
+    columns: tuple[str, ...]
+    label: str
+    column: str
+    expected: str
+
+
+@dataclass(frozen=True)
 class TableSchema:
     """Column name -> :class:`Column`; ``allow_extra`` permits undeclared columns
-    (they are kept as text)."""
+    (they are kept as text); ``unique``: the row key (:class:`UniqueKey`), None = rows may repeat."""
 
     name: str
     columns: Mapping[str, Column] = field(default_factory=dict)
     allow_extra: bool = True
+    unique: UniqueKey | None = None
 
     @property
     def required(self) -> list[str]:
@@ -239,7 +253,21 @@ def read_table(path, schema: TableSchema) -> pd.DataFrame:
                 out[col] = pd.Series(parsed, dtype="int64")
         else:
             out[col] = pd.Series(parsed, dtype=object)
-    return pd.DataFrame(out, columns=header)
+    df = pd.DataFrame(out, columns=header)
+    if schema.unique is not None and all(c in df for c in schema.unique.columns):
+        _check_unique(df, schema.unique, path)
+    return df
+
+
+def _check_unique(df: pd.DataFrame, key: UniqueKey, path) -> None:
+    """TableError at the first row whose key repeats an earlier row's."""
+    seen: dict = {}
+    for i, k in enumerate(zip(*(df[c].tolist() for c in key.columns))):
+        k = tuple(v.item() if hasattr(v, "item") else v for v in k)
+        if k in seen:
+            raise TableError(path, f"duplicate {key.label} {k if len(k) > 1 else k[0]!r} (first at row {seen[k]})",
+                             row=i + 1, column=key.column, expected=key.expected)
+        seen[k] = i + 1
 
 
 # ---------------------------------------------------------------- writers
