@@ -1,7 +1,7 @@
-"""Benchmark: the muscle redundancy solver on the default study (issues 5, 16), one core.
+"""Benchmark: the muscle redundancy solver on the default study, one core.
 
 Prints one JSON object with, for the workflow's solver settings (``current``) and, measured in the same run on
-the same postures, the settings before the issue-16 speed work (``baseline``: batches of 16 postures, every
+the same postures, the settings before the speed work (``baseline``: batches of 16 postures, every
 line-search step length evaluated at once, IPOPT's polish of an SQP point started with least-squares
 multipliers; the Millard-curve inversion fix is in both, it has no switch):
 

@@ -1,4 +1,4 @@
-"""Benchmark: the two paths to a posture optimum side by side (issue 16), one core.
+"""Benchmark: the two paths to a posture optimum side by side, one core.
 
 For each activity (default: upright standing and 19 deg extension; ``--activities`` for more):
 * ``sqp``: the hand-written SQP alone (``certifier: sqp``), cold from the reference pose;

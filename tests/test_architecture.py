@@ -1,4 +1,4 @@
-"""Architecture rules of the ``lumbar`` package (issue 17), checked on the source of every module:
+"""Architecture rules of the ``lumbar`` package, checked on the source of every module:
 
 * no import circle between the package's modules (imports inside function bodies count too);
 * no module imports a private name (``_x``) of another ``lumbar`` module, or reaches one through a

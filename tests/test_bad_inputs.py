@@ -528,7 +528,7 @@ def test_reject_ligament_insertion_off_its_vertebra():
                    "expected within 10 mm")
 
 
-# ---------------------------------------------------------------- stale results and interrupts (issue 18)
+# ---------------------------------------------------------------- stale results and interrupts
 def _smk_ok(tree, *args, timeout=300) -> str:
     r = snakemake("--configfile", "config/test/config.yaml", *args, cwd=tree, timeout=timeout)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
@@ -578,7 +578,7 @@ def _edit_in_place(path: Path, old: str, new: str):
 
 @pytest.mark.workflow
 def test_in_place_edit_of_characteristics_table_reruns_exactly_its_readers(touched_tree):
-    """Issue 18.1: rewriting ligament_prestrain.csv in place re-ran only paper_report (the rules took the folder
+    """Regression: rewriting ligament_prestrain.csv in place re-ran only paper_report (the rules took the folder
     as input) and fsu_rom_intact.csv kept the old ROM. Now every reader of the file, and only they, re-run."""
     f = touched_tree / "data" / "characteristics" / "ligament_prestrain.csv"
     before = f.read_text()
@@ -619,7 +619,7 @@ def test_in_place_edit_of_experiment_table_reruns_only_its_readers(touched_tree)
 
 @pytest.mark.workflow
 def test_published_model_results_is_an_input_when_present(touched_tree, tmp_path):
-    """Issue 18: adding ../shared after a run changed nothing (paths.published_model_results was a parameter).
+    """Regression: adding ../shared after a run changed nothing (paths.published_model_results was a parameter).
     Now the file is an input of the rules that fill the paper columns, and the workflow runs without it."""
     pub = tmp_path / "published_model_results.csv"
     cfg = tmp_path / "config.yaml"
@@ -646,7 +646,7 @@ def _readme_resume_commands() -> list[list[str]]:
 @pytest.mark.workflow
 @pytest.mark.parametrize("sig", ["SIGKILL", "SIGINT"])
 def test_readme_resume_command_after_interrupt(tmp_path, sig):
-    """Issue 18: after SIGINT/SIGKILL the README's plain re-run failed (IncompleteFilesException, then
+    """Regression: after SIGINT/SIGKILL the README's plain re-run failed (IncompleteFilesException, then
     LockException). Interrupt a one-job run while its job runs, then resume with the README's command."""
     import signal
     import subprocess
@@ -684,7 +684,7 @@ def test_readme_resume_command_after_interrupt(tmp_path, sig):
     assert (tree / target[0]).stat().st_size > 0
 
 
-# ---------------------------------------------------------------- issue 18: silent wrong numbers -> loud errors
+# ---------------------------------------------------------------- silent wrong numbers -> loud errors
 VH = DATA / "geometry" / "visible_human_lss"
 
 

@@ -1,4 +1,4 @@
-"""Discrepancy discovery (issue 6): candidate effects (lumbar.experiments.effects) and lumbar.discovery.
+"""Discrepancy discovery: candidate effects (lumbar.experiments.effects) and lumbar.discovery.
 
 Datasets with a planted effect are TEST FIXTURES made in the tests (lumbar.discovery.make_hidden_effect_dataset,
 or the synthetic L2-S1 / muscle-model tables below), never data.
@@ -36,7 +36,7 @@ def fv():
 
 # ------------------------------------------------------------------ fixtures of the L2-S1 and muscle-model schemas
 def in_vivo_fixture(tmp_path, k_moment=0.0, seed=0):
-    """TEST FIXTURE of the muscle model's output tables (contract of issue 5), with an optional hidden moment
+    """TEST FIXTURE of the muscle model's output tables (the muscle stage's contract), with an optional hidden moment
     term: results/tables/in_vivo_validation.csv and muscle_model_segment_loads.csv schemas."""
     acts = ["extension_20deg", "relaxed_standing", "crate_close_chest", "crate_far_60cm", "flexion_36deg",
             "lift_round_back", "sitting_max_flexion", "lying_prone"]
@@ -301,7 +301,7 @@ def test_benchmark_summary_false_positive_rate_interval_and_power():
 
 
 def test_virtual_specimens_without_equilibrium_are_redrawn_not_dropped():
-    """Survivor bias (issue 15): a specimen that fails a scenario is replaced as a whole by a seeded reserve
+    """Survivor bias: a specimen that fails a scenario is replaced as a whole by a seeded reserve
     specimen; a scenario most specimens fail is a model limit and reported as such."""
     import logging
     from lumbar.experiments.virtual_experiment import _without_survivor_bias
@@ -427,7 +427,7 @@ NA_HEAD = "stage,lordosis_deg,lordosis_sd_deg\n"
      "row 1: 4 field(s) but the header has 3; expected one value per header column"),
 ])
 def test_neutral_angle_and_in_vivo_tables_go_through_a_schema(tmp_path, text, expected):
-    """Issue 18: bad cells name the file, the 1-based data row, the column and the expected form."""
+    """bad cells name the file, the 1-based data row, the column and the expected form."""
     p = tmp_path / "t.csv"
     p.write_text(text)
     with pytest.raises(D.DiscoveryInputError) as e:

@@ -1,4 +1,4 @@
-"""README.md and docs/ stay true (issue 17): a short README with the two quick-start commands, and no relative
+"""README.md and docs/ stay true: a short README with the two quick-start commands, and no relative
 link in README.md or docs/*.md that points nowhere. Fast; no Snakemake.
 
 Links are Markdown links ``[text](target)`` and reference definitions ``[label]: target`` outside fenced code;

@@ -159,7 +159,7 @@ def test_flexion_reduction_steps_follow_the_removed_ligaments_forces(charset):
     * FL, the explicit exception: the published fit (Table 3, d = -11.25 < 0) *falls* with strain
       (66.6 N at 10 %, 62.7 N at 15 %), so the pre-tensioned FL unloads in flexion and acts as a negative
       stiffness; removing it lowers flexion ROM (synthetic unit 9.95 -> 8.52 deg; default geometry
-      11.31 -> 9.04 deg, issue 19)."""
+      11.31 -> 9.04 deg)."""
     fsu = build_fsu(symmetric_fsu(), charset)
     m = fsu.model
     stages = ["intact", "wo_ssl", "wo_isl", "wo_fl"]

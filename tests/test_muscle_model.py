@@ -1,4 +1,4 @@
-"""Muscle-driven model (issue 5): redundancy solver, study functions and their input validation.
+"""Muscle-driven model: redundancy solver, study functions and their input validation.
 
 Solves are batched and warm-started so the module stays within ~60 s on 2 cores.
 """

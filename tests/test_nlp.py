@@ -131,7 +131,7 @@ def test_multistart_reports_the_lower_cost_certified_optimum(solver, standing):
 
 
 def test_full_step_first_line_search_reaches_the_same_optimum(model):
-    """The line search tries the full step alone first and the shorter ones only where it fails (issue 16,
+    """The line search tries the full step alone first and the shorter ones only where it fails (for
     speed); evaluating every step length at once (``full_step_first`` False, the former search) chooses the same
     step, so both reach the same optimum from the same warm start (four standing Sobol samples, SQP alone)."""
     from lumbar.muscles.muscle_model import POSTURES, make_solver, sobol_evaluate, solve_postures, sobol_samples

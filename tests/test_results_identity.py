@@ -1,4 +1,4 @@
-"""Identity of the results (issue 17): the test-config DAG writes the same result tables as the reference run
+"""Identity of the results: the test-config DAG writes the same result tables as the reference run
 (tests/data/results_sha256_test_config.json: SHA-256 of 44 tables of every stage except the muscle model and
 the two *_vs_paper tables, whose paper columns come from ../shared; tests/data/results_test_config.tar.gz: the
 tables themselves). A table whose bytes differ is compared number by number with the reference: floating-point

@@ -1,4 +1,4 @@
-"""Sobol indices from a Legendre polynomial chaos expansion (lumbar.muscles.pce; issue 16 item 4) on functions with known
+"""Sobol indices from a Legendre polynomial chaos expansion (lumbar.muscles.pce) on functions with known
 indices, and the Sobol table of the muscle study (lumbar.muscles.muscle_model.sobol_indices) on a synthetic sample."""
 from math import comb
 

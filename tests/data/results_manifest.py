@@ -1,5 +1,5 @@
-"""Write the byte-identity guard of the test-config DAG (issue 17): tests/data/results_sha256_test_config.json,
-the SHA-256 of every result table outside the muscle model (whose solver and Sobol method issue 16 changed)
+"""Write the byte-identity guard of the test-config DAG: tests/data/results_sha256_test_config.json,
+the SHA-256 of every result table outside the muscle model (whose solver and Sobol method the speed work changed)
 and outside the timing files, and tests/data/results_test_config.tar.gz, the tables themselves (the reference
 for the numeric comparison that tests/test_results_identity.py makes where a digest differs: floating-point
 round-off differs between CPUs and BLAS builds, so a machine other than the one that wrote the manifest may
@@ -23,7 +23,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 MANIFEST = HERE / "results_sha256_test_config.json"
 SNAPSHOT = HERE / "results_test_config.tar.gz"
-# muscle-model tables: changed by issue 16; *_vs_paper: their paper columns come from ../shared
+# muscle-model tables: changed by the muscle solver speed work; *_vs_paper: their paper columns come from ../shared
 # (paths.published_model_results), which the test DAG's copy of the repository does not have beside it
 EXCLUDE = ("benchmarks/", "muscle", "sobol", "sensitivity", "in_vivo", "flexion_relaxation", "_vs_paper")
 

@@ -40,7 +40,7 @@ def final_outputs():
         "results/tables/fsu_geometry.csv",
         "results/figures/fig1_l4l5_model.png",
         "results/tables/fsu_rom_intact.csv",
-        # stepwise reduction (issue 3): calibration (Tables 1-3, Figs. 4-5), forward (Table 4, Fig. 6)
+        # stepwise reduction: calibration (Tables 1-3, Figs. 4-5), forward (Table 4, Fig. 6)
         "results/tables/table1_disc_calibrated.csv",
         "results/tables/table2_facet_surfaces.csv",
         "results/tables/table3_ligaments_calibrated.csv",
@@ -62,7 +62,7 @@ def final_outputs():
         "results/tables/table4_vs_paper.csv",
         "results/figures/table4_grid.png",
         "results/figures/fig6_rom_stepwise_reduction.png",
-        # L2-S1 with wire cables, L4-L5 IDP (issue 4): Table 5, Figs. 3 and 7
+        # L2-S1 with wire cables, L4-L5 IDP: Table 5, Figs. 3 and 7
         "results/figures/fig3_l2s1_cables.png",
         "results/tables/table5_idp_synopsis.csv",
         "results/tables/table5_outlier_counts.csv",
@@ -70,7 +70,7 @@ def final_outputs():
         "results/tables/l2s1_internal_loads.csv",
         "results/figures/table5_grid.png",
         "results/figures/fig7_idp.png",
-        # muscle-driven model (issue 5, workflow/rules/muscle_model.smk): validation, sensitivity, Sobol
+        # muscle-driven model (workflow/rules/muscle_model.smk): validation, sensitivity, Sobol
         "results/tables/muscle_model_segment_loads.csv",
         "results/tables/in_vivo_validation.csv",
         "results/muscle_model/in_vivo_metrics.json",
@@ -86,9 +86,9 @@ def final_outputs():
         "results/figures/muscle_sensitivity_pennation_deg.png",
         "results/tables/sobol_indices.csv",
         "results/figures/muscle_sobol.png",
-        # discrepancy discovery (issue 6, workflow/rules/discover.smk)
+        # discrepancy discovery (workflow/rules/discover.smk)
         *discovery_final_outputs(),
-        # paper-style report (issue 7, workflow/rules/report.smk): reads every output above
+        # paper-style report (workflow/rules/report.smk): reads every output above
         "results/report/paper.html",
         "results/report/paper.pdf",
         # documents whose numbers are read from the results (rule docs_numbers)
@@ -109,7 +109,7 @@ def geometry_inputs(wildcards):
     return sorted(glob("data/landmarks/*.csv"))
 
 
-# ---- declared data files (issue 18): every table a rule reads is one of its input files, so that an in-place
+# ---- declared data files: every table a rule reads is one of its input files, so that an in-place
 # edit re-runs exactly the rules that read it (a folder's mtime does not change when a file in it is rewritten).
 # The folder itself stays a named input only to tell the script where the tables are; ancient(): never a trigger.
 CHARACTERISTIC_TABLES = {
@@ -161,7 +161,7 @@ def published_model_results(wildcards):
     return [p] if Path(p).is_file() else []
 
 
-# ---- stepwise reduction (issue 3)
+# ---- stepwise reduction
 def stepwise_reduction_experiment(wildcards):
     """The ROM table to calibrate on and compare with: stepwise_reduction.measured_table
     when set, else the table of rule stepwise_reduction_surrogate."""
@@ -191,7 +191,7 @@ def stepwise_reduction_tables(wildcards):
     return characteristic_tables(config["characteristics"]["data_dir"], [wildcards.set])
 
 
-# ---- paper-style report (issue 7, workflow/rules/report.smk)
+# ---- paper-style report (workflow/rules/report.smk)
 DOC_TEMPLATES = sorted(glob("docs/templates/*.md"))
 
 
@@ -253,7 +253,7 @@ def report_inputs(wildcards):
     return results + [p for p in dict.fromkeys(extra) if p not in results]
 
 
-# ---- L2-S1 IDP experiment (issue 4)
+# ---- L2-S1 IDP experiment
 def l2s1_idp_reference(wildcards):
     """The IDP table Table 5 compares with: l2s1.measured_table when set, else the surrogate
     (rule idp_surrogate)."""
@@ -284,7 +284,7 @@ def l2s1_tables(wildcards):
     return characteristic_tables(d, [wildcards.set])
 
 
-# ---- discrepancy discovery (issue 6, workflow/rules/discover.smk)
+# ---- discrepancy discovery (workflow/rules/discover.smk)
 DISCOVERY_FILES = (
     "discovery.json",
     "disagreement_map.png",

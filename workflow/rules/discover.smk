@@ -1,4 +1,4 @@
-# Discrepancy discovery (issue 6): lumbar.discovery on the default stepwise-reduction table, the published
+# Discrepancy discovery: lumbar.discovery on the default stepwise-reduction table, the published
 # vertebral-arch artefact and the in-vivo validation of the muscle model; the null hypothesis drawn from banks of
 # virtual specimens of the nominal model (rule discovery_specimen_bank); the benchmark (test fixtures from other
 # virtual specimens) split into one job per hidden effect, one for the null tables, one for the out-of-library causes.
@@ -127,7 +127,7 @@ rule discovery_va_artefact:
         "../scripts/discover.py"
 
 
-# real data (issue 15): the published intact L4-L5 ROM (discovery.intact_rom)
+# real data: the published intact L4-L5 ROM (discovery.intact_rom)
 rule discovery_intact_rom:
     input:
         geometry_inputs,
@@ -172,7 +172,7 @@ rule discovery_real_data_summary:
         "../scripts/discover.py"
 
 
-# chains on the muscle model (issue 5) by path: its rules produce these two tables
+# chains on the muscle model by path: its rules produce these two tables
 rule discovery_in_vivo:
     input:
         measured="results/tables/in_vivo_validation.csv",

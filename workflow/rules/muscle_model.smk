@@ -1,4 +1,4 @@
-# Muscle-driven L1-S1 model (paper 2, issue 5): validation against in-vivo L4-L5 IDP (Table 1, Fig. 3,
+# Muscle-driven L1-S1 model (paper 2): validation against in-vivo L4-L5 IDP (Table 1, Fig. 3,
 # flexion-relaxation), the one-at-a-time sensitivity sweep (Figs. 5-11; one job per Paramspace chunk)
 # and a variance-based (Sobol) sensitivity study (muscle_sobol_chunk: model solves of the polynomial chaos
 # training design per posture and sample chunk, so that --cores 2 keeps both cores busy; muscle_sobol fits

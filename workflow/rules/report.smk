@@ -1,4 +1,4 @@
-# Paper-style report (issue 7): results/report/paper.html (self-contained) and paper.pdf, from every final
+# Paper-style report: results/report/paper.html (self-contained) and paper.pdf, from every final
 # output. A file that is not among the inputs (a stage not in this configuration) becomes a one-line
 # "not built in this configuration" note in the report, not an error.
 

@@ -1,4 +1,4 @@
-"""Discrepancy stage (issues 6, 15): rules discovery_idp_model, discovery_specimen_bank (rom | idp),
+"""Discrepancy stage: rules discovery_idp_model, discovery_specimen_bank (rom | idp),
 discovery_fixture_specimens_idp, discovery_default, discovery_va_artefact, discovery_intact_rom, discovery_in_vivo,
 discovery_real_data_summary, discovery_benchmark_job (one hidden effect, "null" or "out_of_library"),
 discovery_benchmark.

@@ -1,4 +1,4 @@
-"""Muscle-driven model stage (paper 2, issue 5): rules muscle_validation, muscle_sensitivity (one
+"""Muscle-driven model stage (paper 2): rules muscle_validation, muscle_sensitivity (one
 Paramspace chunk), muscle_sensitivity_table, muscle_sobol_chunk (one posture, one chunk of the PCE
 training samples) and muscle_sobol (indices and figure). The long jobs log progress lines through the library's
 logger (lumbar.muscles.muscle_model: scenarios done / total, elapsed, estimated remaining), which setup_logging sends

@@ -1,4 +1,4 @@
-"""Discrepancy discovery (issue 6): where do model and measurement disagree, and which missing effect explains it?
+"""Discrepancy discovery: where do model and measurement disagree, and which missing effect explains it?
 
 ``python -m lumbar.discovery --config CONFIG --measured FILE.csv --out DIR``
 

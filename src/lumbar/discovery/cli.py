@@ -11,7 +11,7 @@ from ..inputs.config import ConfigError, load_config
 from .detect import DiscoveryInputError
 from .report import run
 
-DESCRIPTION = ("Discrepancy discovery (issue 6): where do model and measurement disagree, and which missing effect "
+DESCRIPTION = ("Discrepancy discovery: where do model and measurement disagree, and which missing effect "
                "explains it?")
 
 

@@ -136,7 +136,7 @@ def run(config, measured, out_dir, segment_loads=None, idp_model=None, cache=Non
     return out["result"]
 
 
-# ------------------------------------------------------------------ real measurements (issue 15)
+# ------------------------------------------------------------------ real measurements
 REAL_DATA_COLUMNS = ("dataset", "n_rows", "gap_before", "named_effect", "p_value", "estimate", "gap_after", "decision",
                      "best_nuisance", "nuisance_p_value", "gap_specimen_mean", "gap_nuisance", "note")
 

@@ -1,4 +1,4 @@
-"""Candidate physical effects for the discrepancy workflow (issue 6).
+"""Candidate physical effects for the discrepancy workflow.
 
 Each effect is a one-parameter extension of a model that **vanishes at parameter 0** (the model is then
 unchanged, bit for bit) and acts on some of the project's experiments:

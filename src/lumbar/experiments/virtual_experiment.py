@@ -170,7 +170,7 @@ def specimen_rngs(seed: int, n: int):
     return [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(n)]
 
 
-# ---------------------------------------------------------------- stepwise-reduction surrogate (issue 3)
+# ---------------------------------------------------------------- stepwise-reduction surrogate
 def _variation(variation) -> SpecimenVariation:
     if variation is None:
         return SpecimenVariation()
@@ -248,7 +248,7 @@ def stepwise_reduction_table(geometry, charset, seed, n_specimens=8, variation=N
 
 
 def _without_survivor_bias(simulate_one, seed, n_specimens, log, max_redraws=None):
-    """Specimens for a surrogate table without survivor bias (issue 15).
+    """Specimens for a surrogate table without survivor bias.
 
     ``simulate_one(rng) -> (sim, values, converged)``. A scenario where most of the first ``n_specimens`` lack an
     equilibrium is a limit of the model (e.g. the disc-only flexion law's peak), not of one specimen: it is
@@ -280,7 +280,7 @@ def _without_survivor_bias(simulate_one, seed, n_specimens, log, max_redraws=Non
     return sim, vals, redrawn, limit
 
 
-# ---------------------------------------------------------------- in-vitro IDP surrogate (issue 4)
+# ---------------------------------------------------------------- in-vitro IDP surrogate
 def idp_table(geometry, charset, seed, n_specimens=7, variation=None, noise_sd_mpa=0.02, effects=None,
               cables=None, idp_formula="paper1", k_shear=None, max_iter=50, tol=1e-7):
     """Surrogate L4-L5 IDP table (Wilke et al. 1996 layout: 7 muscle set-ups x 7 load cases, L2-S1).

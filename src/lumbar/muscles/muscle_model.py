@@ -786,7 +786,7 @@ SOBOL_STABLE_WIDTH = 0.1    # stable: the top parameter's bootstrap 95 % S1 inte
 # terms, the SSL x K x in-situ SL term another 3 %) and sparse least squares (orthogonal matching pursuit with
 # LOO selection; flexion width 0.17). Inputs stay uniform on the paper's ranges (a log-K input would change the
 # question: indices for a log-uniform K). Cost: 2 x 256 solves; measured 1.9 s (standing) and 4.6 s (flexion)
-# per solve with the SQP + IPOPT certifier on 2026-11-23; 0.38 s and 1.03 s on 2026-11-24 after the issue-16
+# per solve with the SQP + IPOPT certifier on 2026-11-23; 0.38 s and 1.03 s on 2026-11-24 after the
 # speed work (batches of 64, full step first, IPOPT polish from the primal point; benchmarks/bench_muscle_model.py,
 # which estimates the whole default study at 282 s on 2 cores, target 300 s). The indices were measured with
 #   python -c "import pandas as pd; from lumbar.muscles import muscle_model as mm; m = mm.LumbarMuscleModel(); \

@@ -1,5 +1,5 @@
 """The posture problem as a nonlinear program solved by IPOPT (through CasADi), with the model's exact first
-derivatives: the certifier of every reported muscle-model optimum (issue 16).
+derivatives: the certifier of every reported muscle-model optimum.
 
 Problem (the same as :mod:`lumbar.muscles.redundancy`, one posture)::
 
