@@ -261,9 +261,9 @@ def fixture_table(experiment, keys, V, rng, b, pick=None) -> tuple[pd.DataFrame,
     keep = cnt >= max(2, (len(pick) + 1) // 2)
     out = keys[keep].reset_index(drop=True)
     A, ok, cnt = A[:, keep], ok[:, keep], cnt[keep]
+    A = np.maximum(A, 0.0)              # a range of motion and a nucleus pressure read >= 0
     with np.errstate(invalid="ignore"):
         if experiment == "stepwise_rom":
-            A = np.maximum(A, 0.0)
             out["rom_mean_deg"] = np.nanmean(np.where(ok, A, np.nan), 0)
             out["rom_min_deg"] = np.nanmin(np.where(ok, A, np.nan), 0)
             out["rom_max_deg"] = np.nanmax(np.where(ok, A, np.nan), 0)
@@ -326,7 +326,7 @@ def make_hidden_effect_dataset(config, experiment, effect, magnitude, seed, idp_
         base = model["idp_mpa"].to_numpy(float) * 1e6
         idp = idp_forward(vals, base, model["disc_moment_sagittal_nm"].to_numpy(float),
                           float(np.nanmedian(model["idp_per_newton_pa"])))[0] / 1e6
-        A = idp[None, :] + rng.normal(0.0, b["noise_sd_mpa"], (n, len(idp)))
+        A = np.maximum(idp[None, :] + rng.normal(0.0, b["noise_sd_mpa"], (n, len(idp))), 0.0)
         out = model[["muscle_setup", "load_case"]].copy()
         out["idp_mean_mpa"], out["idp_sd_mpa"] = A.mean(0), A.std(0, ddof=1)
         out["n_specimens"] = n

@@ -12,7 +12,7 @@ from ..experiments import effects as fx
 from .detect import default_settings
 from .nuisance import families, multiple_correlation
 from .problems import Problem
-from .specimens import D2, Metric, fit_null_noise, null_datasets, specimen_metric
+from .specimens import D2, NON_NEGATIVE, Metric, fit_null_noise, null_datasets, specimen_metric
 
 
 # ------------------------------------------------------------------ fitting and scoring
@@ -127,8 +127,9 @@ def _resample(problem, center, scale, B, rng):
         cols = np.flatnonzero(hr & (npr == k))
         sd = np.full(len(cols), scale * pooled)
         A = y0[cols][None, None, :] + sd[None, None, :] * rng.standard_normal((B, int(k), len(cols)))
-        if problem.experiment == "stepwise_rom":
+        if problem.experiment in NON_NEGATIVE:
             A = np.maximum(A, 0.0)
+        if problem.experiment == "stepwise_rom":
             Y[:, cols] = A.mean(1)
             d2k = D2.get(int(k), 3.078)
             SIG[:, cols] = np.maximum((A.max(1) - A.min(1)) / d2k / np.sqrt(k), problem.meta.get("sigma_floor", 0.0))

@@ -56,6 +56,11 @@ from .detect import benchmark_settings, discovery_settings
 
 log = logging.getLogger(__name__)
 
+
+#: experiments whose measured quantity cannot be negative (a range of motion, a nucleus pressure): a generator's
+#: specimen value with noise is cut at 0 there, as a transducer reads it (the signed neutral angle is not)
+NON_NEGATIVE = ("stepwise_rom", "idp_invitro", "in_vivo")
+
 # expected range of n normal samples in SDs (d2 of quality control), n = 2..10; beyond 10: 3.078 (n = 10)
 D2 = {2: 1.128, 3: 1.693, 4: 2.059, 5: 2.326, 6: 2.534, 7: 2.704, 8: 2.847, 9: 2.970, 10: 3.078}
 _D2 = np.array([np.nan, np.nan] + [D2[k] for k in range(2, 11)])
@@ -354,7 +359,7 @@ def null_datasets(problem, bank: SpecimenBank, model: NullModel, B: int, rng: np
     fin = np.isfinite(S) & use
     E = np.sqrt(model.a2 + model.b2 * np.where(np.isfinite(r), r, 0.0) ** 2) * rng.standard_normal((B, N, n))
     V = r + S + E
-    if problem.experiment == "stepwise_rom":
+    if problem.experiment in NON_NEGATIVE:
         V = np.maximum(V, 0.0)
     cnt = fin.sum(1)
     with np.errstate(invalid="ignore", divide="ignore"):

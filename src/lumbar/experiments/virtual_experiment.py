@@ -288,7 +288,7 @@ def idp_table(geometry, charset, seed, n_specimens=7, variation=None, noise_sd_m
     Each specimen = ``virtual_specimen(geometry, charset, rng)`` (all four levels L2-L3..L5-S1 perturbed)
     with ``rng`` from ``specimen_rngs(seed, n_specimens)``; its 49 scenarios are solved with
     ``lumbar.experiments.l2s1.run_set`` and Gaussian measurement noise of ``noise_sd_mpa`` [MPa] is added per specimen
-    and scenario. ``effects``: optional {"muscle_setup/load_case": delta_mpa} ("*" matches any) added to
+    and scenario (a reading below 0, near an unloaded disc, is cut at 0 as a transducer reads it). ``effects``: optional {"muscle_setup/load_case": delta_mpa} ("*" matches any) added to
     every specimen's IDP, for effects the model lacks (default none), or {name: value} of an IDP effect of
     ``lumbar.experiments.effects`` (axial_preload, idp_moment_term, disc_load_share; hidden-effect fixtures).
     Per scenario: mean and sample SD over the specimens that reached equilibrium; a specimen without
@@ -319,6 +319,7 @@ def idp_table(geometry, charset, seed, n_specimens=7, variation=None, noise_sd_m
             ms, lc = (str(key).split("/") + ["*"])[:2]
             hit = ((sim["muscle_setup"] == ms) | (ms == "*")) & ((sim["load_case"] == lc) | (lc == "*"))
             idp = idp + np.where(hit.to_numpy(), float(delta), 0.0)
+        idp = np.maximum(idp, 0.0)      # a nucleus pressure transducer reads >= 0 (noise near an unloaded disc)
         conv = sim["converged"].to_numpy(bool)
         for i in np.flatnonzero(~conv):
             log.warning("virtual specimen %d: no equilibrium at %s/%s; dropped from that row",
