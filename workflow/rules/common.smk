@@ -346,7 +346,9 @@ DISCOVERY_OOL_EXPERIMENT = {
 def discovery_benchmark_jobs():
     """One benchmark job per hidden effect, one for the null tables, one for the out-of-library causes."""
     b = config["discovery"]["benchmark"]
-    ool = b["generator"] == "virtual_specimens" and bool(discovery_job_experiments("out_of_library"))
+    ool = b["generator"] == "virtual_specimens" and bool(
+        discovery_job_experiments("out_of_library")
+    )
     return (
         list(b["effects"])
         + (["null"] if b["n_null"] > 0 else [])
@@ -362,7 +364,9 @@ def discovery_job_experiments(job):
         return set(exps[: max(1, min(len(exps), b["n_null"]))])
     if job == "out_of_library":
         return {DISCOVERY_OOL_EXPERIMENT[o] for o in b["out_of_library"]} & set(exps)
-    return {"idp_invitro" if job in DISCOVERY_IDP_EFFECTS else "stepwise_rom"} & set(exps)
+    return {"idp_invitro" if job in DISCOVERY_IDP_EFFECTS else "stepwise_rom"} & set(
+        exps
+    )
 
 
 def discovery_benchmark_idp_model(wildcards):
