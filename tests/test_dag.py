@@ -91,11 +91,14 @@ def test_dag_every_final_output_exists_and_is_not_empty(dag_workdir):
 
 def test_dag_reproducible_byte_identical(dag_workdir, dag_second_workdir):
     """Two runs of the test-config DAG in two fresh copies (two directories) give identical tables, JSON
-    and figure bytes (results/benchmarks, which holds timings, is not compared)."""
+    and figure bytes (results/benchmarks, which holds timings, is not compared). The second run builds the model
+    chain (conftest.SECOND_RUN_TARGETS: every stage but the muscle sensitivity and Sobol chunks, the discovery
+    benchmark and the report, which have their own determinism tests); every file it wrote is compared."""
     a, b = result_files(dag_workdir), result_files(dag_second_workdir)
-    assert sorted(a) == sorted(b), set(a) ^ set(b)
-    differ = sorted(k for k in a if a[k] != b[k])
-    assert differ == [], f"{len(differ)} of {len(a)} result files differ between two runs: {differ}\n" + \
+    assert set(b) <= set(a), sorted(set(b) - set(a))
+    assert len(b) >= 60 and len(b) >= len(a) // 2, (len(b), len(a))
+    differ = sorted(k for k in b if a[k] != b[k])
+    assert differ == [], f"{len(differ)} of {len(b)} result files differ between two runs: {differ}\n" + \
         "\n".join(first_difference(a[k], b[k], k) for k in differ)
 
 
