@@ -162,7 +162,7 @@ def test_docs_type_no_dated_measurement():
 def test_doc_templates_read_workflow_outputs():
     """Every placeholder of docs/templates/*.md reads a result file that a rule of the workflow names (the rule
     docs_numbers takes them as inputs) and has the form 'path | ... | value'."""
-    from lumbar.report.docs import PLACEHOLDER, template_files
+    from lumbar.inputs.templates import PLACEHOLDER, template_files
 
     assert TEMPLATES, "docs/templates/ has no template"
     rules = "".join(p.read_text() for p in (ROOT / "workflow" / "rules").glob("*.smk"))

@@ -196,8 +196,8 @@ DOC_TEMPLATES = sorted(glob("docs/templates/*.md"))
 
 
 def doc_template_inputs(wildcards):
-    """The result files the placeholders of the doc templates read (lumbar.report.docs.template_files)."""
-    from lumbar.report.docs import template_files
+    """The result files the placeholders of the doc templates read (lumbar.inputs.templates.template_files)."""
+    from lumbar.inputs.templates import template_files
 
     return sorted(
         {f for t in DOC_TEMPLATES for f in template_files(Path(t).read_text())}

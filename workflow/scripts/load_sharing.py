@@ -19,18 +19,8 @@ from lumbar.experiments import load_sharing as LS  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 
 if snakemake.rule == "load_sharing_curves":
-    from lumbar.experiments.fsu import build_fsu
-    from lumbar.geometry import load_geometry
-    from lumbar.inputs.characteristics import load_characteristic_set
-
-    g, f, s, ls = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solver, snakemake.params.ls
-    set_name = snakemake.wildcards.set
-    data_dir = Path(snakemake.input.characteristics)
-    data_dir = data_dir.parent if data_dir.is_file() else data_dir
-    geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
-    cs = load_characteristic_set(set_name, data_dir=data_dir)
-    fsu = build_fsu(geo, cs, f["level"], facet_stiffness=f.get("facet_stiffness_n_per_m"),
-                    k_shear=f.get("disc_shear_stiffness_n_per_m"), follower=True)
+    s, ls = snakemake.params.solver, snakemake.params.ls
+    set_name, _, fsu = _common.set_fsu(snakemake, follower=True)
     moments = np.round(np.arange(0.0, ls["max_moment_nm"] + 1e-9, ls["moment_step_nm"]), 6)
     curves = LS.moment_rotation_curves(fsu, moments_nm=moments, stages=ls["stages"], max_iter=s["max_iter"])
     curves.insert(0, "set", set_name)

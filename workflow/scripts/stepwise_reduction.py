@@ -19,18 +19,8 @@ from lumbar.experiments import stepwise_reduction as sr_mod  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 
 if snakemake.rule == "stepwise_reduction_sim":
-    from lumbar.inputs.characteristics import load_characteristic_set
-    from lumbar.experiments.fsu import build_fsu
-    from lumbar.geometry import load_geometry
-
-    g, f, s, sr = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solver, snakemake.params.sr
-    set_name = snakemake.wildcards.set
-    data_dir = Path(snakemake.input.characteristics)
-    data_dir = data_dir.parent if data_dir.is_file() else data_dir
-    geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
-    cs = load_characteristic_set(set_name, data_dir=data_dir)
-    fsu = build_fsu(geo, cs, f["level"], facet_stiffness=f.get("facet_stiffness_n_per_m"),
-                    k_shear=f.get("disc_shear_stiffness_n_per_m"))
+    s, sr = snakemake.params.solver, snakemake.params.sr
+    set_name, data_dir, fsu = _common.set_fsu(snakemake)
     sim = sr_mod.simulate_stepwise_reduction(fsu, moments_nm=sr["moments_nm"], max_iter=s["max_iter"],
                                              tol=min(s["tol_force_n"], s["tol_moment_nm"]), load_steps=s["load_steps"])
     sim.insert(0, "set", set_name)

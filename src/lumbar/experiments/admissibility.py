@@ -77,13 +77,17 @@ def yamamoto_path() -> Path:
     return resources.data_dir() / "experiments" / "yamamoto1989_levels_original_text.csv"
 
 
-def read_literature(path=None) -> pd.DataFrame:
-    p = Path(path) if path is not None else literature_path()
+def _read_with_columns(p: Path, need: set) -> pd.DataFrame:
+    """The CSV ``p``; a missing column of ``need`` is an error naming the file and the columns."""
     df = pd.read_csv(p)
-    need = {"quantity", "value", "unit", "kind", "source"}
     if not need <= set(df.columns):
         raise ValueError(f"{p}: columns {sorted(need - set(df.columns))} missing; expected {sorted(need)}")
     return df
+
+
+def read_literature(path=None) -> pd.DataFrame:
+    return _read_with_columns(Path(path) if path is not None else literature_path(),
+                              {"quantity", "value", "unit", "kind", "source"})
 
 
 def literature_value(lit: pd.DataFrame, quantity: str, load: str | None = None) -> tuple[float, str]:
@@ -99,12 +103,8 @@ def literature_value(lit: pd.DataFrame, quantity: str, load: str | None = None) 
 
 def read_yamamoto(path=None) -> pd.DataFrame:
     """ROM (10 N*m, one side) and neutral zones of every lumbar level (Yamamoto et al. 1989)."""
-    p = Path(path) if path is not None else yamamoto_path()
-    df = pd.read_csv(p)
-    need = {"level", "quantity", "direction", "value_deg", "source"}
-    if not need <= set(df.columns):
-        raise ValueError(f"{p}: columns {sorted(need - set(df.columns))} missing; expected {sorted(need)}")
-    return df
+    return _read_with_columns(Path(path) if path is not None else yamamoto_path(),
+                              {"level", "quantity", "direction", "value_deg", "source"})
 
 
 def neutral_zones(level: str, path=None) -> dict:

@@ -19,21 +19,15 @@ configuration has fewer rows). :func:`template_files` lists the files a template
 from __future__ import annotations
 
 import json
-import re
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from ..inputs.templates import PLACEHOLDER, template_files  # noqa: F401 - template_files: part of this API
 from .sections import fmt
 
-PLACEHOLDER = re.compile(r"\{\{\s*(.+?)\s*\}\}")
 MISSING = "(not in this run)"
-
-
-def template_files(text: str) -> list[str]:
-    """The result files the placeholders of a template read, in order of first use."""
-    return list(dict.fromkeys(m.group(1).split("|")[0].strip() for m in PLACEHOLDER.finditer(text)))
 
 
 def _match(series: pd.Series, value: str) -> pd.Series:
