@@ -268,8 +268,8 @@ def _without_survivor_bias(simulate_one, seed, n_specimens, log, max_redraws=Non
     for k, (_, val, c) in enumerate(first):
         while not (c | limit).all() and nxt < len(rngs):
             bad = np.flatnonzero(~(c | limit))
-            log.warning("virtual specimen %d: no equilibrium in %d scenario(s) (first: %s); re-drawn as reserve "
-                        "specimen %d", k, len(bad), " ".join(map(str, sim.iloc[bad[0]].to_dict().values())), nxt)
+            log.info("virtual specimen %d: no equilibrium in %d scenario(s) (first: %s); re-drawn as reserve "
+                     "specimen %d", k, len(bad), " ".join(map(str, sim.iloc[bad[0]].to_dict().values())), nxt)
             _, val, c = simulate_one(rngs[nxt])
             nxt += 1
             redrawn += 1
@@ -307,7 +307,8 @@ def idp_table(geometry, charset, seed, n_specimens=7, variation=None, noise_sd_m
     vals = []
     for k, rng in enumerate(specimen_rngs(int(seed), n_specimens)):
         geo_k, cs_k = virtual_specimen(geometry, charset, rng, v, levels=list(LEVELS))
-        sim, _ = run_set(geo_k, cs_k, cables, idp_formula=idp_formula, k_shear=k_shear, max_iter=max_iter, tol=tol)
+        sim, _ = run_set(geo_k, cs_k, cables, idp_formula=idp_formula, k_shear=k_shear, max_iter=max_iter, tol=tol,
+                         specimen=True)
         idp = sim["idp_mpa"].to_numpy(float) + rng.normal(0.0, noise_sd_mpa, len(sim))
         for key, delta in (effects or {}).items():
             if key in fx.EFFECTS:      # a discrepancy candidate acting on the IDP from the disc loads
@@ -322,8 +323,8 @@ def idp_table(geometry, charset, seed, n_specimens=7, variation=None, noise_sd_m
         idp = np.maximum(idp, 0.0)      # a nucleus pressure transducer reads >= 0 (noise near an unloaded disc)
         conv = sim["converged"].to_numpy(bool)
         for i in np.flatnonzero(~conv):
-            log.warning("virtual specimen %d: no equilibrium at %s/%s; dropped from that row",
-                        k, sim["muscle_setup"].iat[i], sim["load_case"].iat[i])
+            log.info("virtual specimen %d: no equilibrium at %s/%s; dropped from that row",
+                     k, sim["muscle_setup"].iat[i], sim["load_case"].iat[i])
         vals.append(np.where(conv, idp, np.nan))
     A = np.vstack(vals)
     n = np.isfinite(A).sum(axis=0)
@@ -429,7 +430,8 @@ def idp_specimens(geometry, charset, seed, n_specimens, variation=None, cables=N
         geo_k, cs_k = virtual_specimen(geometry, charset, rng, v, levels=list(LEVELS))
         if disc_scale != 1.0:
             cs_k = modified_charset(cs_k, disc_scale=disc_scale)
-        sim, _ = run_set(geo_k, cs_k, cables, idp_formula=idp_formula, k_shear=k_shear, max_iter=max_iter, tol=tol)
+        sim, _ = run_set(geo_k, cs_k, cables, idp_formula=idp_formula, k_shear=k_shear, max_iter=max_iter, tol=tol,
+                         specimen=True)
         d = sim[["muscle_setup", "load_case", "converged", "idp_mpa", "disc_axial_force_n",
                  "disc_moment_sagittal_nm"]].copy()
         d.insert(0, "specimen", k)
