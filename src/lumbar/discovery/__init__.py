@@ -30,8 +30,10 @@
    nuisance hypothesis: the null tables scaled or offset by its refit); the adequacy of each explanation (its
    residual chi2 against its own tables).
 6. Decision: ``named: <effect>`` only if the data have at least ``min_rows`` compared scenarios, gap_before >
-   ``min_gap``, p < ``alpha``, the effect beats the best nuisance at ``alpha``, its refit is adequate and reduces the
-   gap by ``min_gap_reduction``. Otherwise ``named_effect`` is null and the decision says what the table is:
+   ``min_gap``, p < ``alpha``, the effect beats the best nuisance at ``alpha``, its refit is adequate and explains at least
+   ``min_gap_reduction`` of the discrepancy beyond what the null tables give (its chi-square drop, in the metric of
+   the tests, over the excess of the observed chi-square above the null tables' mean; without an excess the directed
+   tests decide and the refit must not fit worse). Otherwise ``named_effect`` is null and the decision says what the table is:
    ``nothing named`` (consistent with the nominal model and specimen variation; ``nuisance: specimen-mean shift``
    when its gap to the nominal model is what varied specimens give), ``nuisance: uniform scale 0.82`` (a nuisance
    explains it), or ``unexplained`` (something is missing that the library does not hold). A candidate whose effect

@@ -18,7 +18,11 @@ log = logging.getLogger(__name__)
 
 #: discovery settings that are not configuration keys; every other setting and its default is owned by the
 #: ``discovery`` section of the configuration schema (:func:`lumbar.inputs.config.schema_defaults`)
-INTERNAL_SETTINGS = dict(seed=0, fine_candidates=0)
+INTERNAL_SETTINGS = dict(seed=0, fine_candidates=0,
+                         # the metric of the tests with a specimen bank: "specimen_correlation" (residuals decorrelated
+                         # by the specimens' correlation) or "independent" rows; LR statistics normalised by the
+                         # overdispersion of the null model (always without a bank) or raw (with one)
+                         test_metric="specimen_correlation", lr_normalise=False)
 
 
 class DiscoveryInputError(ValueError):

@@ -330,8 +330,10 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
     null_model = None
     if bank is not None:
         null_model = fit_null_noise(problem.meta.get("spec_sd", np.full(len(y), np.nan)), bank, valid)
-    metric = (specimen_metric(bank, null_model, sig, valid) if bank is not None and valid.sum() >= 3
+    decorrelate = s["test_metric"] == "specimen_correlation"
+    metric = (specimen_metric(bank, null_model, sig, valid) if decorrelate and bank is not None and valid.sum() >= 3
               else Metric(valid, sig))
+    normalise = bool(s["lr_normalise"]) or bank is None
     r0 = np.where(valid, r, 0.0)
     curves_w = {c: (td, metric(np.where(np.isfinite(D), D, r0 + 10.0 * sig))) for c, (td, D) in curves.items()}
     r_w = metric(r0)[0]
@@ -340,7 +342,7 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
     def stats(Y, cands_=None, nuis_=None):
         cw_ = curves_w if cands_ is None else {c: curves_w[c] for c in cands_}
         nw_ = nuis_w if nuis_ is None else {n: nuis_w[n] for n in nuis_}
-        return _statistics(cw_, nw_, r_w, metric(np.where(np.isfinite(Y), Y, r0)), normalise=bank is None)
+        return _statistics(cw_, nw_, r_w, metric(np.where(np.isfinite(Y), Y, r0)), normalise=normalise)
 
     obs = stats(y[None, :])
     T_obs = {c: float(v[0]) for c, v in obs["T_c"].items()}
@@ -387,7 +389,7 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
     B = int(s["n_bootstrap"])
     c_hat0 = float(obs["c0"][0])
     rng = np.random.default_rng([int(s.get("seed", 0)), 15])
-    p_adj, p_raw, Tmax_null, boot, Yb, Sb, Yf, Sf = {}, {}, np.array([]), None, None, None, None, None
+    p_adj, p_raw, Tmax_null, boot, Yb, Sb, Yf, Sf, fit0 = {}, {}, np.array([]), None, None, None, None, None, None
     p_nuis, p_fit = {}, {}
     if not too_few and B > 0 and nv >= 2:
         if bank is not None:
@@ -442,12 +444,17 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
     cw = {c: float(v / tot) for c, v in cw.items()} if tot > 0 else {}
     cv = _cross_validate(problem, cands, grids, coarse, fine_theta, fine, exact, yr, w, sig, valid, gap_before) \
         if nv >= 3 else {"none": gap_before}
-    zr_ = (r - y) / sig
-    gap_null = float(np.sqrt(np.mean(zr_[valid] ** 2))) if nv else float("nan")    # against the null prediction
-    gap_after_best = float("nan")
+    # the naming margins in the metric of the tests: the RMS of the decorrelated residuals against the null
+    # prediction r and after the best candidate's exact refit (with specimens, a table's correlated deviations,
+    # which no effect explains, weigh there as what they are; without, these are the RMS z)
+    gap_null = float(np.sqrt(obs["chi_r"][0] / nv)) if nv else float("nan")
+    chi_null_obs = float(obs["chi_r"][0])
+    gap_after_best, gap_after_best_w = float("nan"), float("nan")
     if best is not None and best in exact:
         zb = (exact[best] - y) / sig
         gap_after_best = float(np.sqrt(np.mean(np.where(np.isfinite(zb), zb, 10.0)[valid] ** 2)))
+        eb = np.where(np.isfinite(exact[best]), exact[best], r0 + 10.0 * sig)
+        gap_after_best_w = float(np.sqrt(((metric(eb) - y_w) ** 2).sum() / nv))
     # ---- the best candidate against the best nuisance it is not equivalent to, by the same bootstrap LR test;
     # the adequacy of each explanation: its residual chi2 against its own bootstrap
     versus, p_vs, D_obs = None, None, None
@@ -463,7 +470,7 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
             bn = stats(Yn, nuis_=[versus])
 
             def dstat(st):
-                cn = np.maximum(1.0, st["chi_n"][versus] / max(nv - 1 - nu.k, 1)) if bank is None else 1.0
+                cn = np.maximum(1.0, st["chi_n"][versus] / max(nv - 1 - nu.k, 1)) if normalise else 1.0
                 return (st["chi_n"][versus] - np.min(np.vstack([st["chi_c"][c] for c in cands]), axis=0)) / cn
 
             D_obs = float(dstat(obs)[0])
@@ -480,6 +487,21 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
         p_fit["best_nuisance"] = _p(bn["chi_n"][best_nuisance], float(obs["chi_n"][best_nuisance][0]))
     elif "specimen_mean" in p_fit:
         p_fit["best_nuisance"] = p_fit["specimen_mean"]
+    # the share of the discrepancy the best candidate's refit explains: its chi2 drop (metric of the tests) over the
+    # excess of the observed chi2 above its expectation under the null (the null tables taken at face value); the
+    # null's own discrepancy (specimens, noise) is no effect's to explain
+    chi_after_obs = gap_after_best_w ** 2 * nv if np.isfinite(gap_after_best_w) else float("nan")
+    null_chi = (boot if fit0 is None else fit0) if boot is not None else None     # fit0: tables without specimens
+    chi_null_expected = float(np.mean(null_chi["chi_r"])) if null_chi is not None else float(nv)
+    excess = chi_null_obs - chi_null_expected
+    if not np.isfinite(chi_after_obs):
+        explained = 0.0
+    elif excess > 0:
+        explained = (chi_null_obs - chi_after_obs) / excess
+    else:
+        # no discrepancy beyond what the null tables give: the share has nothing to measure, the directed tests
+        # (max-T, candidate against nuisance, the refit's goodness of fit) decide; the refit must not fit worse
+        explained = 1.0 if chi_after_obs <= chi_null_obs else 0.0
     # ---- decision
     alpha = float(s["alpha"])
     reasons = []
@@ -489,9 +511,9 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
         reasons.append(f"too few rows: {nv} scenario(s) compared, at least {int(s['min_rows'])} needed to test "
                        f"{len(cands)} candidate(s) against the measurement noise; nothing can be named from these data")
     else:
-        if not gap_null > s["min_gap"]:
-            reasons.append(f"gap {gap_null:.2f} against {'the mean of virtual specimens' if bank is not None else 'the nominal model'}"
-                           f" <= min_gap {s['min_gap']:g}: model and data agree within the measurement uncertainty")
+        if not gap_before > s["min_gap"]:
+            reasons.append(f"gap_before {gap_before:.2f} <= min_gap {s['min_gap']:g}: model and data agree within the "
+                           f"measurement uncertainty")
         if not p_adj.get(best, 1.0) < alpha:
             reasons.append(f"p = {p_adj.get(best, float('nan')):.3g} for {best} (max-T over {len(cands)} candidates, "
                            f"{B} null tables{' of virtual specimens' if bank is not None else ''}) is not below alpha "
@@ -503,9 +525,11 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
             reasons.append(f"the refit of {best} leaves a misfit the null tables do not have (p = "
                            f"{fmt_p(p_fit.get('best_candidate'))} < alpha {alpha:g}): part of the discrepancy is not "
                            f"this effect")
-        red = 1 - gap_after_best / gap_null if gap_null > 0 else 0.0
+        red = explained
         if not red >= s["min_gap_reduction"]:
-            reasons.append(f"refit reduces the gap by {100 * red:.0f}% < {100 * s['min_gap_reduction']:.0f}%")
+            reasons.append(f"the refit explains {100 * red:.0f}% < {100 * s['min_gap_reduction']:.0f}% of the "
+                           f"discrepancy beyond what the null hypothesis gives (chi2 {chi_null_obs:.1f} -> "
+                           f"{chi_after_obs:.1f}, {chi_null_expected:.1f} expected)")
     named = best if best is not None and not reasons else None
     if named:
         decision = f"named: {named}"
@@ -610,7 +634,12 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
         "gap_before_rms": rms_phys0, "gap_after_rms": rms_phys1,
         "gap_specimen_mean": gr,
         "gap_nuisance": float(np.sqrt(np.mean(zn[valid] ** 2))) if nv else float("nan"),
-        "gap_reduction": (1 - gap_after / gap_null) if named and gap_null > 0 else 0.0,
+        "gap_reduction": (1 - gap_after / gap_before) if named and gap_before > 0 else 0.0,
+        "discrepancy_explained": explained,
+        "gap_metric": {"null": gap_null, "after_best_candidate": gap_after_best_w,
+                       "definition": "RMS of the residuals in the metric of the tests (standard errors of the table, "
+                                     "decorrelated by the specimens' correlation; the RMS z without specimens): the "
+                                     "naming margins min_gap and min_gap_reduction apply to it"},
         "ranking": ranking,
         "confidence": cw.get(named) if named else None,
         "confidence_definition": ("probability of the named effect among the candidates: weights exp(-chi2_c / "
