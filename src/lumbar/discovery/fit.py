@@ -262,7 +262,7 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
     specimens in it and against each other, and decide (see the package doc)."""
     s = default_settings()
     s.update(settings or {})
-    t0 = time.perf_counter()
+    t_start = time.perf_counter()
     y, sig = problem.y, problem.sigma
     w = 1.0 / sig**2
     cands = list(problem.candidates)
@@ -665,7 +665,7 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
                       "null tables; gap = RMS of z against the nominal model"),
         "margins": {k: s[k] for k in ("alpha", "min_gap", "min_gap_reduction", "min_rows", "n_bootstrap")},
         "forward_batches": n_batches,
-        "seconds": time.perf_counter() - t0,
+        "seconds": time.perf_counter() - t_start,
     }
     return {"result": res, "scenarios": scen, "problem": problem}
 
