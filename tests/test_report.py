@@ -431,3 +431,20 @@ def test_dag_report_pdf_tables_and_scoreboard_page(dag_workdir, monkeypatch):
     assert all(f._cellvalues[1][1].style.fontSize == CELL_SIZES[0] for _, f in r)    # the largest cell font
     height = sum(f.wrap(FRAME_WIDTH, FRAME_HEIGHT)[1] + 30 for _, f in r)      # + title and spacing
     assert height < FRAME_HEIGHT
+
+
+def test_real_data_paragraph_keeps_unexplained_apart_from_nothing_named(fake_results):
+    """A real dataset the discovery calls "unexplained" (the data differ, no library effect or nuisance explains it)
+    is not summed up as "nothing named" on the first lines of the section: the user must act on it."""
+    tmp, config, inputs = fake_results
+    p = Path("results/discrepancy/real_data_summary.csv")
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text("dataset,n_rows,gap_before,named_effect,p_value,estimate,gap_after,decision,best_nuisance,"
+                 "nuisance_p_value,gap_specimen_mean,gap_nuisance,note\n"
+                 "intact_rom,4,7.07,,0.005,,7.07,unexplained,uniform offset,0.005,6.9,6.4,x\n"
+                 "in_vivo,4,1.55,,0.945,,1.55,nothing named,nominal model,,1.55,1.55,y\n")
+    html_path, _, _ = _build(tmp, config, inputs + [str(p)])
+    text = re.sub(r"\s+", " ", re.sub(r"<[^>]+>", " ", html_path.read_text()))
+    assert re.search(r"Tested, unexplained \([^)]*\): intact_rom \(gap 7\.07\)", text), text[:2000]
+    assert re.search(r"Tested, nothing named \([^)]*\): in_vivo \(gap 1\.55\)", text)
+    assert not re.search(r"nothing named[^.]*intact_rom", text)

@@ -855,9 +855,16 @@ class ReportBuilder:
             text += ("Too few rows to name anything: " + ", ".join(f"{r.dataset} ({r.n_rows} row(s))"
                                                                   for r in few.itertuples()) + ". ")
         rest = t[(t["named_effect"].astype(str) == "") & ~t.index.isin(few.index)]
-        if len(rest):
-            text += ("Tested, nothing named: " + ", ".join(f"{r.dataset} (gap {fmt(r.gap_before, 3)})"
-                                                          for r in rest.itertuples()) + ".")
+        dec = rest["decision"].astype(str)
+        for label, sel in (("Tested, nothing named (consistent with the model and specimen variation, or a nuisance "
+                            "explains it)", ~dec.str.startswith("unexplained")),
+                           ("Tested, unexplained (the data differ from the model and neither a library effect nor a "
+                            "nuisance explains it: something the library does not hold is missing)",
+                            dec.str.startswith("unexplained"))):
+            if sel.any():
+                text += (label + ": " + ", ".join(f"{r.dataset} (gap {fmt(r.gap_before, 3)})"
+                                                  for r in rest[sel].itertuples()) + ". ")
+        text = text.rstrip()
         self.doc.add(Para(text))
         self.csv_table(rel, "Discovery on real measurements", surrogate=False)
 
