@@ -232,3 +232,28 @@ def test_table5_marks_non_converged_scenario_as_outlier():
     assert syn["outlier"].tolist() == [False, True, False] and syn["converged"].tolist() == [True, False, True]
     counts = l2s1.outlier_counts(syn).iloc[0]
     assert counts["outliers"] == 1 and counts["not_converged"] == 1 and counts["scenarios"] == 3
+
+
+def test_specimen_registration_is_the_nominal_one_carried_by_its_scaling(geo):
+    """A virtual specimen's meshes are the nominal ones scaled about a point: its cable registration is the nominal
+    registration composed with that scaling (exact), and a fresh ICP on the scaled mesh ends at the same attachments
+    within ICP's tolerance (so the reuse changes no physics)."""
+    from lumbar.experiments.virtual_experiment import SpecimenVariation, perturb_geometry
+
+    c_myo = l2s1.derive_cables().iloc[0]
+    v = c_myo.vertebra                                               # the cables act on L2
+    c0 = (c_myo.centroid_x_m, c_myo.centroid_y_m, c_myo.centroid_z_m)
+    M0, rms0 = l2s1.vertebra_registration(geo, v, c0)
+    spec = perturb_geometry(geo, np.random.default_rng(3), SpecimenVariation(geometry_scale_sd=0.08),
+                            levels=list(l2s1.LEVELS))
+    base, T = spec.similarity
+    s = float(np.cbrt(np.linalg.det(T[:3, :3])))
+    assert base is geo and abs(s - 1.0) > 0.01                      # a real scaling, of the nominal geometry
+    M, rms = l2s1.vertebra_registration(spec, v, c0)
+    np.testing.assert_allclose(M, T @ M0, atol=1e-12)
+    assert rms == pytest.approx(s * rms0, rel=1e-12)
+    Micp, _ = l2s1.register_vertebra(l2s1._myo_meshes()[v], spec.vertebrae[v].mesh, c0, spec.vertebrae[v].centroid)
+    a = np.array([c_myo.attach_x_m, c_myo.attach_y_m, c_myo.attach_z_m, 1.0])
+    assert np.linalg.norm((M @ a)[:3] - (Micp @ a)[:3]) < 5e-4       # m: ICP's own spread, not a different bone
+    # the nominal geometry's meshes are untouched, and its registration is not recomputed on a second call
+    np.testing.assert_allclose(l2s1.vertebra_registration(geo, v, c0)[0], M0, atol=0)

@@ -52,9 +52,14 @@ if snakemake.rule == "multilevel_validation":
         cv, comp = ADM.assess(fsu, fsu, moments_nm=moments)
         cv.insert(0, "level", lv)
         curves.append(cv)
-        limits = ADM.pretension_limits(published, prior, geo, lv, g["path"] if g["kind"] == "visible_human" else None)
+        vh_path = g["path"] if g["kind"] == "visible_human" else None
+        limits = ADM.pretension_limits(published, prior, geo, lv, vh_path)
+        # the force scales' sourced exception, evaluated on this level's fibres (as at the calibrated level)
+        remus = None if vh_path is None else ADM.remus_comparison(
+            build_fsu(geo, cal, lv, facet_stiffness=f.get("facet_stiffness_n_per_m"),
+                      k_shear=f.get("disc_shear_stiffness_n_per_m")), vh_path)
         adm.append(ADM.criteria_table(cv, comp, limits, lv, ADM.neutral_zones(lv, snakemake.input.yamamoto), lit,
-                                      ADM.force_scales(cal, prior)))
+                                      ADM.force_scales(cal, prior), remus=remus))
     curves = pd.concat(curves, ignore_index=True)
     adm = pd.concat(adm, ignore_index=True)
     rom = V.multilevel_rom(curves, pd.read_csv(snakemake.input.yamamoto))

@@ -15,6 +15,7 @@ batch (cables switched by the per-scenario fibre mask, moments as loads).
 from __future__ import annotations
 
 import functools
+import hashlib
 import logging
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
@@ -156,6 +157,31 @@ def _myo_meshes():
     return {v: g.vertebrae[v].mesh for v in FREE}
 
 
+_REGISTRATIONS: dict = {}    # (geometry name, vertebra, fingerprint of both meshes and centroids) -> (M, rms)
+
+
+def vertebra_registration(geometry, v, source_centroid):
+    """``register_vertebra`` of the myo-sim vertebra ``v`` onto ``geometry``'s one, computed once per mesh pair
+    (cached by a fingerprint of both meshes and the starting centroids). A geometry with a ``similarity``
+    (nominal, T) (a virtual specimen: its meshes are the nominal ones scaled by T) gets the nominal registration
+    carried by T, ``(T @ M, s * rms)``: the same cable attachments on the nominal bone, scaled with it, instead
+    of an ICP that would end elsewhere within its tolerance for every specimen."""
+    if geometry.similarity is not None:
+        base, T = geometry.similarity
+        M, rms = vertebra_registration(base, v, source_centroid)
+        return T @ M, rms * float(np.cbrt(np.linalg.det(T[:3, :3])))
+    src, tgt = _myo_meshes()[v], geometry.vertebrae[v].mesh
+    c = np.asarray(geometry.vertebrae[v].centroid, float)
+    h = hashlib.sha1()
+    for a in (src.vertices, src.faces, tgt.vertices, tgt.faces, np.asarray(source_centroid, float), c):
+        h.update(np.ascontiguousarray(a).tobytes())
+    key = (geometry.name, v, h.hexdigest())
+    if key not in _REGISTRATIONS:
+        _REGISTRATIONS[key] = register_vertebra(src, tgt, source_centroid, c)
+    M, rms = _REGISTRATIONS[key]
+    return M.copy(), rms
+
+
 def register_vertebra(source_mesh, target_mesh, source_centroid, target_centroid, n_points=1500):
     """Similarity transform (4x4: rotation, uniform scale, translation) taking the myo-sim vertebra onto the
     target geometry's vertebra: ICP (trimesh.registration.icp, scale allowed, no reflection) from every k-th
@@ -247,9 +273,7 @@ def build_l2s1(geometry, charset, cables: pd.DataFrame | None = None, facet_stif
     for v in sorted(set(cab["vertebra"])):
         if registration == "icp" and geometry.name != "myo_sim":
             r0 = cab[cab["vertebra"] == v].iloc[0]
-            M, rms = register_vertebra(_myo_meshes()[v], geometry.vertebrae[v].mesh,
-                                       (r0.centroid_x_m, r0.centroid_y_m, r0.centroid_z_m),
-                                       geometry.vertebrae[v].centroid)
+            M, rms = vertebra_registration(geometry, v, (r0.centroid_x_m, r0.centroid_y_m, r0.centroid_z_m))
             reg[v] = (M, rms, "icp")
         else:
             reg[v] = (None, float("nan"), "translation" if geometry.name != "myo_sim" else "identity (myo_sim)")

@@ -181,8 +181,24 @@ def multilevel_rom(curves: pd.DataFrame, yamamoto: pd.DataFrame, moment_nm=10.0,
             rows.append({"level": level, "direction": yd, "moment_nm": moment_nm, "sim_deg": sim,
                          "measured_deg": meas, "ratio": sim / meas, "within": bool(abs(sim - meas) <= rel * meas),
                          "tolerance_rule": f"measured +- {rel * 100:g} %", "converged": conv,
-                         "largest_jump_deg": jump, "kind": str(ref["kind"].iloc[0]), "source": str(ref["source"].iloc[0])})
+                         "largest_jump_deg": jump, **_shares_at(at, conv), "kind": str(ref["kind"].iloc[0]),
+                         "source": str(ref["source"].iloc[0])})
     return pd.DataFrame(rows)
+
+
+def _shares_at(at: pd.DataFrame, converged: bool) -> dict:
+    """Shares of the applied moment resisted by the disc, both facet joints and all ligaments together (mean over
+    the sides of a direction; ``lumbar.experiments.load_sharing.moment_shares``): why a level reaches its ROM."""
+    from .load_sharing import moment_shares  # noqa: PLC0415 - the curves' own share rule
+
+    out = {"disc_share": np.nan, "facets_share": np.nan, "ligaments_share": np.nan}
+    if not converged or at.empty or "stage" not in at.columns:
+        return out
+    sh = moment_shares(at)
+    group = np.where(sh["structure"] == "disc", "disc",
+                     np.where(sh["structure"].str.startswith("facet_"), "facets", "ligaments"))
+    per = sh.assign(group=group).groupby(["direction", "group"])["share"].sum().groupby("group").mean()
+    return {f"{g}_share": float(per.get(g, np.nan)) for g in ("disc", "facets", "ligaments")}
 
 
 def multilevel_rows(table: pd.DataFrame, set_name="calibrated") -> list[dict]:

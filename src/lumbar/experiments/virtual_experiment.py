@@ -117,12 +117,19 @@ def _jitter_fibres(upper, lower, extra, rng, sd, max_draws=50):
 def perturb_geometry(geometry, rng: np.random.Generator, v: SpecimenVariation, levels=None):
     """A deep copy of ``geometry`` scaled about the first level's disc centre, with displaced insertions.
 
-    Only the levels in ``levels`` (default: all) are perturbed; meshes are scaled with the points.
+    Only the levels in ``levels`` (default: all) are perturbed; meshes are scaled with the points, and the copy
+    records the scaling as ``similarity`` (nominal geometry, 4x4 matrix), composed with that of ``geometry``.
     """
-    geo = copy.deepcopy(geometry)
+    base, T0 = geometry.similarity or (geometry, np.eye(4))
+    # the nominal geometry a specimen refers to is shared, not copied
+    geo = copy.deepcopy(geometry, {} if base is geometry else {id(base): base})
     names = sorted(geo.levels) if levels is None else list(levels)
     origin = np.asarray(geo.levels[names[0]].disc_centre, float).copy()
     s = float(np.exp(rng.normal(0, v.geometry_scale_sd)))
+    S = np.eye(4)
+    S[:3, :3] *= s
+    S[:3, 3] = (1.0 - s) * origin
+    geo.similarity = (base, S @ T0)
 
     def sc(p):
         return origin + s * (np.asarray(p, float) - origin)

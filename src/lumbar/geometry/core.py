@@ -86,6 +86,10 @@ class SpineGeometry:
     source: str
     vertebrae: dict                # name -> Vertebra
     levels: dict                   # "L4-L5" -> Level
+    # (nominal geometry, 4x4 similarity T): every mesh of this geometry is the nominal one mapped by T (a virtual
+    # specimen's uniform scaling, lumbar.experiments.virtual_experiment.perturb_geometry), so results that depend on
+    # the meshes alone (the cable registration of lumbar.experiments.l2s1) are carried over by T, not recomputed
+    similarity: tuple | None = field(default=None, repr=False, compare=False)
 
 
 def level_vertebrae(level: str) -> tuple[str, str]:
