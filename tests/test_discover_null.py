@@ -235,3 +235,27 @@ def test_rom_from_virtual_specimens_null_unnamed_planted_prestrain_named_softer_
         ["case", "named_effect", "decision", "p_value"]]
     assert (tmp_path / bench["case"].iat[0] / "section.md").is_file()        # the worked example
     assert bench["correct"].all()
+
+
+def test_bank_file_is_parsed_once_and_reread_when_it_changes(tmp_path):
+    """A benchmark job runs one discovery per fixture on the same bank file: it is parsed once per process, and a
+    changed file (size or modification time) is read again, never answered from the old parse."""
+    import os
+
+    from lumbar.discovery import specimens as SP
+
+    def table(offset):
+        rows = [{"specimen": k, "stage": "intact", "direction": d, "moment_nm": 10.0, "rom_deg": 5.0 + k + offset,
+                 "source": "TEST FIXTURE (not data)"} for k in range(3) for d in ("flexion", "extension")]
+        return pd.DataFrame(rows)
+
+    p = tmp_path / "bank.csv"
+    SP.write_bank(table(0.0), p)
+    a = SP.read_bank(p, "stepwise_rom")
+    assert SP.read_bank(p, "stepwise_rom") is a                       # the same parse
+    SP.write_bank(table(0.25), p)
+    st = p.stat()
+    os.utime(p, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000))     # a new version even within the clock's step
+    b = SP.read_bank(p, "stepwise_rom")
+    assert b is not a
+    np.testing.assert_allclose(b.values - a.values, 0.25)

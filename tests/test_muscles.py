@@ -259,9 +259,62 @@ def test_curve_inversion_is_exact_and_converges_in_few_newton_steps(curve, monke
     calls = []
     poly = millard._poly
     monkeypatch.setattr(millard, "_poly", lambda c, u: calls.append(1) or poly(c, u))
-    y, _ = curve.value_and_slope(x)
+    y, _ = curve.value_and_slope_reference(x)
     assert np.abs(y - ref).max() < 1e-12
     assert len(calls) <= 9, f"{len(calls) - 1} Newton sweeps"
+    assert np.abs(curve.value_and_slope(x)[0] - ref).max() < 1e-12      # the compiled path, point by point
+
+
+@pytest.mark.parametrize("curve", [ACTIVE_FL, PASSIVE_FL, FORCE_VELOCITY], ids=lambda c: c.name)
+def test_compiled_curves_equal_the_reference(curve):
+    """The compiled Millard curves (lumbar.muscles.compiled) against the numpy reference: values and slopes to
+    round-off over the whole range, both extrapolations, the segment joints and an array of any shape."""
+    from lumbar.mechanics import kernel
+    x = np.r_[np.linspace(curve.x_lo - 0.5, curve.x_hi + 0.5, 4001), curve.px[:, 0], curve.x_hi].reshape(-1, 1)
+    with kernel.use("compiled"):
+        y, d = curve.value_and_slope(x)
+    y0, d0 = curve.value_and_slope_reference(x)
+    assert y.shape == x.shape and d.shape == x.shape
+    np.testing.assert_allclose(y, y0, rtol=0, atol=1e-12 * max(1.0, np.abs(y0).max()))
+    np.testing.assert_allclose(d, d0, rtol=0, atol=1e-11 * max(1.0, np.abs(d0).max()))
+
+
+def test_compiled_paths_and_model_equal_the_reference(model):
+    """Path lengths, their derivative and the whole muscle model's residual and Jacobian (point loads, activation,
+    levels) on the compiled core equal the numpy reference path to round-off, for a batch of perturbed states."""
+    from lumbar.mechanics import kernel, so3
+    rng = np.random.default_rng(7)
+    x, R = model.reference_state(5)
+    x = x + rng.normal(0, 2e-3, x.shape)
+    R = so3.exp(rng.normal(0, 0.05, (5, model.nb, 3))) @ R
+    fv, fp = model.load_arrays(["crate_far"] * 5)
+    params = {"activation": rng.uniform(0, 0.3, (5, model.ms.n)), "force_vec": fv, "force_pt": fp}
+    with kernel.use("compiled"):
+        L, G = model.paths.lengths(x, R)
+        out = model.evaluate(x, R, params=params, levels=True, muscles=True)
+    L0, G0 = model.paths.lengths_reference(x, R)
+    np.testing.assert_allclose(L, L0, rtol=1e-13, atol=0)
+    np.testing.assert_allclose(G, G0, rtol=0, atol=1e-13)
+    with kernel.use("reference"):
+        ref = model.evaluate(x, R, params=params, levels=True, muscles=True)
+    for a, b in zip(out[:4], ref[:4]):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-9 * max(1.0, np.abs(b).max()))
+
+
+def test_point_load_arrays_equal_the_same_loads_one_by_one(model):
+    """The point loads of an activity given as arrays (``force_vec``/``force_pt``, evaluated for all bodies at
+    once) load the spine exactly as the same loads given one by one (``forces``)."""
+    rng = np.random.default_rng(8)
+    x, R = model.reference_state(2)
+    from lumbar.mechanics import so3
+    R = so3.exp(rng.normal(0, 0.05, (2, model.nb, 3))) @ R
+    fv, fp = model.load_arrays(["crate_far", "upright_standing"])
+    Qa, Ja = model.evaluate(x, R, params={"force_vec": fv, "force_pt": fp})
+    for i in range(2):
+        one = [(b, fv[i, k], fp[i, k], False) for k, b in enumerate(model.load_bodies)]
+        Q1, J1 = model.evaluate(x[[i]], R[[i]], params={"forces": one})
+        np.testing.assert_allclose(Qa[i], Q1[0], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(Ja[i], J1[0], rtol=0, atol=1e-9)
 
 
 def test_model_evaluate_returns_the_muscle_state_it_used(model):

@@ -277,7 +277,8 @@ def build_l2s1(geometry, charset, cables: pd.DataFrame | None = None, facet_stif
             reg[v] = (M, rms, "icp")
         else:
             reg[v] = (None, float("nan"), "translation" if geometry.name != "myo_sim" else "identity (myo_sim)")
-    for i, r in cab.iterrows():
+    placed = []
+    for _, r in cab.iterrows():
         c_geo = np.asarray(geometry.vertebrae[r["vertebra"]].centroid, float)
         M, rms, how = reg[r["vertebra"]]
         a_myo = np.array([r.attach_x_m, r.attach_y_m, r.attach_z_m])
@@ -290,14 +291,17 @@ def build_l2s1(geometry, charset, cables: pd.DataFrame | None = None, facet_stif
             scale = float(np.cbrt(np.linalg.det(M[:3, :3])))
             u = M[:3, :3] @ u
             u = u / np.linalg.norm(u)
-        cab.loc[i, ["registration", "registration_scale", "registration_rms_mm"]] = [how, scale, rms * 1e3]
-        cab.loc[i, ["model_dir_x", "model_dir_y", "model_dir_z"]] = u
-        cab.loc[i, ["model_x_m", "model_y_m", "model_z_m"]] = a
+        placed.append((how, scale, rms * 1e3, *u, *a))
         gid = m.add_fibre_group(f"{r.muscle_setup}_{r.side}", "cable", "cable", m.body_index(r["vertebra"]),
                                 GROUND, a[None], (a + cable_length_m * u)[None], 0.0, "cable",
                                 (float(r.tension_n),))
         groups[(r.muscle_setup, r.side)] = gid
         kinds.append("cable")
+    cols = ["registration", "registration_scale", "registration_rms_mm", "model_dir_x", "model_dir_y", "model_dir_z",
+            "model_x_m", "model_y_m", "model_z_m"]
+    placed = pd.DataFrame(placed, columns=cols, index=cab.index)   # per column (per-cell .loc was most of a build)
+    for c in cols:
+        cab[c] = placed[c]
     m.finalize()
     return L2S1(m, geometry, charset, cab, groups, kinds, sides)
 

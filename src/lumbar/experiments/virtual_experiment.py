@@ -136,10 +136,8 @@ def perturb_geometry(geometry, rng: np.random.Generator, v: SpecimenVariation, l
 
     for vert in geo.vertebrae.values():
         vert.centroid = sc(vert.centroid)
-        if getattr(vert, "mesh", None) is not None:
-            vert.mesh.apply_translation(-origin)
-            vert.mesh.apply_scale(s)
-            vert.mesh.apply_translation(origin)
+        if getattr(vert, "mesh", None) is not None:      # the vertices set at once (three transforms re-hashed it)
+            vert.mesh.vertices = origin + s * (np.asarray(vert.mesh.vertices) - origin)
     for name in sorted(geo.levels):
         lev = geo.levels[name]
         lev.disc_centre = sc(lev.disc_centre)

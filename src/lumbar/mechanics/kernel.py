@@ -42,6 +42,9 @@ except ImportError:  # pragma: no cover - exercised only in an environment witho
 # machine code cached beside this file (or in NUMBA_CACHE_DIR); numpy's error model: a division by zero gives
 # inf/nan as in the reference path instead of raising
 _jit = njit(cache=True, error_model="numpy")
+#: the same decorator for other compiled modules of the package (lumbar.muscles.compiled): one cache rule, one error
+#: model, one switch (:func:`active`)
+jit = _jit
 LAW_SOFTPLUS, LAW_RUPP, LAW_CABLE = 0, 1, 2
 MODES = ("compiled", "reference")
 _state = {"mode": os.environ.get("LUMBAR_KERNEL", "compiled"), "warned": False}

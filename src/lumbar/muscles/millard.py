@@ -29,6 +29,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..mechanics import kernel
+from . import compiled
+
 _B = np.array([[-1, 5, -10, 10, -5, 1],      # quintic Bernstein basis, rows = powers u^5 .. u^0
                [5, -20, 30, -20, 5, 0],
                [-10, 30, -30, 10, 0, 0],
@@ -73,6 +76,7 @@ class SmoothSegmentedCurve:
         self.cy = self.py @ _B.T
         self.x_lo, self.x_hi = self.px[0, 0], self.px[-1, -1]
         self._x_table = np.stack([np.polyval(c, _U_TABLE) for c in self.cx])   # x(u) per segment (monotone)
+        self._starts = np.ascontiguousarray(self.px[:, 0])
         if self.ends is None:
             self.y_lo, self.y_hi = self.py[0, 0], self.py[-1, -1]
             self.s_lo = self._slope_end(0, 0.0)
@@ -86,7 +90,20 @@ class SmoothSegmentedCurve:
         return dy / dx
 
     def value_and_slope(self, x):
-        """y(x) and dy/dx(x) for an array of x."""
+        """y(x) and dy/dx(x) for an array of x: compiled (:mod:`lumbar.muscles.compiled`) when the solver kernel
+        is active, else :meth:`value_and_slope_reference`."""
+        if not kernel.active():
+            return self.value_and_slope_reference(x)
+        x = np.asarray(x, float)
+        flat = np.ascontiguousarray(x.reshape(-1))
+        y, dydx = np.empty_like(flat), np.empty_like(flat)
+        compiled.curve_values(flat, self._starts, self.cx, self.cy, self._x_table, _U_TABLE, float(self.x_lo),
+                              float(self.x_hi), float(self.y_lo), float(self.y_hi), float(self.s_lo),
+                              float(self.s_hi), y, dydx)
+        return y.reshape(x.shape), dydx.reshape(x.shape)
+
+    def value_and_slope_reference(self, x):
+        """The numpy reference of :meth:`value_and_slope`."""
         x = np.asarray(x, float)
         flat = x.reshape(-1)
         y = np.empty_like(flat)

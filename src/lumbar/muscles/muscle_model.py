@@ -295,12 +295,19 @@ class LumbarMuscleModel:
             J += j
             g = Gd.reshape(B, self.ms.n, -1)
             J -= (np.swapaxes(g * dT[..., None], 1, 2) @ g).reshape(J.shape)   # sum_m dT_m g_m g_m^T (BLAS)
-        items = []
-        if "force_vec" in params:
+        if "force_vec" in params:     # fixed-direction point loads on self.load_bodies, all at once
             fv, fp = np.broadcast_to(params["force_vec"], (B,) + np.shape(params["force_vec"])[-2:]), \
                 np.broadcast_to(params["force_pt"], (B,) + np.shape(params["force_pt"])[-2:])
-            items = [(b, fv[:, k], fp[:, k], False) for k, b in enumerate(self.load_bodies)]
-        for b, f, s, follower in list(items) + list(params.get("forces", ())):
+            bodies = np.asarray(self.load_bodies, int)
+            r = np.einsum("bkij,bkj->bki", R[:, bodies], fp - self.c[bodies])
+            tq = np.cross(r, fv)
+            jr = so3.hat(fv) @ so3.hat(r) if jacobian else None
+            for k, b in enumerate(bodies):                 # a body may carry several loads: add one by one
+                Q[:, b, :3] += fv[:, k]
+                Q[:, b, 3:] += tq[:, k]
+                if jacobian:
+                    J[:, b, 3:, b, 3:] += jr[:, k]
+        for b, f, s, follower in params.get("forces", ()):
             s = np.broadcast_to(s, (B, 3))
             r = np.einsum("bij,bj->bi", R[:, b], s - self.c[b])
             fw = np.broadcast_to(f, (B, 3)) if not follower else np.einsum("bij,j->bi", R[:, b], f)

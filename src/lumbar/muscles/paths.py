@@ -21,6 +21,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..mechanics import kernel
+from . import compiled
 from .millard import ACTIVE_FL, PASSIVE_FL
 from .muscle_set import OPTIMAL_SL_UM, MuscleSet
 
@@ -129,7 +131,20 @@ class MusclePaths:
         return p, r
 
     def lengths(self, x, R, gradient=True):
-        """Path lengths (B, nm) and, optionally, dL/dq (B, nm, nb, 6)."""
+        """Path lengths (B, nm) and, optionally, dL/dq (B, nm, nb, 6): compiled (:mod:`lumbar.muscles.compiled`)
+        when the solver kernel is active, else :meth:`lengths_reference`."""
+        if not kernel.active():
+            return self.lengths_reference(x, R, gradient)
+        x, R = np.ascontiguousarray(x, float), np.ascontiguousarray(R, float)
+        B, nb = x.shape[0], x.shape[1]
+        L = np.empty((B, self.nm))
+        G = np.zeros((B, self.nm, nb, 6) if gradient else (1, 1, 1, 6))
+        compiled.path_lengths(x, R, self.c, self.seg_m, self.seg_a, self.seg_b, self.sa, self.sb, self.const,
+                              bool(gradient), L, G)
+        return L, (G if gradient else None)
+
+    def lengths_reference(self, x, R, gradient=True):
+        """The numpy reference of :meth:`lengths`."""
         pa, ra = self._attach(x, R, self.seg_a, self.sa)
         pb, rb = self._attach(x, R, self.seg_b, self.sb)
         d = pa - pb
