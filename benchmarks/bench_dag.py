@@ -34,13 +34,14 @@ STAGES = {"calibration": r"calibrate", "forward": r"stepwise_reduction_sim_.+", 
 
 
 def read_benchmarks(bench_dir: Path) -> dict[str, float]:
-    """Wall seconds of every job from Snakemake's benchmark TSV files (first row, column ``s``)."""
+    """Wall seconds of every job from Snakemake's benchmark TSV files (first row, column ``s``), including those of
+    rules that keep theirs in a subfolder (``muscle_sobol_chunk/flexion_0.tsv`` -> ``muscle_sobol_chunk/flexion_0``)."""
     out = {}
-    for p in sorted(bench_dir.glob("*.tsv")):
+    for p in sorted(bench_dir.rglob("*.tsv")):
         with p.open() as f:
             rows = list(csv.DictReader(f, delimiter="\t"))
         if rows and "s" in rows[0]:
-            out[p.stem] = round(float(rows[0]["s"]), 3)
+            out[p.relative_to(bench_dir).with_suffix("").as_posix()] = round(float(rows[0]["s"]), 3)
     return out
 
 
@@ -67,7 +68,10 @@ def main(argv=None):
     cmd = [sys.executable, "-m", "snakemake", "--cores", str(a.cores)]
     if a.configfile:
         cmd += ["--configfile", a.configfile]
-    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    # cold also for the compiled kernels: an empty numba cache, as in a fresh clone (the installed package may be an
+    # editable install whose cache is warm), so their compile time is part of the wall time
+    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1",
+               NUMBA_CACHE_DIR=str(tmp / "numba_cache"))
     load_before = os.getloadavg()
     t0 = time.perf_counter()
     try:
@@ -95,6 +99,8 @@ def main(argv=None):
         "stages_note": "sum of the job wall times of rules calibrate, stepwise_reduction_sim (every set) and "
                        "l2s1_idp (every set), from their benchmark files; jobs may overlap in time on 2 cores",
         "per_job_s": per_job,
+        "jobs_sum_s": round(sum(per_job.values()), 2),
+        "numba_cache": "empty at the start (compile time included)",
         "python": platform.python_version(),
         "machine": platform.machine(),
         "cpu_count": os.cpu_count(),

@@ -27,8 +27,10 @@ def test_dag_stage_sums_from_benchmark_files(tmp_path):
     for name, s in (("calibrate", 12.5), ("stepwise_reduction_sim_rupp2015", 2.0),
                     ("stepwise_reduction_sim_calibrated", 3.0), ("l2s1_idp_rupp2015", 4.0), ("fsu_rom", 9.0)):
         (tmp_path / f"{name}.tsv").write_text(f"s\th:m:s\tmax_rss\n{s}\t0:00:01\t1.0\n")
+    (tmp_path / "muscle_sobol_chunk").mkdir()             # rules that keep their files in a subfolder count too
+    (tmp_path / "muscle_sobol_chunk" / "flexion_0.tsv").write_text("s\th:m:s\tmax_rss\n7.5\t0:00:07\t1.0\n")
     per_job = bench_dag.read_benchmarks(tmp_path)
-    assert per_job["fsu_rom"] == 9.0
+    assert per_job["fsu_rom"] == 9.0 and per_job["muscle_sobol_chunk/flexion_0"] == 7.5
     assert bench_dag.stage_sums(per_job) == {"calibration": 12.5, "forward": 5.0, "idp": 4.0}
 
 
