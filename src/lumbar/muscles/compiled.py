@@ -15,6 +15,32 @@ from ..mechanics.kernel import jit as _jit
 
 
 @_jit
+def _end(x, R, c, body, s, bi):
+    """World position p and lever arm r = R (s - c) of a path point ``s`` on ``body`` (< 0: fixed, s in world
+    coordinates, r = 0) in scenario ``bi``."""
+    if body < 0:
+        return s[0], s[1], s[2], 0.0, 0.0, 0.0
+    d0, d1, d2 = s[0] - c[body, 0], s[1] - c[body, 1], s[2] - c[body, 2]
+    r0 = R[bi, body, 0, 0] * d0 + R[bi, body, 0, 1] * d1 + R[bi, body, 0, 2] * d2
+    r1 = R[bi, body, 1, 0] * d0 + R[bi, body, 1, 1] * d1 + R[bi, body, 1, 2] * d2
+    r2 = R[bi, body, 2, 0] * d0 + R[bi, body, 2, 1] * d1 + R[bi, body, 2, 2] * d2
+    return x[bi, body, 0] + r0, x[bi, body, 1] + r1, x[bi, body, 2] + r2, r0, r1, r2
+
+
+@_jit
+def _add_gradient(G, bi, m, body, sign, u0, u1, u2, r0, r1, r2):
+    """G[bi, m, body] += sign (u, r x u): a path end's share of dL/d(x, w)."""
+    if body < 0:
+        return
+    G[bi, m, body, 0] += sign * u0
+    G[bi, m, body, 1] += sign * u1
+    G[bi, m, body, 2] += sign * u2
+    G[bi, m, body, 3] += sign * (r1 * u2 - r2 * u1)
+    G[bi, m, body, 4] += sign * (r2 * u0 - r0 * u2)
+    G[bi, m, body, 5] += sign * (r0 * u1 - r1 * u0)
+
+
+@_jit
 def path_lengths(x, R, c, seg_m, seg_a, seg_b, sa, sb, const, gradient, L, G):
     """Fill L (B, nm) with the path lengths and, when ``gradient``, G (B, nm, nb, 6) (zeroed by the caller) with
     dL/dq: per segment between bodies a and b (index < 0: fixed, the point is in world coordinates) its length,
@@ -24,45 +50,17 @@ def path_lengths(x, R, c, seg_m, seg_a, seg_b, sa, sb, const, gradient, L, G):
     for bi in range(B):
         for m in range(nm):
             L[bi, m] = const[m]
-        for s in range(seg_m.shape[0]):
-            ia, ib, m = seg_a[s], seg_b[s], seg_m[s]
-            ra0 = ra1 = ra2 = rb0 = rb1 = rb2 = 0.0
-            if ia >= 0:
-                d0, d1, d2 = sa[s, 0] - c[ia, 0], sa[s, 1] - c[ia, 1], sa[s, 2] - c[ia, 2]
-                ra0 = R[bi, ia, 0, 0] * d0 + R[bi, ia, 0, 1] * d1 + R[bi, ia, 0, 2] * d2
-                ra1 = R[bi, ia, 1, 0] * d0 + R[bi, ia, 1, 1] * d1 + R[bi, ia, 1, 2] * d2
-                ra2 = R[bi, ia, 2, 0] * d0 + R[bi, ia, 2, 1] * d1 + R[bi, ia, 2, 2] * d2
-                pa0, pa1, pa2 = x[bi, ia, 0] + ra0, x[bi, ia, 1] + ra1, x[bi, ia, 2] + ra2
-            else:
-                pa0, pa1, pa2 = sa[s, 0], sa[s, 1], sa[s, 2]
-            if ib >= 0:
-                d0, d1, d2 = sb[s, 0] - c[ib, 0], sb[s, 1] - c[ib, 1], sb[s, 2] - c[ib, 2]
-                rb0 = R[bi, ib, 0, 0] * d0 + R[bi, ib, 0, 1] * d1 + R[bi, ib, 0, 2] * d2
-                rb1 = R[bi, ib, 1, 0] * d0 + R[bi, ib, 1, 1] * d1 + R[bi, ib, 1, 2] * d2
-                rb2 = R[bi, ib, 2, 0] * d0 + R[bi, ib, 2, 1] * d1 + R[bi, ib, 2, 2] * d2
-                pb0, pb1, pb2 = x[bi, ib, 0] + rb0, x[bi, ib, 1] + rb1, x[bi, ib, 2] + rb2
-            else:
-                pb0, pb1, pb2 = sb[s, 0], sb[s, 1], sb[s, 2]
+        for k in range(seg_m.shape[0]):
+            m = seg_m[k]
+            pa0, pa1, pa2, ra0, ra1, ra2 = _end(x, R, c, seg_a[k], sa[k], bi)
+            pb0, pb1, pb2, rb0, rb1, rb2 = _end(x, R, c, seg_b[k], sb[k], bi)
             e0, e1, e2 = pa0 - pb0, pa1 - pb1, pa2 - pb2
             ln = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
             L[bi, m] += ln
-            if not gradient:
-                continue
-            u0, u1, u2 = e0 / ln, e1 / ln, e2 / ln
-            if ia >= 0:
-                G[bi, m, ia, 0] += u0
-                G[bi, m, ia, 1] += u1
-                G[bi, m, ia, 2] += u2
-                G[bi, m, ia, 3] += ra1 * u2 - ra2 * u1
-                G[bi, m, ia, 4] += ra2 * u0 - ra0 * u2
-                G[bi, m, ia, 5] += ra0 * u1 - ra1 * u0
-            if ib >= 0:
-                G[bi, m, ib, 0] -= u0
-                G[bi, m, ib, 1] -= u1
-                G[bi, m, ib, 2] -= u2
-                G[bi, m, ib, 3] -= rb1 * u2 - rb2 * u1
-                G[bi, m, ib, 4] -= rb2 * u0 - rb0 * u2
-                G[bi, m, ib, 5] -= rb0 * u1 - rb1 * u0
+            if gradient:
+                u0, u1, u2 = e0 / ln, e1 / ln, e2 / ln
+                _add_gradient(G, bi, m, seg_a[k], 1.0, u0, u1, u2, ra0, ra1, ra2)
+                _add_gradient(G, bi, m, seg_b[k], -1.0, u0, u1, u2, rb0, rb1, rb2)
 
 
 @_jit
