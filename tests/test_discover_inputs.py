@@ -349,3 +349,19 @@ def test_random_corruption_gives_a_clear_error_or_a_correct_reading(tmp_path, ca
     assert exp == kind
     problems = _correct_reading(kind, text, df)
     assert not problems, (problems, text)
+
+
+def test_infinite_range_end_is_refused_naming_its_column(tmp_path):
+    """An 'inf' in a ROM range column (found by the corruption suite) is refused with the column named, not read
+    as a measurement; an empty cell still means 'no range'."""
+    rows = ["stage,direction,moment_nm,rom_mean_deg,rom_min_deg,rom_max_deg,n_specimens,kind,source"]
+    rows += [f"intact,{d},{m},{4.0 + m / 5:.2f},,,8,surrogate,TEST FIXTURE" for d in ("flexion", "extension")
+             for m in (2.5, 7.5)]
+    ok = tmp_path / "ok.csv"
+    ok.write_text("\n".join(rows) + "\n")
+    D.read_measured(ok)
+    bad = tmp_path / "bad.csv"
+    bad.write_text("\n".join(rows[:1] + [rows[1].replace(",,,8,", ",2.8,inf,8,")] + rows[2:]) + "\n")
+    with pytest.raises(Exception, match="rom_max_deg") as e:
+        D.read_measured(bad)
+    assert "bad.csv" in str(e.value)

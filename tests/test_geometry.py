@@ -315,3 +315,23 @@ def test_reject_unknown_kind_and_level():
         load_geometry("nope")
     with pytest.raises(GeometryError, match="unknown level"):
         load_geometry("default", levels=["L4-L6"])
+
+
+@pytest.mark.parametrize("angle", [0.0, 30.0, 60.0, 90.0])
+def test_facet_sagittal_angle_of_a_known_plane(angle):
+    """Landmarks on a plane whose normal lies in the transverse plane at ``angle`` from the lateral axis: a joint
+    plane ``angle`` from the sagittal plane (0 = sagittal facets, 90 = coronal), whatever the sign of the normal."""
+    from types import SimpleNamespace
+
+    from lumbar.geometry.analysis import facet_sagittal_angle_deg
+    a = np.radians(angle)
+    n = np.array([np.sin(a), np.cos(a), 0.0])                       # joint normal
+    e1 = np.array([0.0, 0.0, 1.0])                                   # superior, in the plane
+    e2 = np.cross(n, e1)
+    rng = np.random.default_rng(1)
+    uv = rng.uniform(-0.01, 0.01, (18, 2))
+    P = np.array([0.03, 0.02, 0.05]) + uv[:, :1] * e1 + uv[:, 1:] * e2 + rng.normal(0, 1e-5, (18, 1)) * n
+    facet = SimpleNamespace(superior=P[:9], inferior=P[9:])
+    assert facet_sagittal_angle_deg(facet) == pytest.approx(angle, abs=0.2)
+    flipped = SimpleNamespace(superior=-P[:9], inferior=-P[9:])       # mirrored: the same orientation
+    assert facet_sagittal_angle_deg(flipped) == pytest.approx(angle, abs=0.2)

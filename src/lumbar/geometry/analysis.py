@@ -120,8 +120,18 @@ def projected_area(points: np.ndarray, normal: np.ndarray) -> float:
     return float(ConvexHull(q).volume)
 
 
+def facet_sagittal_angle_deg(facet) -> float:
+    """Orientation of a facet joint in the transverse plane [deg]: the angle between the joint plane and the
+    sagittal plane (0 = sagittal facets, 90 = coronal facets), from the joint normal = the least-variance axis of
+    all its landmarks (the w axis of the paper's Eq. 4 surface fit, ``lumbar.mechanics.elements.facet``)."""
+    P = np.vstack([np.asarray(facet.superior, float), np.asarray(facet.inferior, float)])
+    w = np.linalg.svd(P - P.mean(0))[2][2]
+    return float(np.degrees(np.arctan2(abs(w[0]), abs(w[1]))))
+
+
 def summary_table(geo) -> pd.DataFrame:
-    """One row per level: disc centre/normal/CSA/height, facet landmarks, ligament fibres (mm)."""
+    """One row per level: disc centre/normal/CSA/height, facet landmarks and orientation
+    (:func:`facet_sagittal_angle_deg`), ligament fibres (mm)."""
 
     rows = []
     for name in sorted(geo.levels):
@@ -134,6 +144,8 @@ def summary_table(geo) -> pd.DataFrame:
         row["disc_csa_mm2"] = 1e6 * float(lev.disc_csa)
         row["disc_height_mm"] = 1e3 * float(lev.disc_height)
         row["facet_landmarks_n"] = int(sum(len(f.superior) + len(f.inferior) for f in lev.facets.values()))
+        for side in sorted(lev.facets):
+            row[f"facet_{side}_sagittal_angle_deg"] = facet_sagittal_angle_deg(lev.facets[side])
         for lig in lev.ligaments:
             length = np.linalg.norm(np.asarray(lig.upper) - np.asarray(lig.lower), axis=1) + np.asarray(lig.extra_length)
             row[f"{lig.name}_n_fibres"] = int(len(length))
