@@ -990,6 +990,15 @@ class _Probe:
         self.kw = dict(max_iter=max_iter, tol_force=tol, tol_moment=tol)
         self.st = level_structures(m, fsu.level.name, dict(enumerate(fsu.surface_side)))
         self.sel = [0, self.scen.index(("moment", "flexion", PROBE_MOMENTS[-1])), B - 1]
+        # what metrics() reads, fixed per probe: the moment scenarios (row, axis, sign), the fibre groups of each
+        # ligament kind and each structure's fibre mask
+        self.rot_rows = [i for i, sc in enumerate(self.scen) if sc[0] == "moment"]
+        self.rot_axis = np.array([AXIS_OF[self.scen[i][1]][0] for i in self.rot_rows])
+        self.rot_sign = np.array([AXIS_OF[self.scen[i][1]][1] for i in self.rot_rows], float)
+        self.kinds = {}
+        for g, (_, k, _lv) in enumerate(m.fibre_groups):
+            self.kinds.setdefault(k, []).append(g)
+        self.group_masks = {k: np.isin(m.f_group, g) for k, g in self.st.groups.items()}
         self.warm = None
         self.state = None
         self.n_solves = 0
@@ -1043,18 +1052,14 @@ class _Probe:
     def metrics(self, x, R):
         """Rotations [deg] at every probe scenario, rest and 10 N*m flexion internal loads, compression share."""
         m = self.fsu.model
-        R0 = R[0, 0]
-        rot = {}
-        for i, (kind, d, M) in enumerate(self.scen):
-            if kind == "moment":
-                ax, sg = AXIS_OF[d]
-                rot[(d, M)] = float(np.degrees(so3.log(R[i, 0] @ R0.T)[ax] * sg))
+        rows = self.rot_rows
+        phi = so3.log(R[rows, 0] @ R[0, 0].T)                       # one batch: every moment scenario
+        deg = np.degrees(phi[np.arange(len(rows)), self.rot_axis] * self.rot_sign)
+        rot = {self.scen[i][1:]: float(v) for i, v in zip(rows, deg)}
         sel = self.sel
         gf = m.group_forces(x[sel], R[sel], self.fm[sel])
         cf = m.contact_forces(x[sel], R[sel], self.cm[sel])
-        kinds = {}
-        for g, (_, k, _lv) in enumerate(m.fibre_groups):
-            kinds.setdefault(k, []).append(g)
+        kinds = self.kinds
         # ligament moments about the disc centre at 10 N*m flexion, straight from the fibre forces
         i = sel[1]
         _, _, T, _, d, dn, pa, _ = m.fibre_state(x[[i]], R[[i]], self.fm[[i]])
@@ -1062,14 +1067,15 @@ class _Probe:
         st = self.st
         centre = x[i, st.upper] + R[i, st.upper] @ (st.centre - m.c[st.upper])
         mom = np.cross(pa[0] - centre, f[0])[:, 1]                # flexion component (world y)
-        flex_moment = {k: float(-mom[np.isin(m.f_group, g)].sum()) for k, g in st.groups.items()}
+        flex_moment = {k: float(-mom[mask].sum()) for k, mask in self.group_masks.items()}
         # facets' share of the follower load: their contact forces along the disc normal (masked residuals)
         j = [sel[2]]
         base, _ = m.evaluate(x[j], R[j], None, self.fm[j] * 0, self.cm[j] * 0, jacobian=False)
         onlyf, _ = m.evaluate(x[j], R[j], None, self.fm[j] * 0, self.cm[j], jacobian=False)
         up = float((onlyf - base)[0, st.upper, :3] @ m.discs[st.disc].frame[2])
-        disc_up = float(m.disc_loads(x[j], R[j])["force"][0, st.disc, 2])
-        disc_r = m.disc_loads(x, R)["r"][:, self.st.disc, 2]       # axial displacement [m], < 0 = compression
+        dl = m.disc_loads(x, R)                                    # every scenario in one batch
+        disc_up = float(dl["force"][j[0], st.disc, 2])
+        disc_r = dl["r"][:, st.disc, 2]                            # axial displacement [m], < 0 = compression
         moment_rows = [i for i, sc in enumerate(self.scen) if sc[0] != "compression"]
         return {"rot": rot, "min_disc_compression_mm": float(-disc_r[moment_rows].max() * 1e3),
                 "rest_tension": {k: float(gf[0, g].sum()) for k, g in kinds.items()},
