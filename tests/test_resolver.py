@@ -3,7 +3,6 @@ workflow's FSU, stepwise-reduction (Table 4) and L2-S1 (Table 5) stages and by t
 import re
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import pandas as pd
@@ -37,19 +36,23 @@ def test_literature_sets_ignore_the_calibration_output(calibrated_dir):
     assert cs.facet.stiffness == load_characteristic_set("rupp2015").facet.stiffness
 
 
-def test_fsu_command_line_uses_the_same_calibrated_values(calibrated_dir):
-    out = subprocess.run([sys.executable, "-m", "lumbar.cli", "fsu", "--moment", "2.5", "--direction", "axial_rotation",
-                          "--calibrated-dir", str(calibrated_dir)], capture_output=True, text=True, cwd=ROOT)
-    assert str(calibrated_dir) in out.stdout.splitlines()[0]
-    out_pub = subprocess.run([sys.executable, "-m", "lumbar.cli", "fsu", "--moment", "2.5", "--direction", "axial_rotation",
-                              "--calibrated-dir", str(calibrated_dir / "nope")], capture_output=True, text=True,
-                             cwd=ROOT)
-    assert "as published" in out_pub.stdout.splitlines()[0]
+def test_fsu_command_line_uses_the_same_calibrated_values(calibrated_dir, capsys, monkeypatch):
+    """``lumbar fsu`` (its main, in this process, from the repository root as a user runs it) takes the calibrated
+    set from --calibrated-dir and says so; without that output, the published set, and the ROM changes."""
+    from lumbar import cli
+    monkeypatch.chdir(ROOT)
+    args = ["fsu", "--moment", "2.5", "--direction", "axial_rotation", "--calibrated-dir"]
+    assert cli.main([*args, str(calibrated_dir)]) == 0
+    out = capsys.readouterr().out
+    assert str(calibrated_dir) in out.splitlines()[0]
+    assert cli.main([*args, str(calibrated_dir / "nope")]) == 0
+    out_pub = capsys.readouterr().out
+    assert "as published" in out_pub.splitlines()[0]
 
     def rom(text):
         row = [ln for ln in text.splitlines() if ln.strip().startswith("intact")][0]
         return float(row.split()[3])
-    assert rom(out.stdout) != pytest.approx(rom(out_pub.stdout), abs=1e-3)   # the calibrated facets act
+    assert rom(out) != pytest.approx(rom(out_pub), abs=1e-3)   # the calibrated facets act
 
 
 def test_every_stage_takes_calibrated_from_the_calibration_output():
