@@ -96,7 +96,7 @@ def test_dag_reproducible_byte_identical(dag_workdir, dag_second_workdir):
     benchmark and the report, which have their own determinism tests); every file it wrote is compared."""
     a, b = result_files(dag_workdir), result_files(dag_second_workdir)
     assert set(b) <= set(a), sorted(set(b) - set(a))
-    assert len(b) >= 60 and len(b) >= len(a) // 2, (len(b), len(a))
+    assert len(b) >= 50 and len(b) >= len(a) // 3, (len(b), len(a))
     differ = sorted(k for k in b if a[k] != b[k])
     assert differ == [], f"{len(differ)} of {len(b)} result files differ between two runs: {differ}\n" + \
         "\n".join(first_difference(a[k], b[k], k) for k in differ)
