@@ -31,14 +31,16 @@ and no IDP by more than 0.1 N of disc force), so it is not identifiable there an
 from __future__ import annotations
 
 import copy
+import functools
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Callable, Mapping
 
 import numpy as np
 import pandas as pd
 
 from ..mechanics import so3
-from ..inputs.characteristics import load_characteristic_set
+from ..inputs.characteristics import default_data_dir, load_characteristic_set
 from ..mechanics.elements.ligament import rupp_shape, slack_length
 from .fsu import DIRECTIONS, STAGES, moment_loads
 from ..mechanics.idp import K_FLEXION_PA_PER_NM
@@ -184,6 +186,21 @@ def idp_delta(name, value, idp_pa, m_sagittal_nm, idp_per_newton):
 
 
 # ------------------------------------------------------------------ solver effects on the L4-L5 unit
+
+def rupp2015_itl_law():
+    """The intertransverse ligament law of the rupp2015 set (the ITL effect's law), read once per version of the
+    data folder's tables: a discovery benchmark builds a unit per virtual specimen (hundreds per job), and reading
+    the set's tables each time cost about 30 ms a unit."""
+    d = Path(default_data_dir())
+    stamp = tuple((p.name, p.stat().st_mtime_ns, p.stat().st_size) for p in sorted(d.glob("*.csv")))
+    return _rupp2015_itl_law(str(d), stamp)
+
+
+@functools.lru_cache(maxsize=4)
+def _rupp2015_itl_law(data_dir: str, stamp: tuple):
+    return load_characteristic_set("rupp2015", data_dir=data_dir).ligaments["ITL"]
+
+
 class FsuVariants:
     """An L4-L5 unit augmented with the extra elements of the solver effects (at weight 0).
 
@@ -203,7 +220,7 @@ class FsuVariants:
         up, lo = 0, -1
         extra = {}
         if itl_law is None:
-            itl_law = load_characteristic_set("rupp2015").ligaments["ITL"]
+            itl_law = rupp2015_itl_law()
         itl = [lg for lg in lev.ligaments if lg.kind == "ITL"]
         shape = rupp_shape(itl_law.l_a_m, itl_law.l_b_m, itl_law.f_a_n, itl_law.f_b_n, itl_law.n_strands)
         g_itl = [m.add_fibre_group(lg.name + "_effect", "ITL", lev.name, up, lo, lg.upper, lg.lower,
