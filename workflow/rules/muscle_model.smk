@@ -96,6 +96,10 @@ rule muscle_sensitivity:
         f"logs/muscle_sensitivity/{MUSCLE_CHUNKS.wildcard_pattern}.log",
     benchmark:
         f"results/benchmarks/muscle_sensitivity/{MUSCLE_CHUNKS.wildcard_pattern}.tsv"
+    # leaves of the DAG (only muscle_sensitivity_table and the report wait for them): below the default priority 0,
+    # so that the jobs heading longer chains (calibration -> forward sets -> tables; the discovery's specimen banks ->
+    # benchmark jobs) start first and these short jobs fill both cores at the end (lowest: the shortest jobs)
+    priority: -10
     conda:
         "../envs/lumbar.yaml"
     params:
@@ -152,6 +156,8 @@ rule muscle_sobol_chunk:
     wildcard_constraints:
         posture="standing|flexion",
         chunk=r"\d+",
+    # leaves like muscle_sensitivity (see there), longer ones: after the other rules, before the sensitivity chunks
+    priority: -5
     conda:
         "../envs/lumbar.yaml"
     params:

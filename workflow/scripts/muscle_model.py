@@ -23,16 +23,21 @@ FIGURE_PARAMETERS = ("ssl_um", "k_n_per_cm2", "in_situ_sl_um", "spt_n_per_cm2", 
 
 snakemake, log = _common.start(globals())
 
-import matplotlib  # noqa: E402
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-
 from lumbar.muscles import muscle_model as mm  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 from lumbar.muscles.redundancy import PostureSolution  # noqa: E402
 
 SAVE = dict(dpi=150, metadata={"Software": None})
+
+
+def _plt():
+    """pyplot on the Agg backend, imported by the jobs that draw (0.6-0.8 s of import the solve jobs skip)."""
+    import matplotlib  # noqa: PLC0415
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # noqa: PLC0415
+
+    return plt
 
 
 def _model(p):
@@ -46,7 +51,7 @@ def _save(fig, path):
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(path).with_suffix(".tmp.png")
     fig.savefig(tmp, **SAVE)
-    plt.close(fig)
+    _plt().close(fig)
     tmp.replace(path)
 
 
@@ -70,7 +75,7 @@ def _sobol_figure(df, path):
     """S1 and ST per parameter with their bootstrap 95 % intervals (whiskers), one panel per posture; the panel
     title gives the method (PCE degree, model solves, leave-one-out Q2). Indices and intervals lie in [0, 1]."""
     posts = list(dict.fromkeys(df["posture"]))
-    fig, axes = plt.subplots(1, len(posts), figsize=(4.6 * len(posts), 4.2), squeeze=False, sharey=True,
+    fig, axes = _plt().subplots(1, len(posts), figsize=(4.6 * len(posts), 4.2), squeeze=False, sharey=True,
                              layout="constrained")
     for ax, post in zip(axes[0], posts):
         d = df[df["posture"] == post]
@@ -154,7 +159,7 @@ if rule == "muscle_validation":
     write_table_atomic(fr, snakemake.output.flexion_relaxation)
     log.info("in-vivo validation: %s", metrics)
     # Fig. 3 analog
-    fig, ax = plt.subplots(figsize=(6.5, 4))
+    fig, ax = _plt().subplots(figsize=(6.5, 4))
     xs = np.arange(len(val2))
     ax.bar(xs - 0.2, val2["idp_force_mpa"], 0.4, color="#4c72b0", label="model: compressive force part")
     ax.bar(xs - 0.2, val2["idp_moment_mpa"], 0.4, bottom=val2["idp_force_mpa"], color="#8fb0d9",
@@ -233,7 +238,7 @@ elif rule == "muscle_sensitivity_table":
         ssls = [x for x in d["ssl_um"].fillna(-1).unique()]
         unit = UNITS[param].split("[")[-1].rstrip("]")
         nrow = max(len(ssls) * len(posts), 1)
-        fig, axes = plt.subplots(nrow, 1, squeeze=False, figsize=(8.5, 0.6 + 2.5 * nrow), layout="constrained")
+        fig, axes = _plt().subplots(nrow, 1, squeeze=False, figsize=(8.5, 0.6 + 2.5 * nrow), layout="constrained")
         fig.suptitle(f"L4-L5 IDP vs {UNITS[param]} per muscle-group scope. Bars: solid = compressive-force part, "
                      "hatched = sagittal-moment part;\ndashed line: baseline; red star: posture not reached; "
                      "open circle: reached, optimum not certified (KKT)", fontsize=8)
@@ -253,7 +258,7 @@ elif rule == "muscle_sensitivity_table":
                             continue
                         row = row.iloc[0]
                         xpos = si + (j - (len(vals) - 1) / 2) * width
-                        ax.bar(xpos, row["idp_force_mpa"], width * 0.9, color=plt.cm.viridis(j / max(len(vals) - 1, 1)),
+                        ax.bar(xpos, row["idp_force_mpa"], width * 0.9, color=_plt().cm.viridis(j / max(len(vals) - 1, 1)),
                                label=f"{v:g} {unit}" if si == 0 else None)
                         ax.bar(xpos, row["idp_moment_mpa"], width * 0.9, bottom=row["idp_force_mpa"], color="none",
                                edgecolor="k", hatch="//", lw=0.4)

@@ -29,7 +29,6 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from scipy.stats import beta, kstest
 
 from ..experiments import effects as fx
 from ..experiments.fsu import MAIN_DIRECTIONS, STAGES
@@ -407,6 +406,7 @@ def _interval(k, n, level=0.95):
     """Clopper-Pearson (exact binomial) interval of k successes in n."""
     if n == 0:
         return [float("nan"), float("nan")]
+    from scipy.stats import beta  # noqa: PLC0415 - scipy.stats costs ~1 s to import; only the summary needs it
     a = (1 - level) / 2
     lo = 0.0 if k == 0 else float(beta.ppf(a, k, n - k + 1))
     hi = 1.0 if k == n else float(beta.ppf(1 - a, k + 1, n - k))
@@ -462,6 +462,7 @@ def summarise_benchmark(bench: pd.DataFrame, generator="virtual_specimens") -> d
     m["power"] = power
     pv = nul["p_value"].to_numpy(float)
     pv = pv[np.isfinite(pv)]
+    from scipy.stats import kstest  # noqa: PLC0415 - see _interval
     ks = kstest(pv, "uniform") if len(pv) >= 5 else None
     m["null_p_values"] = {"n": int(len(pv)), "ks_statistic": float(ks.statistic) if ks else float("nan"),
                           "ks_p": float(ks.pvalue) if ks else float("nan"),

@@ -24,7 +24,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import trimesh
-import matplotlib
 
 from ..inputs import resources, tables
 from .fsu import DIRECTIONS, add_level
@@ -558,6 +557,8 @@ def plot_fig7(syn: pd.DataFrame, path, set_name="calibrated"):
     if set_name not in set(syn["set"]):
         set_name = syn["set"].iloc[0]
     d = syn[syn["set"] == set_name].set_index(["muscle_setup", "load_case"])
+    import matplotlib  # noqa: PLC0415 - matplotlib only where a figure is drawn
+
     colours = matplotlib.colormaps["tab10"].colors
     fig, ax = subplots(figsize=(16, 6), dpi=100)
     w = 0.8 / len(MUSCLE_SETUPS)

@@ -28,8 +28,6 @@ import logging
 
 import numpy as np
 import pandas as pd
-import matplotlib
-from matplotlib.patches import Rectangle
 
 from ..mechanics import so3
 from .effects import SOLVER_EFFECTS, FsuVariants, check_effect, effect_params
@@ -283,6 +281,8 @@ def plot_table4_grid(synopsis: pd.DataFrame, path, sets=None) -> None:
     moments = sorted(synopsis["moment_nm"].unique())
     rows = [(s, M) for s in STAGES for M in moments]
     cols = [(k, d) for k in sets for d in MAIN_DIRECTIONS]
+    from matplotlib.patches import Rectangle  # noqa: PLC0415 - matplotlib only where a figure is drawn
+
     idx = synopsis.set_index(["set", "stage", "direction", "moment_nm"])
     fig, ax = subplots(figsize=(1.2 + 0.32 * len(cols), 1.2 + 0.22 * len(rows)))
     for i, (st, M) in enumerate(rows):
@@ -316,6 +316,8 @@ def plot_rom_stepwise_reduction(synopsis: pd.DataFrame, path, set_name="calibrat
     syn = synopsis[synopsis["set"] == set_name]
     moments = sorted(syn["moment_nm"].unique())
     fig, axes = subplots(len(MAIN_DIRECTIONS), 1, figsize=(12, 11), sharex=True)
+    import matplotlib  # noqa: PLC0415 - see plot_table4_grid
+
     colours = matplotlib.colormaps["viridis"](np.linspace(0, 0.95, len(STAGES)))
     width = 0.8 / len(STAGES)
     for ax, d in zip(axes, MAIN_DIRECTIONS):

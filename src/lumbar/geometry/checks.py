@@ -24,17 +24,25 @@ ORDER = ("S1", "L5", "L4", "L3", "L2", "L1")
 INSERTION_TOL_M = 0.010   # 10 mm: via-point ALL/PLL ends of the Visible Human sit up to ~8 mm off the bone
 
 
-def _surface_distance(mesh, pts):
+def _surface_distance(mesh, pts, trees=None):
+    """Distance of each point to the mesh surface; ``trees`` (dict) keeps one vertex KD-tree per dense mesh across
+    calls (a check of one geometry queries every vertebra some 20 times)."""
     pts = np.asarray(pts, float).reshape(-1, 3)
     if len(mesh.vertices) > 5000:          # dense mesh: the nearest vertex is within a fraction of a mm
         from scipy.spatial import cKDTree  # noqa: PLC0415
-        return cKDTree(mesh.vertices).query(pts)[0]
+        tree = None if trees is None else trees.get(id(mesh))
+        if tree is None:
+            tree = cKDTree(mesh.vertices)
+            if trees is not None:
+                trees[id(mesh)] = tree
+        return tree.query(pts)[0]
     import trimesh  # noqa: PLC0415
     return trimesh.proximity.closest_point(mesh, pts)[1]
 
 
 def check_insertions(geo) -> None:
     """Ligament fibre ends and facet landmarks on (or near) the vertebra they are fixed to."""
+    trees = {}
     for lname, lev in geo.levels.items():
         groups = [(f"ligament {lig.name}", end, body, pts) for lig in lev.ligaments
                   for end, body, pts in (("upper", lev.upper, lig.upper), ("lower", lev.lower, lig.lower))]
@@ -43,7 +51,7 @@ def check_insertions(geo) -> None:
         for what, end, body, pts in groups:
             if body not in geo.vertebrae or len(pts) == 0:
                 continue
-            d = _surface_distance(geo.vertebrae[body].mesh, pts)
+            d = _surface_distance(geo.vertebrae[body].mesh, pts, trees)
             if np.max(d) > INSERTION_TOL_M:
                 j = int(np.argmax(d))
                 raise GeometryError(f"{lname} {what}: point {j} ({end} end, on {body}) is {d[j] * 1e3:.1f} mm from "

@@ -665,13 +665,30 @@ def _eval_one(x, R, Q, J, jac, md, fm, cm, l0, kt, off, w3, w33):
 
 
 @_jit
+def _copy(dst, src):
+    """dst[...] = src for C-contiguous arrays of the same size, as one flat loop (numba's slice assignment of an array
+    compiles a broadcasting path with its error handling at every use)."""
+    d, s = dst.reshape(dst.size), src.reshape(src.size)
+    for i in range(d.size):
+        d[i] = s[i]
+
+
+@_jit
+def _zero(a):
+    """a[...] = 0 for a C-contiguous array (one flat loop, see :func:`_copy`)."""
+    f = a.reshape(a.size)
+    for i in range(f.size):
+        f[i] = 0.0
+
+
+@_jit
 def evaluate_batch(x, R, L, fm, cm, l0, kt, off, jac, md, Q, J):
     """Q (B, nb, 6) and, with ``jac``, J (B, nb, 6, nb, 6) (both written here) of a batch."""
     w3, w33 = np.empty((16, 4)), np.empty((8, 3, 3))
     for s in range(x.shape[0]):
-        Q[s] = L[s if L.shape[0] > 1 else 0]
+        _copy(Q[s], L[s if L.shape[0] > 1 else 0])
         if jac:
-            J[s] = 0.0
+            _zero(J[s])
         _eval_one(x[s], R[s], Q[s], J[s] if jac else J[0], jac, md, fm[s if fm.shape[0] > 1 else 0],
                   cm[s if cm.shape[0] > 1 else 0], l0[s if l0.shape[0] > 1 else 0],
                   kt[s if kt.shape[0] > 1 else 0], off[s if off.shape[0] > 1 else 0], w3, w33)
@@ -810,16 +827,18 @@ def newton_batch(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max
     xt, Rt, E = np.empty((nb, 3)), np.empty((nb, 3, 3)), np.empty((3, 3))
     wv = np.empty(3)
     w3, w33 = np.empty((16, 4)), np.empty((8, 3, 3))
+    # a run-time True: a literal True would type (and compile) _eval_one a second time
+    want_j = max_iter >= 0
     for s in range(B):
         Ls = L[s if L.shape[0] > 1 else 0]
         fms, cms = fm[s if fm.shape[0] > 1 else 0], cm[s if cm.shape[0] > 1 else 0]
         l0s, kts, offs = l0[s if l0.shape[0] > 1 else 0], kt[s if kt.shape[0] > 1 else 0], off[s if off.shape[0] > 1 else 0]
         xs, Rs = x[s], R[s]
-        xs[:] = x0[s]
-        Rs[:] = R0[s]
-        Q[:] = Ls
-        J[:] = 0.0
-        _eval_one(xs, Rs, Q, J, True, md, fms, cms, l0s, kts, offs, w3, w33)
+        _copy(xs, x0[s])
+        _copy(Rs, R0[s])
+        _copy(Q, Ls)
+        _zero(J)
+        _eval_one(xs, Rs, Q, J, want_j, md, fms, cms, l0s, kts, offs, w3, w33)
         conv[s] = False
         iters[s] = 0
         res_f[s] = np.inf
@@ -855,16 +874,16 @@ def newton_batch(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max
                     for i in range(3):
                         for j in range(3):
                             Rt[k, i, j] = E[i, 0] * Rs[k, 0, j] + E[i, 1] * Rs[k, 1, j] + E[i, 2] * Rs[k, 2, j]
-                Qt[:] = Ls
-                Jt[:] = 0.0
-                _eval_one(xt, Rt, Qt, Jt, True, md, fms, cms, l0s, kts, offs, w3, w33)
+                _copy(Qt, Ls)
+                _zero(Jt)
+                _eval_one(xt, Rt, Qt, Jt, want_j, md, fms, cms, l0s, kts, offs, w3, w33)
                 if _merit(Qt, lscale) < m0 * (1.0 - 1e-4 * alpha) or ls == 9:
                     break
                 alpha = 1.0 if ls == 8 else alpha * 0.5
-            xs[:] = xt
-            Rs[:] = Rt
-            Q[:] = Qt
-            J[:] = Jt
+            _copy(xs, xt)
+            _copy(Rs, Rt)
+            Q, Qt = Qt, Q
+            J, Jt = Jt, J
             iters[s] += 1
 
 
