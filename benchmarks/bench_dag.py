@@ -50,6 +50,20 @@ def stage_sums(per_job: dict[str, float]) -> dict[str, float]:
             for stage, rx in STAGES.items()}
 
 
+def speed_reference(n=2_000_000, repeats=3) -> float:
+    """Seconds of a fixed pure-Python loop (best of ``repeats``): the machine's single-core speed at the moment.
+    Measured before and after the DAG, it tells whether a slow run met a slow (shared, throttled) machine: on the
+    project's virtual machine it varied by 2x within an hour, the DAG's wall time with it."""
+    best = float("inf")
+    for _ in range(repeats):
+        t = time.perf_counter()
+        acc = 0
+        for i in range(n):
+            acc += i * i
+        best = min(best, time.perf_counter() - t)
+    return round(best, 4)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--configfile", default=None, help="config file, relative to the repository (default: the "
@@ -73,6 +87,7 @@ def main(argv=None):
     env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1",
                NUMBA_CACHE_DIR=str(tmp / "numba_cache"))
     load_before = os.getloadavg()
+    speed_before = speed_reference()
     t0 = time.perf_counter()
     try:
         r = subprocess.run(cmd, cwd=work, capture_output=True, text=True, timeout=a.timeout, env=env)
@@ -80,6 +95,7 @@ def main(argv=None):
     except subprocess.TimeoutExpired as e:
         rc, err = None, f"timeout after {a.timeout} s: {e}"
     wall = time.perf_counter() - t0
+    speed_after = speed_reference()
     per_job = read_benchmarks(work / "results" / "benchmarks")
     stages = stage_sums(per_job)
     n_jobs = re.findall(r"(\d+) of (\d+) steps \(100%\) done", err or "")
@@ -100,6 +116,11 @@ def main(argv=None):
                        "l2s1_idp (every set), from their benchmark files; jobs may overlap in time on 2 cores",
         "per_job_s": per_job,
         "jobs_sum_s": round(sum(per_job.values()), 2),
+        # the share of the cores' time the benchmarked jobs filled (the few jobs without a benchmark file are left
+        # out, so this is a lower bound): near 1, the wall time is set by the work, not by the schedule
+        "core_utilisation": round(sum(per_job.values()) / (a.cores * wall), 3) if wall > 0 else None,
+        # the machine's speed before and after (speed_reference: lower is faster); compare runs at similar values
+        "speed_reference_s_before_after": [speed_before, speed_after],
         "numba_cache": "empty at the start (compile time included)",
         "python": platform.python_version(),
         "machine": platform.machine(),

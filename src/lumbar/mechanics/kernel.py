@@ -42,9 +42,14 @@ except ImportError:  # pragma: no cover - exercised only in an environment witho
 # machine code cached beside this file (or in NUMBA_CACHE_DIR); numpy's error model: a division by zero gives
 # inf/nan as in the reference path instead of raising
 _jit = njit(cache=True, error_model="numpy")
-#: the same decorator for other compiled modules of the package (lumbar.muscles.compiled): one cache rule, one error
-#: model, one switch (:func:`active`)
+# the helpers, called only from compiled code: no Python (CPython / C) entry point is built for them (a third of
+# the compile time of the core)
+_inner = njit(cache=True, error_model="numpy", no_cpython_wrapper=True, no_cfunc_wrapper=True) if HAVE_NUMBA \
+    else _jit
+#: the same decorators for other compiled modules of the package (lumbar.muscles.compiled): one cache rule, one error
+#: model, one switch (:func:`active`); ``inner_jit`` for functions called only from compiled code
 jit = _jit
+inner_jit = _inner
 LAW_SOFTPLUS, LAW_RUPP, LAW_CABLE = 0, 1, 2
 MODES = ("compiled", "reference")
 _state = {"mode": os.environ.get("LUMBAR_KERNEL", "compiled"), "warned": False}
@@ -162,7 +167,7 @@ def scenario_data(model, B, loads, fmask, cmask, params) -> tuple:
 
 
 # ---------------------------------------------------------------------------------------------------- SO(3)
-@_jit
+@_inner
 def _exp(w, out):
     """Rotation matrix of rotation vector w (as scipy's Rotation.from_rotvec(w).as_matrix())."""
     angle = np.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
@@ -185,7 +190,7 @@ def _exp(w, out):
     out[2, 2] = -x2 - y2 + z2 + w2
 
 
-@_jit
+@_inner
 def _log(Rm, out, out4):
     """Rotation vector of rotation matrix Rm (quaternion route, as scipy's Rotation.from_matrix().as_rotvec())."""
     q = out4
@@ -225,7 +230,7 @@ def _log(Rm, out, out4):
         out[i] = scale * q[i]
 
 
-@_jit
+@_inner
 def _jl_inv(phi, out, work):
     """Inverse left Jacobian of SO(3) at phi (lumbar.mechanics.so3.left_jacobian_inverse)."""
     theta = np.sqrt(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2])
@@ -244,7 +249,7 @@ def _jl_inv(phi, out, work):
 
 
 # ---------------------------------------------------------------------------------------------------- assembly
-@_jit
+@_inner
 def _attach(x, R, c, body, S, row, p, r):
     """World point p of body-fixed reference point S[row] on ``body`` and its lever arm r about the body's point
     (the point itself for ground)."""
@@ -259,7 +264,7 @@ def _attach(x, R, c, body, S, row, p, r):
             p[i] = x[body, i] + r[i]
 
 
-@_jit
+@_inner
 def _point(x, R, c, body, S, row):
     """(p, r) as six scalars: world point of reference point S[row] on ``body`` and its lever arm (see _attach)."""
     if body < 0:
@@ -271,7 +276,7 @@ def _point(x, R, c, body, S, row):
     return x[body, 0] + r0, x[body, 1] + r1, x[body, 2] + r2, r0, r1, r2
 
 
-@_jit
+@_inner
 def _frame_coords(P, o, A):
     """Coordinates of point P in the frame with origin o and rows A (the rows' directions)."""
     d0, d1, d2 = P[0] - o[0], P[1] - o[1], P[2] - o[2]
@@ -279,7 +284,7 @@ def _frame_coords(P, o, A):
             d0 * A[2, 0] + d1 * A[2, 1] + d2 * A[2, 2])
 
 
-@_jit
+@_inner
 def _in_body(x, R, c, body, p0, p1, p2):
     """(lever arm of world point p about ``body``'s reference point, reference-frame coordinates of p in ``body``)
     as six scalars (see _lever, _to_body)."""
@@ -291,14 +296,14 @@ def _in_body(x, R, c, body, p0, p1, p2):
             R[body, 0, 2] * e0 + R[body, 1, 2] * e1 + R[body, 2, 2] * e2 + c[body, 2])
 
 
-@_jit
+@_inner
 def _lever(x, body, p, r):
     """Lever arm of world point p about ``body``'s reference point (the point itself for ground)."""
     for i in range(3):
         r[i] = p[i] if body < 0 else p[i] - x[body, i]
 
 
-@_jit
+@_inner
 def _to_body(x, R, c, body, p, P):
     """Reference-frame coordinates in ``body`` of world point p."""
     if body < 0:
@@ -310,7 +315,7 @@ def _to_body(x, R, c, body, p, P):
                     + R[body, 2, i] * (p[2] - x[body, 2])) + c[body, i]
 
 
-@_jit
+@_inner
 def _relative_point(x, R, c, a, b, S, row, p, ra, rb, P):
     """Point S[row] carried by body a: world point p, its lever arms ra, rb about bodies a and b, and its
     reference-frame coordinates P in body b (where a law fixed in body b reads it)."""
@@ -319,7 +324,7 @@ def _relative_point(x, R, c, a, b, S, row, p, ra, rb, P):
     _to_body(x, R, c, b, p, P)
 
 
-@_jit
+@_inner
 def _rot(R, body, v, out):
     if body < 0:
         for i in range(3):
@@ -329,7 +334,7 @@ def _rot(R, body, v, out):
             out[i] = R[body, i, 0] * v[0] + R[body, i, 1] * v[1] + R[body, i, 2] * v[2]
 
 
-@_jit
+@_inner
 def _add_force(Q, body, f, r, sign):
     if body >= 0:
         Q[body, 0] += sign * f[0]
@@ -340,7 +345,7 @@ def _add_force(Q, body, f, r, sign):
         Q[body, 5] += sign * (r[0] * f[1] - r[1] * f[0])
 
 
-@_jit
+@_inner
 def _add_gkg(J, bi, bj, K, r1, r2, sign):
     """J[bi, :, bj, :] += sign * G1 K G2^T with G = [I; [r]x]:
     [[K, -K [r2]x], [[r1]x K, -[r1]x K [r2]x]]."""
@@ -366,7 +371,7 @@ def _add_gkg(J, bi, bj, K, r1, r2, sign):
         J[bi, 3 + rr, bj, 5] += sign * (r2[0] * m1 - r2[1] * m0)
 
 
-@_jit
+@_inner
 def _add_hatprod(J, bi, bj, a, b, sign):
     """J[bi, 3:, bj, 3:] += sign * [a]x [b]x = sign * (b a^T - (a.b) I)."""
     ab = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
@@ -375,7 +380,7 @@ def _add_hatprod(J, bi, bj, a, b, sign):
             J[bi, 3 + i, bj, 3 + j] += sign * (b[i] * a[j] - (ab if i == j else 0.0))
 
 
-@_jit
+@_inner
 def _add_hat(J, bi, bj, f, sign, o1, o2):
     """J[bi, o1:o1+3, bj, o2:o2+3] += sign * [f]x."""
     J[bi, o1 + 0, bj, o2 + 1] += -sign * f[2]
@@ -386,7 +391,7 @@ def _add_hat(J, bi, bj, f, sign, o1, o2):
     J[bi, o1 + 2, bj, o2 + 1] += sign * f[0]
 
 
-@_jit
+@_inner
 def _fibre_block(J, bi, bj, sign, beta, alpha, u, p, q):
     """J[bi, :, bj, :] += sign * G1 K G2^T for a fibre's K = beta u u^T + alpha I (G = [I; [r]x], r1 = p of body
     bi, r2 = q of body bj): beta g1 g2^T with g = (u, r x u), plus alpha [[I, -[q]x], [[p]x, (p.q) I - q p^T]]
@@ -417,7 +422,7 @@ def _fibre_block(J, bi, bj, sign, beta, alpha, u, p, q):
     J[bi, 5, bj, 1] += sa * p[0]
 
 
-@_jit
+@_inner
 def _fibre_hatprod(J, body, sign, f, r):
     """J[body, 3:, body, 3:] += sign * [f]x [r]x = sign * (r f^T - (f.r) I) (the fibre's geometric stiffness)."""
     fr = f[0] * r[0] + f[1] * r[1] + f[2] * r[2]
@@ -427,7 +432,7 @@ def _fibre_hatprod(J, body, sign, f, r):
             J[body, 3 + k, body, 3 + m] += sign * r[k] * f[m]
 
 
-@_jit
+@_inner
 def _assemble_j(J, a, b, f, ra, rb, K, body_relative):
     """Jacobian blocks of one point element with force f on body a (lever ra), -f on body b (lever rb) and
     stiffness K = df/dp (world); ``body_relative``: the law is fixed in body b (facets, disc translation)."""
@@ -452,7 +457,7 @@ def _assemble_j(J, a, b, f, ra, rb, K, body_relative):
             _add_hatprod(J, b, a, f, ra, -1.0)
 
 
-@_jit
+@_inner
 def _assemble(Q, J, jac, a, b, f, ra, rb, K, body_relative):
     """One point element (see SpineModel._assemble of the reference path)."""
     _add_force(Q, a, f, ra, 1.0)
@@ -461,7 +466,7 @@ def _assemble(Q, J, jac, a, b, f, ra, rb, K, body_relative):
         _assemble_j(J, a, b, f, ra, rb, K, body_relative)
 
 
-@_jit
+@_inner
 def _tension(law, length, l0, P, row, width):
     """Fibre law value and derivative d/d(length) before the fibre's scale (SpineModel._tension_raw); the law's
     parameters are row ``row`` of P."""
@@ -493,14 +498,14 @@ def _tension(law, length, l0, P, row, width):
     return par0, 0.0
 
 
-@_jit
+@_inner
 def _torque_angle(phi, p):
     z = phi ** 3 / p[1]
     t = np.tanh(z)
     return p[0] * t + p[2] * phi, p[0] * (1.0 - t ** 2) * 3.0 * phi ** 2 / p[1] + p[2]
 
 
-@_jit
+@_inner
 def _eval_one(x, R, Q, J, jac, md, fm, cm, l0, kt, off, w3, w33):
     """Residual Q (nb, 6) (pre-filled with the loads) and Jacobian J (nb, 6, nb, 6) (zeroed) of one scenario;
     w3 (16, 4) and w33 (8, 3, 3) are work space."""
@@ -664,7 +669,7 @@ def _eval_one(x, R, Q, J, jac, md, fm, cm, l0, kt, off, w3, w33):
                 _add_hat(J, a, b, tau, 1.0, 3, 3)
 
 
-@_jit
+@_inner
 def _copy(dst, src):
     """dst[...] = src for C-contiguous arrays of the same size, as one flat loop (numba's slice assignment of an array
     compiles a broadcasting path with its error handling at every use)."""
@@ -673,7 +678,7 @@ def _copy(dst, src):
         d[i] = s[i]
 
 
-@_jit
+@_inner
 def _zero(a):
     """a[...] = 0 for a C-contiguous array (one flat loop, see :func:`_copy`)."""
     f = a.reshape(a.size)
@@ -706,7 +711,7 @@ def evaluate(model, x, R, loads=None, fmask=1.0, cmask=1.0, jacobian=True, param
 
 
 # ---------------------------------------------------------------------------------------------------- Newton
-@_jit
+@_inner
 def _cholesky_ok(A, shift, W):
     """True if A - shift*I is positive definite (Cholesky without pivoting; W is work space)."""
     n = A.shape[0]
@@ -724,7 +729,7 @@ def _cholesky_ok(A, shift, W):
     return True
 
 
-@_jit
+@_inner
 def _lu_solve(A, bvec, out):
     """Solve A out = bvec by LU with partial pivoting (A and bvec are overwritten)."""
     n = A.shape[0]
@@ -752,7 +757,7 @@ def _lu_solve(A, bvec, out):
         out[i] = s / A[i, i]
 
 
-@_jit
+@_inner
 def _merit(Q, lscale):
     m1 = 0.0
     m2 = 0.0
@@ -763,7 +768,7 @@ def _merit(Q, lscale):
     return m1 + m2
 
 
-@_jit
+@_inner
 def _norms(Q):
     rf = 0.0
     rm = 0.0
@@ -780,7 +785,7 @@ def _norms(Q):
     return rf, rm
 
 
-@_jit
+@_inner
 def _step(J, Q, reg, S, A, sym, W, rhs, d):
     """Modified Newton step (lumbar.mechanics.solve._modified_newton_step): solve (-J + diag(reg)) d = Q in
     scaled variables, shifting the scaled symmetric part to positive definite where it is not."""

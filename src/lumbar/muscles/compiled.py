@@ -11,10 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..mechanics.kernel import inner_jit as _inner
 from ..mechanics.kernel import jit as _jit
 
 
-@_jit
+@_inner
 def _end(x, R, c, body, s, bi):
     """World position p and lever arm r = R (s - c) of a path point ``s`` on ``body`` (< 0: fixed, s in world
     coordinates, r = 0) in scenario ``bi``."""
@@ -27,7 +28,7 @@ def _end(x, R, c, body, s, bi):
     return x[bi, body, 0] + r0, x[bi, body, 1] + r1, x[bi, body, 2] + r2, r0, r1, r2
 
 
-@_jit
+@_inner
 def _add_gradient(G, bi, m, body, sign, u0, u1, u2, r0, r1, r2):
     """G[bi, m, body] += sign (u, r x u): a path end's share of dL/d(x, w)."""
     if body < 0:
@@ -63,7 +64,7 @@ def path_lengths(x, R, c, seg_m, seg_a, seg_b, sa, sb, const, gradient, L, G):
                 _add_gradient(G, bi, m, seg_b[k], -1.0, u0, u1, u2, rb0, rb1, rb2)
 
 
-@_jit
+@_inner
 def _poly(c, seg, u):
     out = c[seg, 0]
     for k in range(1, 6):
@@ -71,7 +72,7 @@ def _poly(c, seg, u):
     return out
 
 
-@_jit
+@_inner
 def _dpoly(c, seg, u):
     out = 5.0 * c[seg, 0]
     for k in range(1, 5):
