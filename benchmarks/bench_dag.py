@@ -52,8 +52,9 @@ def stage_sums(per_job: dict[str, float]) -> dict[str, float]:
 
 def speed_reference(n=2_000_000, repeats=3) -> float:
     """Seconds of a fixed pure-Python loop (best of ``repeats``): the machine's single-core speed at the moment.
-    Measured before and after the DAG, it tells whether a slow run met a slow (shared, throttled) machine: on the
-    project's virtual machine it varied by 2x within an hour, the DAG's wall time with it."""
+    Measured before and after the DAG, it records the state of a shared (throttled) machine. It does not normalise a
+    run: on the project's virtual machine it did not track the numpy/numba jobs closely; compare two versions by
+    running both DAGs at the same time (``--cores 1`` each)."""
     best = float("inf")
     for _ in range(repeats):
         t = time.perf_counter()
