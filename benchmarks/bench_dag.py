@@ -8,6 +8,10 @@ paths relative to the repository (``../shared/...``) resolve as they do in the r
 
     python benchmarks/bench_dag.py                                   # config/config.yaml (the paper's)
     python benchmarks/bench_dag.py --configfile config/test/config.yaml --cores 2 [--keep]
+    python benchmarks/bench_dag.py --baseline HEAD~3      # this tree and HEAD~3 at the same time, one core each
+
+On a shared machine whose speed changes (the project's virtual machine: severalfold within an hour) two runs made
+one after the other do not compare; ``--baseline`` runs both versions at the same time and gives their ratios.
 """
 from __future__ import annotations
 
@@ -65,11 +69,58 @@ def speed_reference(n=2_000_000, repeats=3) -> float:
     return round(best, 4)
 
 
+def export_tree(rev: str, dest: Path) -> Path:
+    """The repository's tracked files at ``rev`` (a commit, tag or branch) in ``dest`` (``git archive``): the
+    baseline of a same-run comparison."""
+    dest.mkdir(parents=True, exist_ok=True)
+    arch = subprocess.run(["git", "-C", str(ROOT), "archive", "--format=tar", rev], capture_output=True, check=False)
+    if arch.returncode != 0:
+        raise SystemExit(f"bench_dag: --baseline {rev!r} is not a revision of {ROOT}: "
+                         f"{arch.stderr.decode(errors='replace').strip()}")
+    subprocess.run(["tar", "-x", "-C", str(dest)], input=arch.stdout, check=True)
+    return dest
+
+
+def start_dag(tree: Path, tmp: Path, cores: int, configfile):
+    """Start ``snakemake --cores cores`` in ``tree`` with its own library (``tree/src`` first on the path), an empty
+    numba cache of its own and one thread per BLAS; returns (process, start time, its log file in ``tmp``)."""
+    cmd = [sys.executable, "-m", "snakemake", "--cores", str(cores)]
+    if configfile:
+        cmd += ["--configfile", configfile]
+    # cold also for the compiled kernels: an empty numba cache, as in a fresh clone (the installed package may be an
+    # editable install whose cache is warm), so their compile time is part of the wall time
+    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1",
+               NUMBA_CACHE_DIR=str(tmp / f"numba_cache_{tree.name}"),
+               PYTHONPATH=os.pathsep.join(p for p in (str(tree / "src"), os.environ.get("PYTHONPATH")) if p))
+    # the output to files, not pipes: of two runs at once, the one not being read would stall on a full pipe
+    log = tmp / f"snakemake_{tree.name}.log"
+    with log.open("w") as fh:
+        proc = subprocess.Popen(cmd, cwd=tree, stdout=fh, stderr=subprocess.STDOUT, text=True, env=env)
+    return proc, time.perf_counter(), log
+
+
+def finish_dag(proc, t0, log, timeout):
+    """(exit code or None on timeout, Snakemake's output, wall seconds) of a run from :func:`start_dag`."""
+    try:
+        proc.wait(timeout=max(timeout - (time.perf_counter() - t0), 1.0))
+        rc, note = proc.returncode, ""
+    except subprocess.TimeoutExpired as e:
+        proc.kill()
+        proc.wait()
+        rc, note = None, f"timeout after {timeout} s: {e}\n"
+    wall = time.perf_counter() - t0
+    return rc, note + log.read_text(errors="replace"), wall
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--configfile", default=None, help="config file, relative to the repository (default: the "
                     "Snakefile's config/config.yaml)")
     ap.add_argument("--cores", type=int, default=2)
+    ap.add_argument("--baseline", default=None, metavar="REV",
+                    help="also run the DAG of git revision REV at the same time, each run on half of --cores, and "
+                         "report the ratios (a comparison that a shared machine's changing speed does not bias; "
+                         "the wall time is then not the target's)")
     ap.add_argument("--keep", action="store_true", help="keep the temporary copy (its path is in the JSON)")
     ap.add_argument("--timeout", type=float, default=3600.0, help="seconds before the run is stopped")
     a = ap.parse_args(argv)
@@ -80,22 +131,14 @@ def main(argv=None):
     shared = ROOT.parent / "shared"
     if shared.is_dir():
         (tmp / "shared").symlink_to(shared, target_is_directory=True)
-    cmd = [sys.executable, "-m", "snakemake", "--cores", str(a.cores)]
-    if a.configfile:
-        cmd += ["--configfile", a.configfile]
-    # cold also for the compiled kernels: an empty numba cache, as in a fresh clone (the installed package may be an
-    # editable install whose cache is warm), so their compile time is part of the wall time
-    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1",
-               NUMBA_CACHE_DIR=str(tmp / "numba_cache"))
+    cores = max(1, a.cores // 2) if a.baseline else a.cores
+    base = export_tree(a.baseline, tmp / "baseline") if a.baseline else None
     load_before = os.getloadavg()
     speed_before = speed_reference()
-    t0 = time.perf_counter()
-    try:
-        r = subprocess.run(cmd, cwd=work, capture_output=True, text=True, timeout=a.timeout, env=env)
-        rc, err = r.returncode, r.stderr
-    except subprocess.TimeoutExpired as e:
-        rc, err = None, f"timeout after {a.timeout} s: {e}"
-    wall = time.perf_counter() - t0
+    runs = [start_dag(work, tmp, cores, a.configfile)]
+    if base is not None:
+        runs.append(start_dag(base, tmp, cores, a.configfile))
+    (rc, err, wall), *rest = [finish_dag(p, t0, log, a.timeout) for p, t0, log in runs]
     speed_after = speed_reference()
     per_job = read_benchmarks(work / "results" / "benchmarks")
     stages = stage_sums(per_job)
@@ -103,7 +146,7 @@ def main(argv=None):
     out = {
         "benchmark": "dag_cold",
         "configfile": a.configfile or "config/config.yaml (Snakefile default)",
-        "cores": a.cores,
+        "cores": cores,
         "success": rc == 0,
         "jobs": int(n_jobs[-1][1]) if n_jobs else None,
         "wall_time_s": round(wall, 2),
@@ -119,8 +162,8 @@ def main(argv=None):
         "jobs_sum_s": round(sum(per_job.values()), 2),
         # the share of the cores' time the benchmarked jobs filled (the few jobs without a benchmark file are left
         # out, so this is a lower bound): near 1, the wall time is set by the work, not by the schedule
-        "core_utilisation": round(sum(per_job.values()) / (a.cores * wall), 3) if wall > 0 else None,
-        # the machine's speed before and after (speed_reference: lower is faster); compare runs at similar values
+        "core_utilisation": round(sum(per_job.values()) / (cores * wall), 3) if wall > 0 else None,
+        # the machine's speed before and after (speed_reference: lower is faster): a record of its state
         "speed_reference_s_before_after": [speed_before, speed_after],
         "numba_cache": "empty at the start (compile time included)",
         "python": platform.python_version(),
@@ -129,6 +172,22 @@ def main(argv=None):
         # other processes on the machine inflate every time: the 1-minute load average before and after the run
         "load_average_1min_before_after": [round(load_before[0], 2), round(os.getloadavg()[0], 2)],
     }
+    if base is not None:
+        b_rc, b_err, b_wall = rest[0]
+        b_jobs = read_benchmarks(base / "results" / "benchmarks")
+        ok = rc == 0 and b_rc == 0
+        out["baseline"] = {"revision": a.baseline, "success": b_rc == 0, "wall_time_s": round(b_wall, 2),
+                           "jobs_sum_s": round(sum(b_jobs.values()), 2), "stages_s": stage_sums(b_jobs),
+                           "per_job_s": b_jobs}
+        out["ratio_to_baseline"] = {
+            "wall_time": round(wall / b_wall, 4) if ok else None,
+            "jobs_sum": round(sum(per_job.values()) / sum(b_jobs.values()), 4) if ok and b_jobs else None}
+        out["baseline_note"] = (f"both DAGs ran at the same time on {cores} core(s) each: the ratios compare the two "
+                                "versions on the same machine state; the wall time is not the target's (2 cores, one "
+                                "DAG), so ratio_to_target is not given")
+        out.update(ratio_to_target=None, stages_ratio_to_target=None)
+        if b_rc != 0:
+            out["baseline"]["error_tail"] = (b_err or "")[-2000:]
     if rc != 0:   # a failed run has no meaningful time: no ratios
         out.update(ratio_to_target=None, stages_ratio_to_target=None, error_tail=(err or "")[-2000:])
     if a.keep:

@@ -45,3 +45,23 @@ def test_run_all_skips_opensim_cleanly(tmp_path):
     assert res["skipped"] is True and "opensim" in res["reason"]
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["opensim"]["result"]["skipped"] is True
+
+
+def test_dag_baseline_tree_is_the_revision_and_a_bad_revision_is_named(tmp_path):
+    """bench_dag --baseline: the baseline is the repository's tracked files at the revision (here HEAD, whose
+    Snakefile is this checkout's committed one); a revision git does not know stops with its name before any run."""
+    import pytest
+
+    bench_dag = _load("bench_dag")
+    if subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True).returncode != 0:
+        pytest.skip("not a git checkout")
+    tree = bench_dag.export_tree("HEAD", tmp_path / "baseline")
+    committed = subprocess.run(["git", "-C", str(ROOT), "show", "HEAD:Snakefile"], capture_output=True,
+                               text=True, check=True).stdout
+    assert (tree / "Snakefile").read_text() == committed
+    assert (tree / "src" / "lumbar" / "mechanics" / "kernel.py").is_file()
+    # only tracked files: no outputs of a run, no caches
+    assert [p.name for p in (tree / "results").iterdir()] == ["README.md"]
+    assert not list(tree.rglob("__pycache__")) and not (tree / ".snakemake").exists()
+    with pytest.raises(SystemExit, match="no-such-revision"):
+        bench_dag.export_tree("no-such-revision", tmp_path / "bad")
