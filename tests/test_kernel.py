@@ -88,7 +88,8 @@ def test_compiled_jacobian_matches_finite_differences(charset, case):
 @needs_numba
 def test_model_arrays_changed_in_place_are_read_at_every_call(charset):
     """The calibration writes f_par rows, f_scale, f_l0, k_stiff and a disc's k_shear between calls: the compiled
-    path follows each change (equals the reference after it and differs from the result before it)."""
+    path follows each change (equals the reference after it and differs from the result before it), also an array
+    replaced by a new one and a disc's centre moved in place (the kernel keeps the model's data between calls)."""
     m = build_fsu(symmetric_fsu(), charset).model
     x, R, loads = perturbed_state(m, 2, 7)
     T = m.fibre_state(x, R)[2]
@@ -99,7 +100,9 @@ def test_model_arrays_changed_in_place_are_read_at_every_call(charset):
                lambda: m.f_l0.__setitem__(slice(None), m.f_l0 * 0.99),
                lambda: m.k_stiff.__setitem__(slice(None), m.k_stiff * 5.0),
                lambda: setattr(m.discs[0], "k_shear", m.discs[0].k_shear * 4.0),
-               lambda: m.discs[0].torque.__setitem__("flexion", (1.0, 0.01, 50.0))]
+               lambda: m.discs[0].torque.__setitem__("flexion", (1.0, 0.01, 50.0)),
+               lambda: setattr(m, "f_scale", m.f_scale * 2.0),
+               lambda: m.discs[0].centre.__setitem__(2, m.discs[0].centre[2] + 2e-3)]
     for change in changes:
         before = m.evaluate(x, R, loads)[1]
         change()
@@ -142,6 +145,33 @@ def test_same_equilibria_on_the_l2s1_model_with_cables():
     assert spine.model.nb == 4 and c.converged.all() and (c.converged == r.converged).all()
     assert_same(c.x, r.x)
     assert_same(so3.log(c.R), so3.log(r.R))
+
+
+@needs_numba
+def test_a_start_state_shared_by_a_batch_gives_what_each_scenario_gives_alone(charset):
+    """Consecutive scenarios from the same start state with the same element data share the start's internal forces
+    and Jacobian; a batch must give, bit for bit, what each scenario gives solved alone, also where the start
+    states or the per-scenario masks and parameters change inside the batch (where nothing may be shared)."""
+    m = _two_level_model(charset, "rupp")
+    rng = np.random.default_rng(3)
+    B = 12
+    loads = np.zeros((B, m.nb, 6))
+    loads[:, 0, 3:] = rng.uniform(-4.0, 4.0, (B, 3))
+    x0, R0 = m.reference_state(B)
+    x0[6:, 1, 2] += 2e-4                                   # scenarios 6-11 start elsewhere
+    fmask = np.ones((B, m.nf))
+    fmask[9:, -3:] = 0.0                                   # scenarios 9-11 from there without the cable
+    params = {"k_tension": np.where(np.arange(B) == 4, 1e6, 0.0)}   # scenario 4 with a disc in tension
+    with kernel.use("compiled"):
+        batch = kernel.newton(m, x0, R0, loads, fmask, 1.0, params, 50, 1e-8, 1e-8, 1e-3, 0.05,
+                              np.tile([1.0, 1.0, 1.0, 1e-6, 1e-6, 1e-6], m.nb), np.ones(6 * m.nb), 0.05)
+        for s in range(B):
+            one = kernel.newton(m, x0[s:s + 1], R0[s:s + 1], loads[s:s + 1], fmask[s:s + 1], 1.0,
+                                {"k_tension": params["k_tension"][s:s + 1]}, 50, 1e-8, 1e-8, 1e-3, 0.05,
+                                np.tile([1.0, 1.0, 1.0, 1e-6, 1e-6, 1e-6], m.nb), np.ones(6 * m.nb), 0.05)
+            for a, b in zip(batch, one):
+                assert np.array_equal(a[s], b[0]), s
+    assert batch[2].all() and len({round(float(v), 12) for v in batch[0][:, 0, 0]}) == B
 
 
 @needs_numba

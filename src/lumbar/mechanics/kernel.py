@@ -12,7 +12,13 @@ Cholesky test instead of an eigenvalue decomposition for the modified-Newton shi
 only where the test fails, i.e. where the shift is needed).
 
 Nothing of the model is frozen: :func:`model_data` reads the model's current arrays at every call, so callers may
-change ``f_par``, ``f_l0``, ``f_scale``, ``k_stiff``, a disc's ``k_shear`` ... in place between calls.
+change ``f_par``, ``f_l0``, ``f_scale``, ``k_stiff``, a disc's ``k_shear`` ... in place between calls (or replace
+them). The assembled tuple is kept between calls only while it provably shows the model's state: the same array
+objects, passed through without copies, and equal disc and surface values.
+
+Scenarios of a batch that start from the same state with the same element data (a batch of loads from one
+equilibrium: the benchmark, the virtual experiments) share the start's internal forces and Jacobian: one evaluation
+instead of one per scenario, with the same results as each scenario solved alone (tests/test_kernel.py).
 
 Switch: the environment variable ``LUMBAR_KERNEL`` (``compiled``, the default, or ``reference``) at import, or
 :func:`set_mode` / :func:`use` at run time. Without numba the reference path runs (:func:`active` is False) and
@@ -112,12 +118,38 @@ def _i64(a):
 _TORQUE_ORDER = ("lateral_bending", "flexion", "extension", "axial_rotation")
 
 
+_MODEL_ARRAYS = ("c", "f_a", "f_b", "f_sa", "f_sb", "f_extra", "f_law", "f_par", "f_scale", "k_a", "k_b", "k_s", "k_surf",
+                 "k_stiff")
+
+
+def _elements_key(surfs, discs) -> tuple:
+    """The values of the facet surfaces and discs that the kernel reads (Python objects, changed by attribute)."""
+    key = []
+    for s in surfs:
+        key += (np.asarray(s.origin, float).tobytes(), np.asarray(s.axes, float).tobytes(),
+                np.asarray(s.coef, float).tobytes())
+    for d in discs:
+        key += (d.upper, d.lower, float(d.k_quadratic), float(d.k_linear), float(d.k_shear),
+                np.asarray(d.centre, float).tobytes(), np.asarray(d.frame, float).tobytes(),
+                np.asarray([d.torque[k] for k in _TORQUE_ORDER], float).tobytes())
+    return tuple(key)
+
+
 def model_data(model) -> tuple:
-    """The model's current element arrays as one tuple of contiguous arrays (read at every call, never cached)."""
-    surfs = model.surfaces
-    discs = model.discs
+    """The model's current element arrays as one tuple of contiguous arrays.
+
+    Read at every call: the tuple is rebuilt unless the model's arrays are the same objects as at the last call
+    (their contents changed in place are seen through them: every one of them is passed through without a copy)
+    and the surfaces' and discs' values are equal (a key of their bytes, cheaper than the arrays' assembly; a
+    caller that evaluates small batches many times, the muscle model's levels, spends most of a call here)."""
+    surfs, discs = model.surfaces, model.discs
+    arrays = tuple(getattr(model, a) for a in _MODEL_ARRAYS)
+    key = (tuple(map(id, arrays)), float(model.slack_width_pct), float(model.contact_eps), _elements_key(surfs, discs))
+    cached = model.__dict__.get("_kernel_model_data")
+    if cached is not None and cached[0] == key:
+        return cached[1]
     ns, nd = len(surfs), len(discs)
-    return (
+    md = (
         _f64(model.c, (-1, 3)),
         _i64(model.f_a), _i64(model.f_b), _f64(model.f_sa, (-1, 3)), _f64(model.f_sb, (-1, 3)),
         _f64(model.f_extra), _i64(model.f_law), _f64(model.f_par, (-1, 5)), _f64(model.f_scale),
@@ -131,6 +163,11 @@ def model_data(model) -> tuple:
         _f64([(d.k_quadratic, d.k_linear, d.k_shear) for d in discs], (nd, 3)),
         _f64([[d.torque[k] for k in _TORQUE_ORDER] for d in discs], (nd, 4, 3)),
     )
+    # cache only where every model array was passed through (a copy would not see a later change in place)
+    if all(isinstance(a, np.ndarray) and (a.size == 0 or np.may_share_memory(md[i], a))
+           for i, a in zip((0, 1, 2, 3, 4, 5, 6, 7, 8, 10, 11, 12, 13, 14), arrays)):
+        model.__dict__["_kernel_model_data"] = (key, md)
+    return md
 
 
 def _rows(a, B, n):
@@ -141,17 +178,27 @@ def _rows(a, B, n):
     return _f64(np.broadcast_to(a.reshape(-1) if a.ndim else a, (n,))[None])
 
 
+def _is_one(a) -> bool:
+    return isinstance(a, (int, float)) and a == 1.0
+
+
 def scenario_data(model, B, loads, fmask, cmask, params) -> tuple:
-    """Per-scenario arrays (rows 1 or B): loads, fibre and contact weights, slack lengths, disc tension, offset."""
+    """Per-scenario arrays (rows 1 or B): loads, fibre and contact weights, slack lengths, disc tension, offset.
+    The defaults (no loads, every element at full weight, no offset) are arrays kept on the model, read-only to the
+    kernel."""
     nb, nf, nc, nd = model.nb, model.nf, model.nc, model.nd
     params = params or {}
+    const = model.__dict__.get("_kernel_defaults")
+    if const is None or const[0] != (nb, nf, nc):
+        const = ((nb, nf, nc), np.zeros((1, nb, 6)), np.ones((1, nf)), np.ones((1, nc)), np.zeros((1, 3)))
+        model.__dict__["_kernel_defaults"] = const
     if loads is None:
-        L = np.zeros((1, nb, 6))
+        L = const[1]
     else:
         L = np.asarray(loads, dtype=np.float64)
         L = _f64(L if L.ndim == 3 and L.shape[0] in (1, B) else np.broadcast_to(L, (B, nb, 6)))
-    fm = _rows(fmask, B, nf)
-    cm = _rows(cmask, B, nc)
+    fm = const[2] if _is_one(fmask) else _rows(fmask, B, nf)
+    cm = const[3] if _is_one(cmask) else _rows(cmask, B, nc)
     l0 = np.asarray(model.f_l0, dtype=np.float64)
     sc = params.get("fibre_l0_scale")
     l0 = _f64(l0[None] if sc is None else np.broadcast_to(l0 * np.asarray(sc, float).reshape(B, -1), (B, nf)))
@@ -162,7 +209,7 @@ def scenario_data(model, B, loads, fmask, cmask, params) -> tuple:
         kt = np.reshape(np.asarray(kt, float), (-1, 1))
         kt = _f64(np.broadcast_to(kt, (kt.shape[0], nd)))
     off = params.get("disc_phi_offset")
-    off = np.zeros((1, 3)) if off is None else _f64(off, (-1, 3))
+    off = const[4] if off is None else _f64(off, (-1, 3))
     return L, fm, cm, l0, kt, off
 
 
@@ -686,6 +733,22 @@ def _zero(a):
         f[i] = 0.0
 
 
+@_inner
+def _same(a, b):
+    """a == b element by element (C-contiguous arrays of the same size)."""
+    fa, fb = a.reshape(a.size), b.reshape(b.size)
+    for i in range(fa.size):
+        if fa[i] != fb[i]:
+            return False
+    return True
+
+
+@_inner
+def _same_row(a, s, s0):
+    """Rows s and s0 of a per-scenario array (one shared row when a has a single row) are equal."""
+    return a.shape[0] == 1 or _same(a[s], a[s0])
+
+
 @_jit
 def evaluate_batch(x, R, L, fm, cm, l0, kt, off, jac, md, Q, J):
     """Q (B, nb, 6) and, with ``jac``, J (B, nb, 6, nb, 6) (both written here) of a batch."""
@@ -790,9 +853,10 @@ def _step(J, Q, reg, S, A, sym, W, rhs, d):
     """Modified Newton step (lumbar.mechanics.solve._modified_newton_step): solve (-J + diag(reg)) d = Q in
     scaled variables, shifting the scaled symmetric part to positive definite where it is not."""
     n = reg.shape[0]
+    J2, q = J.reshape(n, n), Q.reshape(n)
     for i in range(n):
         for j in range(n):
-            A[i, j] = (-J[i // 6, i % 6, j // 6, j % 6] + (reg[i] if i == j else 0.0)) * S[i] * S[j]
+            A[i, j] = (-J2[i, j] + (reg[i] if i == j else 0.0)) * S[i] * S[j]
     scale = 0.0
     for i in range(n):
         for j in range(n):
@@ -813,10 +877,11 @@ def _step(J, Q, reg, S, A, sym, W, rhs, d):
             mu = -lam + 1e-6 * scale
     for i in range(n):
         A[i, i] += mu
-        rhs[i] = S[i] * Q[i // 6, i % 6]
+        rhs[i] = S[i] * q[i]
     _lu_solve(A, rhs, W[0])
+    dv = d.reshape(n)
     for i in range(n):
-        d[i // 6, i % 6] = W[0, i] * S[i]
+        dv[i] = W[0, i] * S[i]
 
 
 @_jit
@@ -832,6 +897,10 @@ def newton_batch(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max
     xt, Rt, E = np.empty((nb, 3)), np.empty((nb, 3, 3)), np.empty((3, 3))
     wv = np.empty(3)
     w3, w33 = np.empty((16, 4)), np.empty((8, 3, 3))
+    # the internal forces and the Jacobian at the start state, without the loads: shared by consecutive scenarios
+    # that start from the same state with the same element data (a batch of loads from one equilibrium)
+    Q0, J0 = np.empty((nb, 6)), np.empty((nb, 6, nb, 6))
+    s0 = -1
     # a run-time True: a literal True would type (and compile) _eval_one a second time
     want_j = max_iter >= 0
     for s in range(B):
@@ -841,9 +910,17 @@ def newton_batch(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max
         xs, Rs = x[s], R[s]
         _copy(xs, x0[s])
         _copy(Rs, R0[s])
-        _copy(Q, Ls)
-        _zero(J)
-        _eval_one(xs, Rs, Q, J, want_j, md, fms, cms, l0s, kts, offs, w3, w33)
+        if s0 < 0 or not (_same(x0[s], x0[s0]) and _same(R0[s], R0[s0]) and _same_row(fm, s, s0)
+                          and _same_row(cm, s, s0) and _same_row(l0, s, s0) and _same_row(kt, s, s0)
+                          and _same_row(off, s, s0)):
+            _zero(Q0)
+            _zero(J0)
+            _eval_one(xs, Rs, Q0, J0, want_j, md, fms, cms, l0s, kts, offs, w3, w33)
+            s0 = s
+        _copy(J, J0)
+        q, q0, ls_ = Q.reshape(Q.size), Q0.reshape(Q0.size), Ls.reshape(Ls.size)
+        for i in range(q.size):
+            q[i] = ls_[i] + q0[i]
         conv[s] = False
         iters[s] = 0
         res_f[s] = np.inf
