@@ -17,8 +17,9 @@ them). The assembled tuple is kept between calls only while it provably shows th
 objects, passed through without copies, and equal disc and surface values.
 
 Scenarios of a batch that start from the same state with the same element data (a batch of loads from one
-equilibrium: the benchmark, the virtual experiments) share the start's internal forces and Jacobian: one evaluation
-instead of one per scenario, with the same results as each scenario solved alone (tests/test_kernel.py).
+equilibrium: the benchmark, the virtual experiments) share the start's Jacobian, which does not depend on the
+loads: their first residual is evaluated without it, bit-identical to each scenario solved alone
+(tests/test_kernel.py).
 
 Switch: the environment variable ``LUMBAR_KERNEL`` (``compiled``, the default, or ``reference``) at import, or
 :func:`set_mode` / :func:`use` at run time. Without numba the reference path runs (:func:`active` is False) and
@@ -897,12 +898,14 @@ def newton_batch(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max
     xt, Rt, E = np.empty((nb, 3)), np.empty((nb, 3, 3)), np.empty((3, 3))
     wv = np.empty(3)
     w3, w33 = np.empty((16, 4)), np.empty((8, 3, 3))
-    # the internal forces and the Jacobian at the start state, without the loads: shared by consecutive scenarios
-    # that start from the same state with the same element data (a batch of loads from one equilibrium)
-    Q0, J0 = np.empty((nb, 6)), np.empty((nb, 6, nb, 6))
+    # the Jacobian at the start state (it does not depend on the loads): shared by consecutive scenarios that start
+    # from the same state with the same element data (a batch of loads from one equilibrium), whose residuals are
+    # then evaluated without it (the same arithmetic as with it: the results are bit-identical to unshared solves)
+    J0 = np.empty((nb, 6, nb, 6))
     s0 = -1
-    # a run-time True: a literal True would type (and compile) _eval_one a second time
+    # run-time bools: a literal would type (and compile) _eval_one a second time
     want_j = max_iter >= 0
+    no_j = not want_j
     for s in range(B):
         Ls = L[s if L.shape[0] > 1 else 0]
         fms, cms = fm[s if fm.shape[0] > 1 else 0], cm[s if cm.shape[0] > 1 else 0]
@@ -910,17 +913,16 @@ def newton_batch(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max
         xs, Rs = x[s], R[s]
         _copy(xs, x0[s])
         _copy(Rs, R0[s])
+        _copy(Q, Ls)
         if s0 < 0 or not (_same(x0[s], x0[s0]) and _same(R0[s], R0[s0]) and _same_row(fm, s, s0)
                           and _same_row(cm, s, s0) and _same_row(l0, s, s0) and _same_row(kt, s, s0)
                           and _same_row(off, s, s0)):
-            _zero(Q0)
             _zero(J0)
-            _eval_one(xs, Rs, Q0, J0, want_j, md, fms, cms, l0s, kts, offs, w3, w33)
+            _eval_one(xs, Rs, Q, J0, want_j, md, fms, cms, l0s, kts, offs, w3, w33)
             s0 = s
+        else:
+            _eval_one(xs, Rs, Q, J0, no_j, md, fms, cms, l0s, kts, offs, w3, w33)
         _copy(J, J0)
-        q, q0, ls_ = Q.reshape(Q.size), Q0.reshape(Q0.size), Ls.reshape(Ls.size)
-        for i in range(q.size):
-            q[i] = ls_[i] + q0[i]
         conv[s] = False
         iters[s] = 0
         res_f[s] = np.inf

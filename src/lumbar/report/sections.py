@@ -841,7 +841,8 @@ class ReportBuilder:
         if not self.has(rel):
             self.missing("Discovery on real measurements (real_data_summary.csv)")
             return
-        t = _read_csv(self.path(rel)).fillna("")
+        t = _read_csv(self.path(rel))
+        t = t.astype(object).where(t.notna(), "")            # empty cells as "" (fillna("") on float columns warns)
         named = t[t["named_effect"].astype(str) != ""]
         few = t[t["note"].astype(str).str.contains("too few rows")]
         text = (f"The discrepancy discovery ran on {len(t)} published dataset(s) the model is compared with. ")
