@@ -5,11 +5,13 @@ Markers (pyproject.toml): every test that uses the session DAG (``dag_workdir``,
 fixture built on them) is marked ``workflow`` here, so the fast lane ``pytest -m "not workflow and not slow"``
 never starts Snakemake.
 """
+import atexit
 import dataclasses
 import os
 import shutil
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -19,6 +21,12 @@ import pytest
 
 from lumbar.experiments.l2s1 import scenario_grid as l2s1_scenario_grid
 from lumbar.inputs.characteristics import load_characteristic_set
+
+# parsed geometry files are cached by content across processes (lumbar.geometry.diskcache): one cache per test
+# session, shared by its Snakemake runs, never the user's own
+_GEOMETRY_CACHE = tempfile.mkdtemp(prefix="lumbar_test_cache_")
+os.environ["LUMBAR_CACHE_DIR"] = _GEOMETRY_CACHE
+atexit.register(shutil.rmtree, _GEOMETRY_CACHE, ignore_errors=True)
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared"

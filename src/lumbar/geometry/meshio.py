@@ -8,19 +8,32 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from . import diskcache
 from .core import GeometryError
 
 MAX_EXTENT_M = 0.3
 
 
-@functools.lru_cache(maxsize=64)
-def _read_mesh_cached(path: str, mtime_ns: int) -> trimesh.Trimesh:
+def _parse_mesh(path: str) -> dict:
+    """Vertices and faces of a mesh file as trimesh loads and processes it (merged vertices)."""
     try:
         mesh = trimesh.load(path, force="mesh", process=True)
     except Exception as exc:  # trimesh raises many types
         raise GeometryError(f"{path}: mesh not readable ({type(exc).__name__}: {exc}); "
                             "expected an STL/OBJ triangle mesh in metres") from exc
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0 or len(mesh.vertices) < 4:
+        raise GeometryError(f"{path}: mesh not readable or empty (no triangles); "
+                            "expected an STL/OBJ triangle mesh in metres")
+    return {"vertices": np.asarray(mesh.vertices, dtype=np.float64), "faces": np.asarray(mesh.faces, dtype=np.int64)}
+
+
+@functools.lru_cache(maxsize=64)
+def _read_mesh_cached(path: str, mtime_ns: int) -> trimesh.Trimesh:
+    # parsed once per file content across processes (lumbar.geometry.diskcache); every process builds the mesh from
+    # the same two arrays, whether parsed here or read from the cache
+    arr = diskcache.load_or_parse(path, "mesh", f"trimesh {trimesh.__version__} process", lambda: _parse_mesh(path))
+    mesh = trimesh.Trimesh(vertices=arr["vertices"], faces=arr["faces"], process=False)
+    if len(mesh.faces) == 0 or len(mesh.vertices) < 4:
         raise GeometryError(f"{path}: mesh not readable or empty (no triangles); "
                             "expected an STL/OBJ triangle mesh in metres")
     if not np.all(np.isfinite(mesh.vertices)):
@@ -34,7 +47,8 @@ def _read_mesh_cached(path: str, mtime_ns: int) -> trimesh.Trimesh:
 
 
 def read_mesh(path, *, max_extent: float = MAX_EXTENT_M) -> trimesh.Trimesh:
-    """Read a mesh (cached by path + modification time); returns a private copy."""
+    """Read a mesh (cached in the process by path + modification time, across processes by content:
+    :mod:`lumbar.geometry.diskcache`); returns a private copy."""
     p = Path(path)
     if not p.is_file():
         raise GeometryError(f"{p}: mesh file missing (expected a triangle mesh file in metres)")

@@ -30,6 +30,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from . import analysis as A
+from . import diskcache
 from .core import (FacetLandmarks, GeometryError, Level, Ligament, SpineGeometry, Vertebra, level_vertebrae,
                    levels_and_vertebrae)
 from .meshio import read_mesh, require_dir
@@ -48,6 +49,12 @@ def _numbers(text: str):
 
 @functools.lru_cache(maxsize=64)
 def _read_nodes_cached(path: str, mtime: int) -> np.ndarray:
+    # parsed once per file content across processes (lumbar.geometry.diskcache)
+    tag = f"index x y z, |coordinate| <= {MAX_COORD_M} m"
+    return diskcache.load_or_parse(path, "nodes", tag, lambda: {"nodes": _parse_nodes(path)})["nodes"]
+
+
+def _parse_nodes(path: str) -> np.ndarray:
     rows = []
     with open(path) as fh:
         for ln, line in enumerate(fh, 1):
