@@ -202,15 +202,41 @@ def _start_dag(name: str, dest: Path, targets=()):
     _DAG_RUNS[name] = dict(path=dest, proc=proc, log=log, t0=time.perf_counter(), rc=None)
 
 
+# The solver's numba kernels are compiled (or loaded from their on-disk cache) in a process of their own that starts
+# with the session, so that the compilation (about 20 s on an empty cache, as on a fresh clone) runs beside the
+# collection; the Snakemake runs start once it is done, so that their jobs load the cache instead of each compiling
+# at the same time.
+_WARM_UP = {}
+
+
+def pytest_sessionstart(session):
+    if session.config.option.collectonly:
+        return
+    _WARM_UP["proc"] = subprocess.Popen(
+        [sys.executable, "-c", "from lumbar.mechanics import kernel; kernel.warm_up()"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+
+
+def _wait_warm_up(timeout=None):
+    proc = _WARM_UP.pop("proc", None)
+    if proc is None:
+        return
+    try:
+        _, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:       # only at the session's end (see pytest_sessionfinish)
+        proc.kill()
+        proc.communicate()
+        return
+    if proc.returncode != 0:    # the tests that use the kernel will show the error; Snakemake jobs compile alone
+        sys.stderr.write(f"conftest: kernel warm-up failed (exit {proc.returncode}):\n{err[-3000:]}\n")
+
+
 def pytest_collection_finish(session):
     items = session.items
     if session.config.option.collectonly or not any(DAG_FIXTURES & set(getattr(i, "fixturenames", ()))
                                                     for i in items):
         return
-    # compile the solver's numba kernels here (or load them from their on-disk cache) before the Snakemake jobs
-    # start: they then load the cache instead of each compiling at the same time
-    from lumbar.mechanics import kernel
-    kernel.warm_up()
+    _wait_warm_up()
     factory = session.config._tmp_path_factory
     _start_dag("first", factory.mktemp("dag") / "repo")
     if any(i.name == "test_dag_reproducible_byte_identical" for i in items):
@@ -218,6 +244,7 @@ def pytest_collection_finish(session):
 
 
 def pytest_sessionfinish(session, exitstatus):
+    _wait_warm_up(timeout=5)      # a short session (one test file) ends before the compilation: not waited for
     for run in _DAG_RUNS.values():     # e.g. -x stopped the session: do not leave a Snakemake run behind
         if run["proc"].poll() is None:
             run["proc"].terminate()

@@ -288,3 +288,33 @@ def test_checkers_find_the_faults_of_a_fake_package(fake_package):
     assert sorted((m, t) for m, _, t in res.private_imports) == [
         ("fakepkg_arch.a", "fakepkg_arch.sub.c:_helper"), ("fakepkg_arch.b", "fakepkg_arch.sub.c:_hidden")]
     assert sorted(m for m, _, _ in res.backend_switches) == ["fakepkg_arch.a", "fakepkg_arch.sub.c"]
+
+
+# ------------------------------------------------------------------ lazy imports (lumbar/__init__.py)
+#: what the workflow's table, figure and report jobs import (they read results; no mesh, no equilibrium)
+RESULT_READERS = ("lumbar.report", "lumbar.report.docs", "lumbar.experiments.validation",
+                  "lumbar.experiments.stepwise_reduction", "lumbar.experiments.l2s1", "lumbar.experiments.load_sharing",
+                  "lumbar.experiments.admissibility", "lumbar.experiments.fsu", "lumbar.geometry", "lumbar.plots.discovery")
+#: imported by the functions that build meshes or solve equilibria, never at module level
+HEAVY = ("trimesh", "shapely", "scipy.spatial", "numba", "lumbar.mechanics.kernel")
+
+
+def heavy_imports_of(modules, heavy=HEAVY) -> list[str]:
+    """The ``heavy`` modules a fresh interpreter holds after importing ``modules``."""
+    import subprocess  # noqa: PLC0415
+    code = (f"import sys\nfor m in {list(modules)!r}: __import__(m)\n"
+            f"print(' '.join(h for h in {list(heavy)!r} if h in sys.modules))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                       env={**__import__("os").environ, "PYTHONPATH": str(Path(lumbar.__file__).parents[1])})
+    assert r.returncode == 0, r.stderr
+    return r.stdout.split()
+
+
+def test_result_readers_import_no_mesh_or_solver_library():
+    assert heavy_imports_of(RESULT_READERS) == []
+
+
+def test_heavy_import_check_sees_a_solver_import():
+    # the check can fail: a module that solves (the compiled core) holds numba, one that reads meshes trimesh
+    assert set(heavy_imports_of(["lumbar.mechanics.kernel", "lumbar.geometry.landmarks"])) >= \
+        {"trimesh", "numba", "lumbar.mechanics.kernel"}

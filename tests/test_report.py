@@ -68,6 +68,8 @@ def check_pdf(pdf_path: Path):
     assert data.startswith(b"%PDF-") and data.rstrip().endswith(b"%%EOF")
     assert len(re.findall(rb"/Type\s*/Page[^s]", data)) >= 1
     assert b"/CreationDate (D:20000101000000" in data     # reportlab invariant mode: no time stamp
+    # binary Flate streams: the pure-Python ASCII85 layer cost a quarter of the report job (figures' pixels)
+    assert b"/FlateDecode" in data and b"ASCII85Decode" not in data
 
 
 # ----------------------------------------------------------------------------------------------- fixtures
@@ -152,6 +154,8 @@ def test_report_references_exist_and_pdf_valid(fake_results):
     html_path, pdf_path, summary = _build(*fake_results)
     refs = check_references(html_path)
     check_pdf(pdf_path)
+    from reportlab import rl_config
+    assert rl_config.useA85 == 1, "render_pdf left reportlab's global ASCII85 setting changed"
     assert len(refs.images) == 3 and summary["figures"] + 2 == 3     # Fig. 1, Fig. 6 and one S-figure
     assert any(t.get("data-source") == "../tables/table4_rom_synopsis.csv" for t in refs.tables)
 

@@ -23,7 +23,6 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-import trimesh
 
 from ..inputs import resources, tables
 from .fsu import DIRECTIONS, add_level
@@ -190,6 +189,7 @@ def register_vertebra(source_mesh, target_mesh, source_centroid, target_centroid
     pts = v[:: max(1, len(v) // n_points)]
     T0 = np.eye(4)
     T0[:3, 3] = np.asarray(target_centroid, float) - np.asarray(source_centroid, float)
+    import trimesh  # noqa: PLC0415 - see lumbar/__init__.py, lazy imports
     M, _, _ = trimesh.registration.icp(pts, target_mesh, initial=T0, threshold=1e-9, max_iterations=40,
                                        reflection=False, scale=True)
     moved = pts @ M[:3, :3].T + M[:3, 3]

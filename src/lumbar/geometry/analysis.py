@@ -1,11 +1,13 @@
 """Geometric helpers shared by the loaders: plane fits, endplates, disc measures, centroids."""
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import pandas as pd
-import shapely.geometry as sg
-import trimesh
-from scipy.spatial import ConvexHull
+
+if TYPE_CHECKING:
+    import trimesh
 
 EZ = np.array([0.0, 0.0, 1.0])
 
@@ -30,6 +32,7 @@ def sagittal_split(mesh: trimesh.Trimesh, y_mid: float = 0.0):
     if sec is None:
         return None, None
     p2, T = sec.to_2D()
+    import trimesh  # noqa: PLC0415 - see lumbar/__init__.py, lazy imports
     boxes = []
     for poly in p2.polygons_full:
         b = np.array(poly.exterior.coords)
@@ -42,6 +45,7 @@ def sagittal_split(mesh: trimesh.Trimesh, y_mid: float = 0.0):
 
 
 def hull_centroid(points: np.ndarray) -> np.ndarray:
+    import trimesh  # noqa: PLC0415
     return np.asarray(trimesh.convex.convex_hull(points).center_mass, dtype=float)
 
 
@@ -104,6 +108,8 @@ def section_area(mesh: trimesh.Trimesh, origin, normal, inside_point=None) -> fl
         return float("nan")
     if inside_point is None:
         return float(sum(p.area for p in polys))
+    import shapely.geometry as sg  # noqa: PLC0415
+    import trimesh  # noqa: PLC0415
     q = trimesh.transform_points(np.atleast_2d(inside_point), np.linalg.inv(T))[0, :2]
     pt = sg.Point(q)
     best = min(polys, key=lambda p: p.distance(pt))
@@ -117,6 +123,7 @@ def projected_area(points: np.ndarray, normal: np.ndarray) -> float:
     a /= np.linalg.norm(a)
     b = np.cross(n, a)
     q = np.c_[points @ a, points @ b]
+    from scipy.spatial import ConvexHull  # noqa: PLC0415
     return float(ConvexHull(q).volume)
 
 

@@ -3,8 +3,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import trimesh
+
+if TYPE_CHECKING:
+    import trimesh
 
 LEVEL_NAMES = ("L1-L2", "L2-L3", "L3-L4", "L4-L5", "L5-S1")
 VERTEBRA_NAMES = ("L1", "L2", "L3", "L4", "L5", "S1")

@@ -1,8 +1,12 @@
 """``load_geometry``: dispatch to the geometry sources."""
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import trimesh
+
+if TYPE_CHECKING:
+    import trimesh
 
 from ..inputs import resources
 from . import analysis as A

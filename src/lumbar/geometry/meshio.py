@@ -5,8 +5,12 @@ import functools
 import os
 from pathlib import Path
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import trimesh
+
+if TYPE_CHECKING:
+    import trimesh
 
 from . import diskcache
 from .core import GeometryError
@@ -16,6 +20,7 @@ MAX_EXTENT_M = 0.3
 
 def _parse_mesh(path: str) -> dict:
     """Vertices and faces of a mesh file as trimesh loads and processes it (merged vertices)."""
+    import trimesh  # noqa: PLC0415 - see lumbar/__init__.py, lazy imports
     try:
         mesh = trimesh.load(path, force="mesh", process=True)
     except Exception as exc:  # trimesh raises many types
@@ -31,6 +36,7 @@ def _parse_mesh(path: str) -> dict:
 def _read_mesh_cached(path: str, mtime_ns: int) -> trimesh.Trimesh:
     # parsed once per file content across processes (lumbar.geometry.diskcache); every process builds the mesh from
     # the same two arrays, whether parsed here or read from the cache
+    import trimesh  # noqa: PLC0415
     arr = diskcache.load_or_parse(path, "mesh", f"trimesh {trimesh.__version__} process", lambda: _parse_mesh(path))
     mesh = trimesh.Trimesh(vertices=arr["vertices"], faces=arr["faces"], process=False)
     if len(mesh.faces) == 0 or len(mesh.vertices) < 4:

@@ -16,7 +16,6 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from .core import GeometryError
 
@@ -50,6 +49,7 @@ def mjcf_vector(el, name, default):
 
 def mjcf_rotation(el) -> np.ndarray:
     """Rotation matrix of an MJCF element's orientation (``quat`` or ``euler``; identity if none)."""
+    from scipy.spatial.transform import Rotation  # noqa: PLC0415 - see lumbar/__init__.py, lazy imports
     if el.get("quat"):
         w, x, y, z = mjcf_vector(el, "quat", [1, 0, 0, 0])
         return Rotation.from_quat([x, y, z, w]).as_matrix()

@@ -27,7 +27,6 @@ import os
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from . import analysis as A
 from . import diskcache
@@ -180,6 +179,7 @@ def _grid_on_nodes(nodes: np.ndarray) -> np.ndarray:
     a1 = np.quantile(q1, [0.9, 0.5, 0.1])
     a2 = np.quantile(q2, [0.1, 0.5, 0.9])
     pts, used = [], set()
+    from scipy.spatial import cKDTree  # noqa: PLC0415 - see lumbar/__init__.py, lazy imports
     tree = cKDTree(nodes)
     for s1 in a1:
         for s2 in a2:
@@ -238,6 +238,7 @@ def load_visible_human(path, levels=None) -> SpineGeometry:
     bodies = {v: read_mesh(folder / "meshes" / f"{v}_body.obj") for v in verts}
     ligfiles = {lv: (read_lig(folder / "ligaments" / f"{PREFIX[lv]}_Ligs_AS.lig", "AS"),
                      read_lig(folder / "ligaments" / f"{PREFIX[lv]}_Ligs_MP.lig", "MP")) for lv in levels}
+    from scipy.spatial import cKDTree  # noqa: PLC0415
     trees = {v: cKDTree(m.vertices) for v, m in meshes.items()}
     geo_levels = {}
     for lv in levels:

@@ -33,6 +33,8 @@ import os
 
 import numpy as np
 
+from .elements.ligament import LAW_CABLE, LAW_RUPP, LAW_SOFTPLUS  # noqa: F401 - compile-time constants
+
 log = logging.getLogger(__name__)
 
 try:  # numba is pinned (environment.txt); without it the numpy reference path runs
@@ -57,7 +59,6 @@ _inner = njit(cache=True, error_model="numpy", no_cpython_wrapper=True, no_cfunc
 #: model, one switch (:func:`active`); ``inner_jit`` for functions called only from compiled code
 jit = _jit
 inner_jit = _inner
-LAW_SOFTPLUS, LAW_RUPP, LAW_CABLE = 0, 1, 2
 #: Newton trials from residuals below LAZY x the tolerances are evaluated without the Jacobian first (newton_batch);
 #: on the default unit's benchmark scenarios 1e3, 1e4, 1e5, 1e6 and 1e7 cost 83.9, 83.1, 82.8, 85.3 and 88.2 us of
 #: evaluations per equilibrium (counted evaluations x the measured cost with / without the Jacobian; all: 85.7)

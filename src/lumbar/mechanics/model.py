@@ -25,12 +25,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import kernel, so3
+from . import so3
 from .elements.disc import disc_axial_force, disc_torque
 from .elements.facet import FacetSurface, contact_penalty
-from .elements.ligament import rupp_force, slack_length, softplus_force
+from .elements.ligament import LAW_CABLE, LAW_RUPP, LAW_SOFTPLUS, rupp_force, slack_length, softplus_force
 
-LAW_SOFTPLUS, LAW_RUPP, LAW_CABLE = kernel.LAW_SOFTPLUS, kernel.LAW_RUPP, kernel.LAW_CABLE
 GROUND = -1
 
 
@@ -330,6 +329,7 @@ class SpineModel:
 
         On the compiled core (:mod:`lumbar.mechanics.kernel`) when it is active, else on the numpy reference
         :meth:`evaluate_reference` (same arguments, same results up to round-off)."""
+        from . import kernel  # noqa: PLC0415 - numba only where equilibria are computed (lumbar/__init__.py)
         if kernel.active():
             return kernel.evaluate(self, x, R, loads, fmask, cmask, jacobian, params)
         return self.evaluate_reference(x, R, loads, fmask, cmask, jacobian, params)

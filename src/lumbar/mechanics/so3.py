@@ -6,7 +6,6 @@ Convention: a spatial (left) increment ``w`` updates ``R <- exp(w) @ R``.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 _SMALL = 1e-8
 
@@ -35,6 +34,7 @@ def exp(w: np.ndarray) -> np.ndarray:
     """Rotation matrices from rotation vectors (Rodrigues), batched."""
     w = np.asarray(w, dtype=float)
     flat = w.reshape(-1, 3)
+    from scipy.spatial.transform import Rotation  # noqa: PLC0415 - see lumbar/__init__.py, lazy imports
     mats = Rotation.from_rotvec(flat).as_matrix()
     return mats.reshape(w.shape[:-1] + (3, 3))
 
@@ -43,6 +43,7 @@ def log(R: np.ndarray) -> np.ndarray:
     """Rotation vectors from rotation matrices, batched (angle in [0, pi])."""
     R = np.asarray(R, dtype=float)
     flat = R.reshape(-1, 3, 3)
+    from scipy.spatial.transform import Rotation  # noqa: PLC0415
     vecs = Rotation.from_matrix(flat).as_rotvec()
     return vecs.reshape(R.shape[:-2] + (3,))
 

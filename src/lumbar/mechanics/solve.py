@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import kernel, so3
+from . import so3
 from .model import SpineModel
 
 log = logging.getLogger(__name__)
@@ -99,6 +99,7 @@ def newton(model, x, R, loads, fmask=1.0, cmask=1.0, params=None, max_iter=50, t
     (:func:`lumbar.mechanics.kernel.newton`: the same iteration, scenario by scenario); any other model (e.g. the
     muscle model, which adds its own terms to the SpineModels' residuals) and the reference mode run
     :func:`newton_reference`."""
+    from . import kernel  # noqa: PLC0415 - numba only where equilibria are computed (lumbar/__init__.py)
     if isinstance(model, SpineModel) and type(model).evaluate is SpineModel.evaluate and kernel.active():
         nb = x.shape[1]
         return kernel.newton(model, x, R, loads, fmask, cmask, params, max_iter, tol_force, tol_moment,

@@ -19,6 +19,9 @@ from __future__ import annotations
 
 import numpy as np
 
+#: fibre law codes of the model's arrays (``SpineModel.f_law``) and of the compiled core
+LAW_SOFTPLUS, LAW_RUPP, LAW_CABLE = 0, 1, 2
+
 
 def slack_length(reference_length, prestrain):
     """Slack length [m] of a fibre prestrained by ``prestrain`` (a strain, fraction: 0.1 = 10 %) at its
