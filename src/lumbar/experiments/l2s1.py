@@ -525,17 +525,20 @@ def plot_table5_grid(syn: pd.DataFrame, path):
     """Check/cross grid: rows = set-up x load case, columns = characteristic sets."""
     sets = list(dict.fromkeys(syn["set"]))
     rows = scenario_grid()
-    idx = syn.set_index(["set", "muscle_setup", "load_case"])
+    cells = {(s, ms, lc): (bool(c), bool(o)) for s, ms, lc, c, o in
+             syn[["set", "muscle_setup", "load_case", "converged", "outlier"]].itertuples(index=False)}
     fig, ax = subplots(figsize=(2.0 + 1.3 * len(sets), 14), dpi=100)
+    # the marks lie inside the axes: left out of tight_layout's pass over every artist (the same bytes)
     for j, s in enumerate(sets):
         for i, (ms, lc) in enumerate(rows):
-            r = idx.loc[(s, ms, lc)]
-            if not bool(r["converged"]):
-                ax.text(j, i, "n.c.", color="#d62728", ha="center", va="center", fontsize=8, fontweight="bold")
-            elif bool(r["outlier"]):
-                ax.text(j, i, "\u2717", color="#d62728", ha="center", va="center", fontsize=12)
+            conv, out = cells[(s, ms, lc)]
+            if not conv:
+                ax.text(j, i, "n.c.", color="#d62728", ha="center", va="center", fontsize=8, fontweight="bold",
+                        in_layout=False)
+            elif out:
+                ax.text(j, i, "\u2717", color="#d62728", ha="center", va="center", fontsize=12, in_layout=False)
             else:
-                ax.text(j, i, "\u2713", color="#2ca02c", ha="center", va="center", fontsize=12)
+                ax.text(j, i, "\u2713", color="#2ca02c", ha="center", va="center", fontsize=12, in_layout=False)
     ax.set_xlim(-0.5, len(sets) - 0.5)
     ax.set_ylim(len(rows) - 0.5, -0.5)
     ax.set_xticks(range(len(sets)))

@@ -283,21 +283,24 @@ def plot_table4_grid(synopsis: pd.DataFrame, path, sets=None) -> None:
     cols = [(k, d) for k in sets for d in MAIN_DIRECTIONS]
     from matplotlib.patches import Rectangle  # noqa: PLC0415 - matplotlib only where a figure is drawn
 
-    idx = synopsis.set_index(["set", "stage", "direction", "moment_nm"])
+    # (outlier, converged) per cell, read once (a .loc per cell cost 0.7 s on the paper's 960 cells)
+    cells = {(k, st, d, M): (bool(o), bool(c)) for k, st, d, M, o, c in
+             synopsis[["set", "stage", "direction", "moment_nm", "outlier", "converged"]].itertuples(index=False)}
     fig, ax = subplots(figsize=(1.2 + 0.32 * len(cols), 1.2 + 0.22 * len(rows)))
     for i, (st, M) in enumerate(rows):
         for j, (k, d) in enumerate(cols):
             key = (k, st, d, M)
-            if key not in idx.index:
+            if key not in cells:
                 colour, mark = "0.85", ""
             else:
-                r = idx.loc[key]
-                out = bool(r["outlier"])
+                out, conv = cells[key]
                 colour = "#f4b6b6" if out else "#b9e4b9"
-                mark = ("x" if bool(r["converged"]) else "NC") if out else "v"
-            ax.add_patch(Rectangle((j, i), 1, 1, color=colour, ec="white"))
+                mark = ("x" if conv else "NC") if out else "v"
+            # the cells lie inside the limits set below: add_artist skips add_patch's data-limit update (2 s on
+            # 960 cells) and the marks stay out of tight_layout's pass over every artist (the same bytes)
+            ax.add_artist(Rectangle((j, i), 1, 1, color=colour, ec="white"))
             ax.text(j + 0.5, i + 0.5, mark, ha="center", va="center", fontsize=6,
-                    color="darkred" if mark in ("x", "NC") else "darkgreen")
+                    color="darkred" if mark in ("x", "NC") else "darkgreen", in_layout=False)
     ax.set_xlim(0, len(cols))
     ax.set_ylim(len(rows), 0)
     ax.set_xticks(np.arange(len(cols)) + 0.5)
