@@ -69,6 +69,52 @@ def test_compiled_residual_and_jacobian_equal_the_reference(charset, case):
     assert_same(Qn, Qr)
 
 
+def _place_contact_point(m, x, R, n, gap):
+    """State (x, R) with body k_a[n] translated so that contact point n has the given gap to its surface (the
+    translation runs along the surface's w axis: the point's u and v stay, its w moves by the same length)."""
+    a, b, surf = int(m.k_a[n]), int(m.k_b[n]), m.surfaces[int(m.k_surf[n])]
+    p, _ = m._attach(x, R, m.k_a[n:n + 1], m.k_s[n:n + 1])
+    g0 = surf.gap(m._to_body(x, R, m.k_b[n:n + 1], p))[0][0, 0]
+    Rb = R[0, b] if b >= 0 else np.eye(3)
+    x = x.copy()
+    x[0, a] += Rb @ surf.axes[2] * (gap - g0)
+    p, _ = m._attach(x, R, m.k_a[n:n + 1], m.k_s[n:n + 1])
+    assert abs(surf.gap(m._to_body(x, R, m.k_b[n:n + 1], p))[0][0, 0] - gap) < 1e-13
+    return x
+
+
+@needs_numba
+@pytest.mark.parametrize("case", ["fsu", "two_bodies"])
+@pytest.mark.parametrize("gap", [-5e-10, 5e-10, -2e-6])
+def test_contact_screen_keeps_a_point_that_barely_touches(charset, case, gap):
+    """The compiled contact loop skips a point whose screened gap (one affine map per surface) exceeds
+    kernel.SCREEN_M: a point that penetrates by less than that margin, or by a little more, still gives the reference
+    path's force and stiffness, and one that is open by less than the margin gives none (on a surface of the fixed
+    body, and on a moving lower body)."""
+    m = build_fsu(symmetric_fsu(), charset).model if case == "fsu" else _two_level_model(charset)
+    x, R, loads = perturbed_state(m, 1, 7)
+    n = int(np.flatnonzero(m.k_b >= 0)[0]) if case == "two_bodies" else m.nc // 2
+    x = _place_contact_point(m, x, R, n, gap)
+    m.k_stiff[n] = 1e14      # N/m: a penetration of 0.5 nm gives a force (0.25 N) far above the other sums' round-off
+    one, none = np.zeros((1, m.nc)), np.zeros((1, m.nc))
+    one[0, n] = 1.0
+    fm = np.zeros((1, m.nf))
+    d = {}
+    for mode in ("compiled", "reference"):
+        with kernel.use(mode):
+            Q1, J1 = m.evaluate(x, R, loads, fm, one)
+            Q0, J0 = m.evaluate(x, R, loads, fm, none)
+        # the point's share, beside the round-off of the other elements' sums in another order
+        d[mode] = (Q1 - Q0, J1 - J0, 64 * np.finfo(float).eps * np.abs(Q0).max(), 64 * np.finfo(float).eps * np.abs(J0).max())
+    (dQc, dJc, eq, ej), (dQr, dJr, _, _) = d["compiled"], d["reference"]
+    if gap > 0:
+        assert np.abs(dQr).max() <= eq and np.abs(dQc).max() <= eq
+        return
+    assert np.abs(dQr).max() > 100 * eq and np.abs(dJr).max() > 100 * ej     # a skipped point would fail below
+    assert np.abs(dQc - dQr).max() <= 1e-6 * np.abs(dQr).max() + eq
+    assert np.abs(dJc - dJr).max() <= 1e-6 * np.abs(dJr).max() + ej
+
+
 @needs_numba
 @pytest.mark.parametrize("case", ["fsu", "two_bodies_rupp"])
 def test_compiled_jacobian_matches_finite_differences(charset, case):
