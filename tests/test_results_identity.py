@@ -44,6 +44,16 @@ RTOL = 1e-6     # of the column's largest magnitude
 #: tolerance, and a flag or an outlier count at its threshold may flip. Every other table (geometry, the published
 #: literature sets, which no fit touches) keeps the strict comparison.
 RTOL_FIT = 5e-2
+#: Rows of a scenario with wire cables (a ``muscle_setup`` other than ``none``): the cable attachments come from an ICP
+#: registration of the myo-sim vertebrae onto the geometry (``l2s1.register_vertebra``), whose fixed point moves with
+#: round-off: on one machine, OpenBLAS's Haswell and SkylakeX kernels gave registrations that differ by 2e-5 to 7e-4
+#: (matrix entries, also when the ICP is run to a fixed point) and IDP tables of the published Rupp set that differ
+#: by up to 2.3e-4 of a column's largest value (rows without cables: identical). Those rows are compared to this.
+RTOL_REGISTRATION = 2e-3
+#: A solver's residual (columns named ``*residual*``) is round-off at convergence: its digits differ between CPUs and
+#: BLAS builds (1e-14 ... 1e-10 N or N*m), so it is compared as a quantity that must stay at the reference's level:
+#: within RESIDUAL_FACTOR x the reference column's largest magnitude, not digit by digit.
+RESIDUAL_FACTOR = 10.0
 FIT_INDEPENDENT = ("rupp2015", "chazal1985", "shirazi_adl1986", "white_panjabi1990", "nolte1990",
                    "tables/fsu_geometry.csv", "tables/table2_facet_surfaces.csv")
 
@@ -54,12 +64,16 @@ def fit_dependent(rel: str) -> bool:
 
 def numeric_differences(ref: bytes, now: bytes, rtol=RTOL, numbers_only=False) -> list[str]:
     """Where two CSV tables differ beyond round-off: columns, row count, text cells, numbers (NaN = NaN);
-    ``numbers_only``: text and flag columns are not compared (tables downstream of a fit, RTOL_FIT)."""
+    ``numbers_only``: text and flag columns are not compared (tables downstream of a fit, RTOL_FIT). Rows with
+    cables are compared to max(rtol, RTOL_REGISTRATION), residual columns to RESIDUAL_FACTOR x their level."""
     a, b = pd.read_csv(io.BytesIO(ref)), pd.read_csv(io.BytesIO(now))
     if list(a.columns) != list(b.columns):
         return [f"columns {list(a.columns)} -> {list(b.columns)}"]
     if len(a) != len(b):
         return [f"rows {len(a)} -> {len(b)}"]
+    tol = np.full(len(a), rtol)
+    if "muscle_setup" in a.columns:
+        tol[(a["muscle_setup"].astype(str) != "none").to_numpy()] = max(rtol, RTOL_REGISTRATION)
     out = []
     for c in a.columns:
         x, y = a[c], b[c]
@@ -67,7 +81,11 @@ def numeric_differences(ref: bytes, now: bytes, rtol=RTOL, numbers_only=False) -
                 pd.api.types.is_bool_dtype(x) or pd.api.types.is_bool_dtype(y)):
             xf, yf = x.to_numpy(float), y.to_numpy(float)
             scale = np.nanmax(np.abs(xf)) if np.isfinite(xf).any() else 0.0
-            same = (np.isnan(xf) & np.isnan(yf)) | (np.abs(xf - yf) <= rtol * max(scale, 1e-300))
+            if "residual" in c:
+                ok = np.abs(yf) <= RESIDUAL_FACTOR * max(scale, 1e-300)
+            else:
+                ok = np.abs(xf - yf) <= tol * max(scale, 1e-300)
+            same = (np.isnan(xf) & np.isnan(yf)) | ok
             if not same.all():
                 k = int(np.flatnonzero(~same)[0])
                 out.append(f"{c}: {int((~same).sum())} values, e.g. row {k}: {xf[k]!r} -> {yf[k]!r}")
@@ -86,6 +104,17 @@ def test_numeric_comparison_tolerates_round_off_only():
     assert numeric_differences(ref, b"name,v,n,ok\na,1.0,3,True\nb,2.5e-3,4,False\nc,0.1,5,True\n")
     assert numeric_differences(ref, b"name,v,n,ok\na,1.0,3,True\nb,2.5e-3,4,False\n")
     assert numeric_differences(ref, b"name,w,n,ok\na,1.0,3,True\nb,2.5e-3,4,False\nc,,5,True\n")
+
+
+def test_residual_columns_and_cable_rows_have_their_own_tolerance():
+    """A residual at round-off may change its digits but not grow to another level; rows with cables (behind an
+    ICP registration) tolerate RTOL_REGISTRATION, rows without cables keep RTOL."""
+    ref = b"muscle_setup,v,residual_force_n\nnone,1.0,3e-10\nall,2.0,1e-10\n"
+    assert numeric_differences(ref, b"muscle_setup,v,residual_force_n\nnone,1.0,2e-10\nall,2.0,2.9e-9\n") == []
+    assert numeric_differences(ref, b"muscle_setup,v,residual_force_n\nnone,1.0,3e-10\nall,2.0,4e-9\n")
+    assert numeric_differences(ref, b"muscle_setup,v,residual_force_n\nnone,1.0,3e-10\nall,2.002,1e-10\n") == []
+    assert numeric_differences(ref, b"muscle_setup,v,residual_force_n\nnone,1.0,3e-10\nall,2.006,1e-10\n")
+    assert numeric_differences(ref, b"muscle_setup,v,residual_force_n\nnone,1.001,3e-10\nall,2.0,1e-10\n")
 
 
 def test_fit_dependent_tables_are_compared_on_their_numbers():

@@ -184,7 +184,9 @@ def register_vertebra(source_mesh, target_mesh, source_centroid, target_centroid
     """Similarity transform (4x4: rotation, uniform scale, translation) taking the myo-sim vertebra onto the
     target geometry's vertebra: ICP (trimesh.registration.icp, scale allowed, no reflection) from every k-th
     source vertex, started at the translation of the body centroids. Returns (matrix, rms [m]).
-    Deterministic (no random sampling)."""
+    Deterministic (no random sampling) on one machine; its fixed point moves with round-off (the closest-point
+    pairs change discretely): OpenBLAS's Haswell and SkylakeX kernels gave matrices that differ by 2e-5 to 7e-4 and
+    Table 5 IDP values that differ by up to 2e-4 relative (tests/test_results_identity.py, RTOL_REGISTRATION)."""
     v = np.asarray(source_mesh.vertices)
     pts = v[:: max(1, len(v) // n_points)]
     T0 = np.eye(4)
