@@ -102,12 +102,17 @@ def _sobol_figure(df, path):
     _save(fig, path)
 
 
-def _warn_uncertified(what, which, table):
-    """One WARNING per rule for reached postures whose optimum IPOPT could not certify (something to act on);
-    postures the muscles cannot reach are expected outcomes (red stars), counted in the rule's summary line."""
+def _warn_uncertified(what, which, table, statuses=()):
+    """One WARNING per rule for reached postures whose optimum IPOPT could not certify: a reported value (a row of the
+    validation or of the sensitivity study) that may not be the optimum; postures the muscles cannot reach are
+    expected outcomes (red stars), counted in the rule's summary line. The Sobol chunks do not call this: their
+    uncertified samples are kept in the expansion by design and counted in sobol_indices.csv (n_uncertified)."""
     if which:
-        log.warning("%s: %d reached posture(s) whose optimum IPOPT could not certify (certified=False in %s): "
-                    "raise muscle_model.solver.ipopt_max_iter, or read them as uncertified", what, len(which), table)
+        why = ", ".join(sorted({str(s) for s in statuses})) or "see ipopt_status"
+        log.warning("%s: %d reached posture(s) whose optimum IPOPT could not certify (%s; certified=False in %s): "
+                    "read them as equilibria that may not be the optimum. A larger muscle_model.solver."
+                    "ipopt_max_iter helps where IPOPT was still converging; near the edge of the muscles' capacity "
+                    "it may stall at any limit", what, len(which), why, table)
 
 
 rule = snakemake.rule
@@ -126,7 +131,7 @@ if rule == "muscle_validation":
     log.info("%d activities solved in %.1f s; converged: %s", len(names), time.perf_counter() - t0,
              {n: s.converged for n, s in zip(names, sols)})
     _warn_uncertified("muscle_validation", [n for n, s in zip(names, sols) if s.reached and not s.certified],
-                      snakemake.output.segment_loads)
+                      snakemake.output.segment_loads, [s.ipopt_status for s in sols if s.reached and not s.certified])
     for n, s in zip(names, sols):
         log.info("%s: converged=%s reached=%s certified=%s KKT residual %.1e, residual %.1e N %.1e N*m, tracking "
                  "error %.3f deg, %d iterations %s", n, s.converged, s.reached, s.certified, s.kkt_residual,
@@ -213,8 +218,9 @@ elif rule == "muscle_sensitivity":
     log.info("chunk %s (ssl %s): %d scenarios in %.1f s, %d not reached, %d reached but not certified "
              "(max KKT residual %.1e)", param, ssl, len(out), time.perf_counter() - t0, int((~out["reached"]).sum()),
              int((out["reached"] & ~out["certified"]).sum()), out["kkt_residual"].max())
-    _warn_uncertified(f"sensitivity chunk {param} (ssl {ssl})", list(out.index[out["reached"] & ~out["certified"]]),
-                      snakemake.output[0])
+    unc = out["reached"] & ~out["certified"]
+    _warn_uncertified(f"sensitivity chunk {param} (ssl {ssl})", list(out.index[unc]), snakemake.output[0],
+                      out.loc[unc, "ipopt_status"])
     write_table_atomic(out, snakemake.output[0])
 elif rule == "muscle_sensitivity_table":
     df = pd.concat([pd.read_csv(f) for f in snakemake.input.chunks], ignore_index=True)
@@ -294,11 +300,13 @@ elif rule == "muscle_sobol_chunk":
              sb.get("chunks", 1), rows[0], rows[-1], len(X), sb["n_train"])
     out = mm.sobol_evaluate(model, solver, _load_baseline(snakemake.input.baseline), X, rows, posture, sb["scope"],
                             p["disc_area_m2"], label=f"sobol {posture} chunk {k + 1}/{sb.get('chunks', 1)}")
-    log.info("Sobol %s chunk %d: %d samples in %.1f s, %d not reached, %d reached but not certified", posture, k + 1,
-             len(out), time.perf_counter() - t0, int((~out["reached"]).sum()),
-             int((out["reached"] & ~out["certified"]).sum()))
-    _warn_uncertified(f"Sobol {posture} chunk {k + 1}", list(out.index[out["reached"] & ~out["certified"]]),
-                      snakemake.output[0])
+    # one summary line: samples not reached are left out of the expansion, reached but uncertified ones are kept
+    # (n_failed / n_uncertified of sobol_indices.csv): results of the study, not something to act on
+    unc = out["reached"] & ~out["certified"]
+    log.info("Sobol %s chunk %d: %d samples in %.1f s, %d not reached, %d reached but not certified%s", posture, k + 1,
+             len(out), time.perf_counter() - t0, int((~out["reached"]).sum()), int(unc.sum()),
+             f" (IPOPT: {', '.join(sorted(set(out.loc[unc, 'ipopt_status'].astype(str))))}; kept in the expansion)"
+             if unc.any() else "")
     write_table_atomic(out, snakemake.output[0])
 elif rule == "muscle_sobol":
     import time
