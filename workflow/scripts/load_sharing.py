@@ -60,7 +60,8 @@ elif snakemake.rule == "load_sharing_summary":
     LS.plot_curves(curves, ref, snakemake.output.curves_figure)
     if "calibrated" in curves:
         LS.plot_shares(curves["calibrated"], snakemake.output.shares_figure,
-                       title=f"Moment carried by each structure, calibrated {lvl} unit (dashed: the applied moment)")
+                       title=f"Moment carried by each structure, calibrated {lvl} unit (below 0: acting with the applied "
+                       "moment; upper stack minus lower stack = the applied moment, dashed)")
     else:
         first = next(iter(curves))
         LS.plot_shares(curves[first], snakemake.output.shares_figure)

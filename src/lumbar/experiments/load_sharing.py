@@ -367,7 +367,10 @@ def plot_curves(curves_by_set: dict, reference: pd.DataFrame | None, path, stage
 
 
 def plot_shares(curves: pd.DataFrame, path, stage="intact", title="") -> None:
-    """Stacked moment shares of the structures against the applied moment, one panel per direction."""
+    """Stacked moment shares of the structures against the applied moment, one panel per direction: the structures
+    that resist the applied moment stacked upward from 0, those that act with it (a pre-tensioned ligament on the
+    side that shortens, a facet pushed by the pre-stress) stacked downward, so that the upper stack minus the lower
+    one is the applied moment (the dashed line) at every step."""
     from ..inputs.io import save_figure_atomic, subplots  # noqa: PLC0415
     sh = moment_shares(curves[(curves["stage"] == stage) & (curves["moment_nm"] > 0)])
     fig, axes = subplots(2, 3, figsize=(12, 7), sharey=True)
@@ -375,15 +378,16 @@ def plot_shares(curves: pd.DataFrame, path, stage="intact", title="") -> None:
         g = sh[sh["direction"] == d]
         wide = g.pivot_table(index="moment_nm", columns="structure", values="moment_resisted_nm", sort=False)
         M = wide.index.to_numpy(float)
-        pos = wide.clip(lower=0.0)
-        bottom = np.zeros(len(M))
-        for lab in pos.columns:
-            v = pos[lab].to_numpy(float)
-            if np.nanmax(v, initial=0.0) < 0.02:
-                continue
-            ax.fill_between(M, bottom, bottom + v, color=STRUCTURE_COLOURS.get(lab, "0.6"), alpha=0.85,
-                            label=lab.replace("_", " "), lw=0)
-            bottom = bottom + v
+        for part in (wide.clip(lower=0.0), wide.clip(upper=0.0)):
+            base = np.zeros(len(M))
+            for lab in part.columns:
+                v = part[lab].to_numpy(float)
+                if np.nanmax(np.abs(v), initial=0.0) < 0.02:
+                    continue
+                ax.fill_between(M, base, base + v, color=STRUCTURE_COLOURS.get(lab, "0.6"), alpha=0.85,
+                                label=lab.replace("_", " "), lw=0)
+                base = base + v
+        ax.axhline(0.0, color="k", lw=0.6)
         ax.plot(M, M, "k--", lw=0.8)
         ax.set_title(d.replace("_", " "), fontsize=10)
         ax.set_xlabel("applied moment [N*m]")
@@ -396,7 +400,7 @@ def plot_shares(curves: pd.DataFrame, path, stage="intact", title="") -> None:
                 handles.append(h)
                 labels.append(lab)
     fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 10), fontsize=8)
-    fig.suptitle(title or f"Moment carried by each structure, {stage} unit (dashed: the applied moment; "
-                 "negative contributions not drawn)", fontsize=10)
+    fig.suptitle(title or f"Moment carried by each structure, {stage} unit (below 0: acting with the applied "
+                 "moment; upper stack minus lower stack = the applied moment, dashed)", fontsize=10)
     fig.tight_layout(rect=(0, 0.06, 1, 0.96))
     save_figure_atomic(fig, path, dpi=110)
