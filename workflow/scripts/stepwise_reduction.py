@@ -24,8 +24,10 @@ if snakemake.rule == "stepwise_reduction_sim":
     sim = sr_mod.simulate_stepwise_reduction(fsu, moments_nm=sr["moments_nm"], max_iter=s["max_iter"],
                                              tol=min(s["tol_force_n"], s["tol_moment_nm"]), load_steps=s["load_steps"])
     sim.insert(0, "set", set_name)
-    n_bad = int((~sim["converged"]).sum())
-    log.info("set %s (characteristics from %s): %d scenarios, %d not converged", set_name, data_dir, len(sim), n_bad)
+    bad = sim.loc[~sim["converged"]]
+    where = ", ".join(f"{st} ({n})" for st, n in bad.groupby("stage", sort=False).size().items())
+    log.info("set %s (characteristics from %s): %d scenarios, %d not converged%s", set_name, data_dir, len(sim),
+             len(bad), f" (by stage: {where})" if len(bad) else "")
     write_table_atomic(sim, snakemake.output[0])
 elif snakemake.rule == "table4":
     sr = snakemake.params.sr
