@@ -98,7 +98,8 @@ def test_rom_does_not_fall_along_the_reduction(rom):
     "negative below about 1 deg: the disc-only unit's 0 N*m state at zero rotation is an equilibrium with one "
     "unstable direction (largest eigenvalue of the symmetric stiffness +1.68 N*m/rad), the first flexion step of the "
     "disc-only stage includes the snap onto the stable branch, and where only a weak ALL is left (Shirazi-Adl 1986 "
-    "set, stage w/o PLL) the solver reaches no rest state (docs/validity.md, Known departures)"))
+    "set, stage w/o PLL) the reference is a saddle the solver leaves only by cutting the PLL gradually "
+    "(continue_rest_states; docs/validity.md, Known departures)"))
 def test_disc_alone_is_stable_at_its_neutral_position(geo, fitted):
     """A disc without ligaments and facets is stable about its neutral position: every in-vitro moment-rotation curve
     is most compliant near neutral and stiffens with load, none has a negative stiffness (Yamamoto et al. 1989). The

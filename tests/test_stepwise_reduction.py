@@ -176,3 +176,29 @@ def test_non_converged_scenario_flagged_with_residual_and_marked_in_table4(chars
     assert not bool(syn.loc[10.5, "converged"]) and bool(syn.loc[10.5, "outlier"])
     counts = sr.outlier_counts(syn.reset_index()).iloc[0]
     assert counts["n_not_converged"] == 1 and counts["n_outliers"] >= 1
+
+
+def test_rest_state_a_saddle_hides_is_reached_by_cutting_the_structure_gradually():
+    """Shirazi-Adl et al. (1986) set, stage w/o PLL: the disc's flexion law has a negative stiffness about zero
+    (docs/validity.md) and the ALL left beside it is weak, so the reference is a saddle from which the modified Newton
+    reaches no rest state. Removing the PLL gradually from the w/o VA rest state reaches a stable one (every
+    eigenvalue of the symmetric tangent stiffness of the residual negative), between the neighbouring stages' rest
+    rotations in flexion; the rows reached from the reference are not touched."""
+    from lumbar.experiments.fsu import build_fsu
+    from lumbar.geometry import load_geometry
+    from lumbar.mechanics import so3
+    from lumbar.mechanics.solve import continue_rest_states, solve
+    fsu = build_fsu(load_geometry("visible_human", levels=["L4-L5"]), load_characteristic_set("shirazi_adl1986"))
+    m = fsu.model
+    fm, cm = fsu.masks(["wo_va", "wo_pll"])
+    kw = dict(max_iter=50, tol_force=1e-9, tol_moment=1e-9)
+    r0 = solve(m, np.zeros((2, m.nb, 6)), fmask=fm, cmask=cm, **kw)
+    assert list(r0.converged) == [True, False]           # the case the continuation exists for
+    before = (r0.x[0].copy(), r0.R[0].copy())
+    r = continue_rest_states(m, r0, fm, cm, **kw)
+    assert r.converged.all() and r.residual_force[1] < 1e-8 and r.residual_moment[1] < 1e-8
+    assert np.array_equal(r.x[0], before[0]) and np.array_equal(r.R[0], before[1])
+    J = m.evaluate(r.x[1:], r.R[1:], fmask=fm[1:], cmask=cm[1:])[1][0].reshape(6 * m.nb, 6 * m.nb)
+    assert np.linalg.eigvalsh(0.5 * (J + J.T)).max() < 0.0
+    flex = np.degrees(so3.log(r.R[:, 0])[:, 1])
+    assert 0.0 < flex[0] < flex[1]          # cutting the PLL (posterior, in tension) lets the unit flex further

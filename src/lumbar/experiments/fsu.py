@@ -29,7 +29,7 @@ from ..mechanics.elements.facet import fit_surface
 from ..mechanics.elements.ligament import rupp_shape
 from ..geometry import load_geometry
 from ..mechanics.model import DiscSpec, SpineModel
-from ..mechanics.solve import solve
+from ..mechanics.solve import continue_rest_states, solve
 from ..inputs.tables import MAIN_DIRECTIONS, STAGES
 
 log = logging.getLogger(__name__)
@@ -256,6 +256,8 @@ def range_of_motion(fsu: FSU, moments_nm=(1, 2.5, 5, 7.5, 10), directions=MAIN_D
     zero = np.zeros((len(stages), m.nb, 6))
     r0 = solve(m, zero, fmask=fm_s, cmask=cm_s, load_steps=1, max_iter=max_iter,
                tol_force=tol, tol_moment=tol)
+    if not r0.converged.all():      # a rest state not reached from the reference: continued from the stage before
+        r0 = continue_rest_states(m, r0, fm_s, cm_s, max_iter=max_iter, tol_force=tol, tol_moment=tol)
     grid = [(s, d, M) for s in range(len(stages)) for d in directions for M in moments_nm]
     si = np.array([g[0] for g in grid], int)
     loads = moment_loads([g[1] for g in grid], [g[2] for g in grid], m.nb)

@@ -34,7 +34,7 @@ from .effects import SOLVER_EFFECTS, FsuVariants, check_effect, effect_params
 from .effects import register_effect as register_effect  # re-export: the documented extension hook
 from .fsu import DIRECTIONS, MAIN_DIRECTIONS, STAGES, moment_loads
 from ..inputs.io import TableError, read_table, save_figure_atomic, subplots
-from ..mechanics.solve import solve
+from ..mechanics.solve import continue_rest_states, solve
 from ..inputs.tables import STEPWISE_ROM, versus_paper
 
 log = logging.getLogger(__name__)
@@ -99,6 +99,9 @@ class StageSolver:
         m = self.fsu.model
         zero = np.zeros((len(self.stages), m.nb, 6))
         r0 = self._solve(zero, self.fm_s, self.cm_s, self._warm0)
+        if not r0.converged.all():      # a rest state not reached from the reference: continued from the stage before
+            r0 = continue_rest_states(m, r0, self.fm_s, self.cm_s, self.params, max_iter=self.kw["max_iter"],
+                                      tol_force=self.kw["tol_force"], tol_moment=self.kw["tol_moment"])
         si = self.si
         if self._warm is None:
             warm = (r0.x[si], r0.R[si])

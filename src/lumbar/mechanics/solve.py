@@ -245,6 +245,43 @@ def solve(model, loads, x0=None, R0=None, fmask=1.0, cmask=1.0, params=None, loa
     return SolveResult(x, R, conv, res_f, res_m, iters, frac)
 
 
+def continue_rest_states(model, res: SolveResult, fmask, cmask, params=None, steps=(8, 32), **kw) -> SolveResult:
+    """Rest states (0 N*m, no load) of B element sets, rows of ``fmask`` / ``cmask`` in removal order (the stages of
+    a reduction), after :func:`solve` from the reference: a row that did not converge there is continued from the
+    previous row's rest state, its removed elements' weights going from the previous row's to its own in ``steps``
+    equal increments (each count of ``steps`` in turn until one reaches the end) - the state a specimen settles in
+    when the structure is cut. Where a unit has more than one stable rest state (a disc law with negative stiffness
+    about zero, held by a weak ligament) the reference is a saddle the modified Newton cannot leave toward either, and
+    this is the state the sequence of cuts leads to. Rows reached from the reference, and rows whose previous row has
+    no rest state, are left as they are; ``res`` is updated in place and returned."""
+    B = len(res.converged)
+    fm, cm = np.broadcast_to(np.asarray(fmask, float), (B, model.nf)), np.broadcast_to(np.asarray(cmask, float),
+                                                                                        (B, model.nc))
+    zero = np.zeros((1, model.nb, 6))
+    for i in range(1, B):
+        if res.converged[i] or not res.converged[i - 1]:
+            continue
+        for n in steps:
+            x, R, it, ok = res.x[i - 1:i], res.R[i - 1:i], 0, True
+            for t in np.arange(1, n + 1) / n:
+                r = solve(model, zero, x0=x, R0=R, fmask=fm[i - 1:i] * (1.0 - t) + fm[i:i + 1] * t,
+                          cmask=cm[i - 1:i] * (1.0 - t) + cm[i:i + 1] * t, params=_take_params(params, [i], B),
+                          retry_load_steps=(), **kw)
+                x, R, it = r.x, r.R, it + int(r.iterations[0])
+                if not r.converged[0]:
+                    ok = False
+                    break
+            res.iterations[i] += it
+            if ok:
+                res.x[i], res.R[i], res.converged[i] = x[0], R[0], True
+                res.residual_force[i], res.residual_moment[i] = r.residual_force[0], r.residual_moment[0]
+                res.load_fraction[i] = 1.0
+                log.info("rest state %d of %d not reached from the reference: reached from rest state %d by removing "
+                         "the elements they differ by in %d steps", i, B, i - 1, n)
+                break
+    return res
+
+
 def solve_sequence(model, loads_path, x0=None, R0=None, fmask=1.0, cmask=1.0, params=None, **kw) -> list:
     """Equilibria along a load path (a continuation): ``loads_path`` (K, B, nb, 6), step k warm-started from the
     equilibrium of step k-1 (the first from ``x0, R0``, default the reference state).
