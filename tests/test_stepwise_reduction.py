@@ -202,3 +202,29 @@ def test_rest_state_a_saddle_hides_is_reached_by_cutting_the_structure_gradually
     assert np.linalg.eigvalsh(0.5 * (J + J.T)).max() < 0.0
     flex = np.degrees(so3.log(r.R[:, 0])[:, 1])
     assert 0.0 < flex[0] < flex[1]          # cutting the PLL (posterior, in tension) lets the unit flex further
+
+
+def test_rom_measured_from_a_saddle_is_flagged_in_the_table():
+    """The disc-only stage's 0 N*m state at zero rotation is a saddle (the disc's flexion law has negative stiffness
+    about zero, docs/validity.md): its rows say rest_state_stable = False; every stage a ligament still holds is
+    stable. stable_rest_states itself: a state pushed off the saddle onto the stable branch (by a flexion moment,
+    then unloaded at the branch's rest state found by continuation) is stable."""
+    from lumbar.experiments.fsu import build_fsu
+    from lumbar.geometry import load_geometry
+    from lumbar.mechanics.solve import stable_rest_states
+    fsu = build_fsu(load_geometry("visible_human", levels=["L4-L5"]), load_characteristic_set("calibrated"))
+    out = sr.simulate_stepwise_reduction(fsu, moments_nm=[1.0], directions=["flexion"])
+    stable = out.set_index("stage")["rest_state_stable"]
+    assert not stable["wo_all"] and stable.drop("wo_all").all()
+    m = fsu.model
+    fm, cm = fsu.masks(["wo_all"])
+    x, R = m.reference_state(1)
+    assert not stable_rest_states(m, x, R, fm, cm)[0]
+    from lumbar.experiments.fsu import moment_loads
+    from lumbar.mechanics.solve import solve
+    for M in (1.0, 0.5, 0.2, 0.1, 0.05, 0.02, 0.01, 0.0):     # down the stable flexion branch to its rest state
+        r = solve(m, moment_loads(["flexion"], [M], m.nb), x0=x, R0=R, fmask=fm, cmask=cm, tol_force=1e-9,
+                  tol_moment=1e-9)
+        assert r.converged[0], M
+        x, R = r.x, r.R
+    assert stable_rest_states(m, x, R, fm, cm)[0]

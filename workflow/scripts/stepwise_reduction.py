@@ -26,8 +26,10 @@ if snakemake.rule == "stepwise_reduction_sim":
     sim.insert(0, "set", set_name)
     bad = sim.loc[~sim["converged"]]
     where = ", ".join(f"{st} ({n})" for st, n in bad.groupby("stage", sort=False).size().items())
-    log.info("set %s (characteristics from %s): %d scenarios, %d not converged%s", set_name, data_dir, len(sim),
-             len(bad), f" (by stage: {where})" if len(bad) else "")
+    saddle = sorted(set(sim.loc[~sim["rest_state_stable"].astype(bool), "stage"]))
+    log.info("set %s (characteristics from %s): %d scenarios, %d not converged%s; ROM measured from an unstable "
+             "0 N*m state (rest_state_stable=False): %s", set_name, data_dir, len(sim), len(bad),
+             f" (by stage: {where})" if len(bad) else "", ", ".join(saddle) or "none")
     write_table_atomic(sim, snakemake.output[0])
 elif snakemake.rule == "table4":
     sr = snakemake.params.sr

@@ -34,7 +34,7 @@ from .effects import SOLVER_EFFECTS, FsuVariants, check_effect, effect_params
 from .effects import register_effect as register_effect  # re-export: the documented extension hook
 from .fsu import DIRECTIONS, MAIN_DIRECTIONS, STAGES, moment_loads
 from ..inputs.io import TableError, read_table, save_figure_atomic, subplots
-from ..mechanics.solve import continue_rest_states, solve
+from ..mechanics.solve import continue_rest_states, solve, stable_rest_states
 from ..inputs.tables import STEPWISE_ROM, versus_paper
 
 log = logging.getLogger(__name__)
@@ -102,6 +102,8 @@ class StageSolver:
         if not r0.converged.all():      # a rest state not reached from the reference: continued from the stage before
             r0 = continue_rest_states(m, r0, self.fm_s, self.cm_s, self.params, max_iter=self.kw["max_iter"],
                                       tol_force=self.kw["tol_force"], tol_moment=self.kw["tol_moment"])
+        #: per stage: its 0 N*m state, from which the ROM is measured, is stable (solve.stable_rest_states)
+        self.rest_stable = stable_rest_states(m, r0.x, r0.R, self.fm_s, self.cm_s, self.params)
         si = self.si
         if self._warm is None:
             warm = (r0.x[si], r0.R[si])
@@ -122,7 +124,9 @@ class StageSolver:
 def simulate_stepwise_reduction(fsu, stages=STAGES, directions=MAIN_DIRECTIONS, moments_nm=MOMENTS_NM,
                                 effects=None, max_iter=50, tol=1e-7, load_steps=1) -> pd.DataFrame:
     """ROM of every (stage, direction, moment) scenario: stage, direction, moment_nm, rom_deg, converged,
-    residual_force_n, residual_moment_nm (max residual of the loaded solve; the effects path may omit them).
+    residual_force_n, residual_moment_nm (max residual of the loaded solve) and rest_state_stable (the stage's 0 N*m
+    state, from which the ROM is measured, is stable: :func:`lumbar.mechanics.solve.stable_rest_states`); the effects
+    path omits the last three.
 
     ``effects`` {name: value} of the registry ``lumbar.experiments.effects.EFFECTS``: when every name is a solver effect
     (``lumbar.experiments.effects.SOLVER_EFFECTS``, the discrepancy candidates; values within their bounds) the scenarios
@@ -150,6 +154,8 @@ def simulate_stepwise_reduction(fsu, stages=STAGES, directions=MAIN_DIRECTIONS, 
     out["converged"] = conv
     out["residual_force_n"] = res.residual_force      # of the loaded solve (the 0 N*m state has its own)
     out["residual_moment_nm"] = res.residual_moment
+    # the stage's 0 N*m state is stable; False: a saddle, so the ROM from it includes a snap (docs/validity.md)
+    out["rest_state_stable"] = ss.rest_stable[ss.si]
     if not conv.all():
         log.info("stepwise reduction: %d of %d scenario(s) did not converge (rom_deg NaN, converged=False)",
                  int((~conv).sum()), len(conv))

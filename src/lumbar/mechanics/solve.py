@@ -245,6 +245,20 @@ def solve(model, loads, x0=None, R0=None, fmask=1.0, cmask=1.0, params=None, loa
     return SolveResult(x, R, conv, res_f, res_m, iters, frac)
 
 
+def stable_rest_states(model, x, R, fmask=1.0, cmask=1.0, params=None, rtol=1e-9) -> np.ndarray:
+    """(B,) bool: the unloaded states (x, R) are stable, i.e. the symmetric part of the tangent stiffness (-dQ/dx,
+    rotations scaled by LENGTH_SCALE as in the Newton step) has no negative eigenvalue below -``rtol`` x its
+    largest magnitude (a neutral direction, zero up to round-off, counts as stable). An equilibrium that is not
+    stable (a saddle: a law with negative stiffness about its rest state) is one a specimen would leave at the
+    slightest load, so a range of motion measured from it includes that snap."""
+    _, J = model.evaluate(x, R, fmask=fmask, cmask=cmask, params=params)
+    n = 6 * model.nb
+    S = _scaling(model.nb)
+    A = -J.reshape(-1, n, n) * S[:, None] * S[None, :]
+    w = np.linalg.eigvalsh(0.5 * (A + np.swapaxes(A, -1, -2)))
+    return w.min(axis=-1) >= -rtol * np.abs(w).max(axis=-1)
+
+
 def continue_rest_states(model, res: SolveResult, fmask, cmask, params=None, steps=(8, 32), **kw) -> SolveResult:
     """Rest states (0 N*m, no load) of B element sets, rows of ``fmask`` / ``cmask`` in removal order (the stages of
     a reduction), after :func:`solve` from the reference: a row that did not converge there is continued from the
