@@ -859,9 +859,10 @@ def test_fsu_cli_flags_states_outside_force_law_validity(capsys):
     rc = main(["--moment", "10", "20", "50", "--direction", "lateral_bending"])
     out, err = capsys.readouterr()
     assert rc == 1
-    assert "valid" in out.splitlines()[1]
+    head = out.splitlines()[1].split()
+    assert "valid" in head
     rows = [line.split() for line in out.splitlines()[2:]]
-    valid = [r[-1] for r in rows]
+    valid = [r[head.index("valid")] for r in rows]
     assert valid[0] == "True" and valid[-1] == "False", out      # 10 N*m: the experiments' range; 50: far beyond
     assert "N*m) lie OUTSIDE the validity of the force laws" in err and "50 N*m" in err
 

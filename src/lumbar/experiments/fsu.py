@@ -29,7 +29,7 @@ from ..mechanics.elements.facet import fit_surface
 from ..mechanics.elements.ligament import rupp_shape
 from ..geometry import load_geometry
 from ..mechanics.model import DiscSpec, SpineModel
-from ..mechanics.solve import continue_rest_states, solve
+from ..mechanics.solve import continue_rest_states, solve, stable_rest_states
 from ..inputs.tables import MAIN_DIRECTIONS, STAGES
 
 log = logging.getLogger(__name__)
@@ -246,6 +246,9 @@ def range_of_motion(fsu: FSU, moments_nm=(1, 2.5, 5, 7.5, 10), directions=MAIN_D
     ``valid`` is False where a converged state lies outside the validity of the force laws: the disc centre
     approaches the lower vertebra by more than the disc height (``disc_compression_mm``), or the upper vertebra
     rotates by more than :data:`MAX_VALID_ROTATION_DEG` from the stage's 0 N*m state (and where not converged).
+    ``rest_state_stable`` is False where that 0 N*m state is a saddle (:func:`lumbar.mechanics.solve.
+    stable_rest_states`: the disc-only stage, whose flexion law has negative stiffness about zero), so the ROM
+    includes the snap off it.
     """
     for d in directions:
         if d not in DIRECTIONS:
@@ -295,6 +298,7 @@ def range_of_motion(fsu: FSU, moments_nm=(1, 2.5, 5, 7.5, 10), directions=MAIN_D
         "iterations": res.iterations,
         "disc_compression_mm": compression * 1e3,
         "valid": valid,
+        "rest_state_stable": stable_rest_states(m, r0.x, r0.R, fm_s, cm_s)[si],
     })
     if not conv.all():
         log.warning("ROM: %d of %d scenarios did not converge; their rom_deg is NaN and converged=False",
@@ -351,7 +355,8 @@ def main(argv=None, prog: str = "python -m lumbar.experiments.fsu") -> int:
         print(f"error: {e}", file=sys.stderr)
         return 2
     cols = ["stage", "direction", "moment_nm", "rom_deg", "rot_x_deg", "rot_y_deg", "rot_z_deg",
-            "trans_x_mm", "trans_y_mm", "trans_z_mm", "disc_compression_mm", "converged", "valid"]
+            "trans_x_mm", "trans_y_mm", "trans_z_mm", "disc_compression_mm", "converged", "valid",
+            "rest_state_stable"]
     origin = (a.calibrated_dir if a.set == "calibrated" and (Path(a.calibrated_dir) / "disc.csv").is_file()
               else "data/characteristics (as published)")
     print(f"# geometry={geo.name} set={cs.name} ({origin}) level={a.level}")
@@ -365,6 +370,10 @@ def main(argv=None, prog: str = "python -m lumbar.experiments.fsu") -> int:
               f"N*m) lie OUTSIDE the validity of the force laws (valid=False: disc compressed beyond its height "
               f"{geo.levels[a.level].disc_height * 1e3:.1f} mm or rotation > {MAX_VALID_ROTATION_DEG:g} deg); "
               "their numbers are extrapolations, not predictions", file=sys.stderr)
+    saddle = sorted(set(df.loc[~df["rest_state_stable"], "stage"]))
+    if saddle:
+        print(f"# stage(s) {', '.join(saddle)}: the 0 N*m state the ROM is measured from is unstable "
+              "(rest_state_stable=False; docs/validity.md, Known departures)", file=sys.stderr)
     return 0 if ok and not invalid.any() else 1
 
 
