@@ -23,7 +23,7 @@ import pandas as pd
 
 from ..mechanics import so3
 from ..mechanics.model import SpineModel
-from ..mechanics.solve import solve_sequence
+from ..mechanics.solve import continue_rest_states, solve, solve_sequence
 from .fsu import DIRECTIONS, FSU, disc_frame, moment_loads
 
 log = logging.getLogger(__name__)
@@ -195,7 +195,18 @@ def moment_rotation_curves(fsu: FSU, moments_nm=None, directions=CURVE_DIRECTION
     si = np.array([stages.index(s) for s, _ in grid])
     fm, cm = fm_s[si], cm_s[si]
     path = np.stack([moment_loads([d for _, d in grid], [M] * len(grid), m.nb) for M in moments_nm])
-    steps = solve_sequence(m, path, fmask=fm, cmask=cm, max_iter=max_iter, tol_force=tol, tol_moment=tol)
+    # the stages' rest states first: one a saddle hides (solve.continue_rest_states) is continued from the stage
+    # before; a rest state reached from the reference is the start of its curves unchanged (its step 0 converges at
+    # once)
+    r0 = solve(m, np.zeros((len(stages), m.nb, 6)), fmask=fm_s, cmask=cm_s, max_iter=max_iter, tol_force=tol,
+               tol_moment=tol)
+    if not r0.converged.all():
+        r0 = continue_rest_states(m, r0, fm_s, cm_s, max_iter=max_iter, tol_force=tol, tol_moment=tol)
+    start = [(r0.x[i], r0.R[i]) if r0.converged[i] else m.reference_state(1) for i in range(len(stages))]
+    x0 = np.stack([np.reshape(start[i][0], (m.nb, 3)) for i in si])
+    R0 = np.stack([np.reshape(start[i][1], (m.nb, 3, 3)) for i in si])
+    steps = solve_sequence(m, path, x0=x0, R0=R0, fmask=fm, cmask=cm, max_iter=max_iter, tol_force=tol,
+                           tol_moment=tol)
     st = level_structures(m, fsu.level.name, dict(enumerate(fsu.surface_side)))
     R0 = steps[0].R[:, 0]
     rows = []
