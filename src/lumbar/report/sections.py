@@ -508,7 +508,8 @@ class ReportBuilder:
             "A warning in a rule's log is something to act on. Expected outcomes are results in their tables, each "
             "rule's log has one summary line for them: postures the muscles cannot hold (columns reached and "
             "converged of the muscle tables; red stars in the figures), scenarios without equilibrium (converged, "
-            "n.c. in the grids), calibration parameters that are not identifiable or end at a bound (columns "
+            "n.c. in the grids), ROM measured from an unstable rest state (rest_state_stable of the stepwise-reduction "
+            "tables: the disc-only stage, whose flexion law has negative stiffness about zero), calibration parameters that are not identifiable or end at a bound (columns "
             "identifiable and at_bound of calibration_summary.csv), comparisons outside their acceptance interval "
             "(Tables R1 and R2)."))
         if warn is None:
