@@ -209,6 +209,7 @@ REPORT_OPTIONAL = [
     "results/load_sharing/compression_summary.csv",
     "results/calibration/remus2021_comparison.csv",
     "results/tables/multilevel_admissibility.csv",
+    "results/tables/multilevel_transfer_readings.csv",
     "results/calibration/calibration_real_fit.csv",
     "results/muscle_model/in_vivo_metrics.json",
     "results/tables/muscle_model_segment_loads.csv",

@@ -43,6 +43,11 @@ rule multilevel_validation:
         ),
         admissibility="results/tables/multilevel_admissibility.csv",
         curves="results/load_sharing/multilevel_curves.csv",
+        readings=report(
+            "results/tables/multilevel_transfer_readings.csv",
+            caption="../report/multilevel_transfer_readings.rst",
+            category="Validation on real data",
+        ),
         figure=report(
             "results/figures/multilevel_rom.png",
             caption="../report/multilevel_rom_figure.rst",

@@ -32,12 +32,15 @@ if snakemake.rule == "multilevel_validation":
 
     from lumbar.experiments import admissibility as ADM  # noqa: E402
     from lumbar.experiments.calibration import elongation_prior  # noqa: E402
+    from lumbar.experiments import level_transfer as LT  # noqa: E402
     from lumbar.experiments.fsu import build_fsu  # noqa: E402
+    from lumbar.experiments.load_sharing import moment_rotation_curves  # noqa: E402
     from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
 
     g, f, ls = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.ls
     levels = [lv for lv in ls["other_levels"] if lv != f["level"]]
-    geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=levels)
+    geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None,
+                        levels=levels + [f["level"]])
     published = load_characteristic_set("calibrated", data_dir=snakemake.params.data_dir)
     cal = load_characteristic_set("calibrated",
                                   data_dir=Path(_common.as_list(snakemake.input.characteristics)[0]).parent)
@@ -67,10 +70,29 @@ if snakemake.rule == "multilevel_validation":
     write_table_atomic(adm, snakemake.output.admissibility)
     write_table_atomic(rom, snakemake.output.rom)
     V.plot_multilevel(rom, curves, snakemake.output.figure)
+    # the same levels (and the calibrated one) under the other readings of the transfer (lumbar.experiments.
+    # level_transfer): whether a miss comes from the transfer rule or from what the model does not have
+    yam = pd.read_csv(snakemake.input.yamamoto)
+    kw = dict(facet_stiffness=f.get("facet_stiffness_n_per_m"), k_shear=f.get("disc_shear_stiffness_n_per_m"))
+    by_reading = {}
+    for reading in LT.READINGS:
+        cvs = [curves[curves["stage"] == "intact"]] if reading == "as_calibrated" else []
+        for lv in ([f["level"]] if reading == "as_calibrated" else levels + [f["level"]]):
+            cv = moment_rotation_curves(LT.reading_unit(reading, geo, cal, lv, geo.levels[f["level"]], build_fsu,
+                                                        **kw), moments_nm=moments)
+            cv.insert(0, "level", lv)
+            cvs.append(cv)
+        by_reading[reading] = V.multilevel_rom(pd.concat(cvs, ignore_index=True), yam)
+    readings = LT.readings_table(by_reading, f["level"], ls["moment_step_nm"])
+    summary = LT.readings_summary(readings)
+    write_table_atomic(readings, snakemake.output.readings)
     jumps = adm[adm["criterion"].str.startswith("no snap-through") & ~adm["passed"]]
     log.info("other levels (calibrated set unchanged): %d of %d ROM values within %s; %d of %d admissibility "
-             "criteria pass; snap-through at %d (level, direction) pairs", int(rom["within"].sum()), len(rom),
-             rom["tolerance_rule"].iloc[0] if len(rom) else "-", int(adm["passed"].sum()), len(adm), len(jumps))
+             "criteria pass; snap-through at %d (level, direction) pairs; other readings of the transfer: %s",
+             int(rom["within"].sum()), len(rom), rom["tolerance_rule"].iloc[0] if len(rom) else "-",
+             int(adm["passed"].sum()), len(adm), len(jumps),
+             ", ".join(f"{r.reading} {r.other_within} of {r.other_n}" for r in summary.itertuples()
+                       if r.reading != "as_calibrated"))
     sys.exit(0)
 
 g, f, sr = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.sr
