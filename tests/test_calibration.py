@@ -138,6 +138,43 @@ def test_bad_disc_fit_too_few_points():
         cal.fit_disc_direction([0.01, 0.02], [1.0, 2.0])
 
 
+def test_disc_fit_keeps_the_stiffening_family():
+    """Disc-only rows with a neutral-zone laxity (1.5 deg more rotation from 2.5 N*m on): the free Eq. 3 fit
+    explains them with p1 < 0, a law stiffest at zero that yields under load; the fit keeps p1 >= 0. The paper's
+    flexion law (p1 > 0, p3 < 0) stays recoverable: the bound does not touch it."""
+    from scipy.optimize import least_squares
+
+    M = np.array([1.0, 2.5, 5.0, 7.5])
+    phi = np.radians([7.24, 10.28, 12.26, 15.2])
+    free = least_squares(lambda q: cal.eq3(phi, (q[0], 10.0 ** q[1], q[2])) - M, [-7.6, -2.76, 57.5],
+                         bounds=([-1e3, -9, -1e3], [1e3, 1, 1e3]))
+    assert free.x[0] < -1.0                              # what the bound is there for
+    p1, p2, p3 = cal.fit_disc_direction(phi, M)
+    assert p1 >= cal.P1_MIN_NM and p2 > 0
+    paper = (10.67, 0.005913, -1.685)
+    ang = np.radians([1.0, 3.0, 5.0, 7.0, 9.0])
+    np.testing.assert_allclose(cal.fit_disc_direction(ang, cal.eq3(ang, paper)), paper, rtol=1e-6)
+
+
+def test_admissible_fit_targets_prefer_the_measured_tables_own_intact_rows():
+    def rows(kind, stage="intact", moment=10.0, rom=5.0, source="table"):
+        return pd.DataFrame({"stage": [stage] * 2, "direction": ["flexion", "extension"], "moment_nm": moment,
+                             "rom_mean_deg": rom, "rom_min_deg": np.nan, "rom_max_deg": np.nan, "n_specimens": 8,
+                             "kind": kind, "source": source})
+    yam = rows("original_text", rom=7.0, source="Yamamoto")
+    measured = pd.concat([rows("measured", "wo_all", 5.0), rows("measured", moment=5.0), rows("measured")])
+    t, origin = cal.admissible_fit_targets(measured, yam)
+    assert "measured table" in origin and len(t) == 2 and (t["kind"] == "measured").all()
+    assert (t["moment_nm"] == 10.0).all() and (t["stage"] == "intact").all()
+    # a surrogate carries no information about real specimens: the real rows are the targets
+    t, origin = cal.admissible_fit_targets(rows("surrogate"), yam)
+    assert (t["source"] == "Yamamoto").all() and "real_targets" in origin
+    # a measured table without intact rows at 10 N*m falls back to the real rows; with neither: none
+    t, _ = cal.admissible_fit_targets(rows("measured", moment=7.5), yam)
+    assert (t["source"] == "Yamamoto").all()
+    assert cal.admissible_fit_targets(rows("measured", moment=7.5), None) == (None, "none")
+
+
 def test_reject_reference_without_disc_stage(geometry):
     derived = read_experiment_table(DERIVED)
     with pytest.raises(ValueError, match="wo_pll"):

@@ -210,6 +210,52 @@ def test_admissible_fit_ends_in_an_admissible_set_within_25_percent(geometry, pr
     assert table["passed"].all(), table[~table["passed"]]
 
 
+@pytest.mark.slow
+def test_calibration_on_a_measured_table_ends_admissible(geometry):
+    """A measured stepwise table (here: the test configuration's surrogate, distorted by what the model does not
+    have: a neutral-zone laxity growing with each removal and a stage-dependent softening, plus intact rows at
+    10 N*m) is calibrated as the workflow does it: the final fit is pinned to the table's own intact rows and the
+    admissibility criteria, so the set passes every criterion. Ending at the stepwise fits (the calibration's
+    behaviour without real targets) fails it."""
+    import io
+    import importlib.util
+    from conftest import ROOT
+    from lumbar.experiments.stepwise_reduction import reference_table
+    from lumbar.inputs.characteristics import load_characteristic_set
+
+    spec = importlib.util.spec_from_file_location("rm", ROOT / "tests" / "data" / "results_manifest.py")
+    rm = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(rm)
+    sur = pd.read_csv(io.BytesIO(rm.read_snapshot()["experiments/stepwise_reduction_surrogate.csv"]))
+    order = {st: i for i, st in enumerate(["intact", "wo_ssl", "wo_isl", "wo_fl", "wo_cl", "wo_va", "wo_pll",
+                                           "wo_all"])}
+    lax = sur["direction"].map({"flexion": 0.9, "extension": 0.7, "lateral_bending": 0.6, "axial_rotation": 0.3})
+    k = sur["stage"].map(order)
+    shift = lax * (1 + 0.1 * k) * np.minimum(1.0, sur["moment_nm"] / 2.5)
+    t = sur.assign(**{c: sur[c] * (1 + 0.04 * k) + shift for c in ("rom_mean_deg", "rom_min_deg", "rom_max_deg")})
+    intact10 = pd.DataFrame({"stage": "intact", "direction": ["flexion", "extension", "lateral_bending",
+                                                               "axial_rotation"], "moment_nm": 10.0,
+                             "rom_mean_deg": [8.2, 5.6, 6.3, 2.7], "rom_min_deg": np.nan, "rom_max_deg": np.nan,
+                             "n_specimens": 2})
+    t = pd.concat([t, intact10], ignore_index=True).assign(kind="measured", source="test: distorted surrogate")
+    ref = reference_table(t)
+    targets, origin = C.admissible_fit_targets(ref, None)
+    assert len(targets) == 4 and "measured table" in origin
+    published = load_characteristic_set("calibrated")
+    kw = dict(initial=published, data_kind="measured", family="scaled_published", transfer="elongation",
+              geometry_path=GEOMETRY_DIR, surrogate_weight=0.3)
+    res = C.calibrate(geometry, ref, real_targets=targets, **kw)
+    prior = C.elongation_prior(published)[0]
+    table, _, _ = ADM.evaluate(geometry, res.charset, prior, None, geometry_path=GEOMETRY_DIR,
+                               fit_parameters=res.info["real_fit"])
+    assert table["passed"].all(), table[~table["passed"]][["criterion", "direction", "value", "limit"]]
+    rt = res.info["real_fit_targets"]
+    assert (rt["rom_sim_deg"] / rt["rom_mean_deg"] - 1).abs().max() <= 0.25, rt
+    stepwise = C.calibrate(geometry, ref, real_targets=None, **kw)
+    table, _, _ = ADM.evaluate(geometry, stepwise.charset, prior, None, geometry_path=GEOMETRY_DIR)
+    assert not table["passed"].all()
+
+
 # ------------------------------------------------------------------ the workflow's outputs (session DAG, config/test)
 def test_dag_calibrated_set_is_admissible_and_other_levels_do_not_snap(dag_workdir):
     adm = pd.read_csv(dag_workdir / "results/calibration/admissibility.csv")

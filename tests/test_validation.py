@@ -104,3 +104,15 @@ def test_scoreboard_figure_grows_with_new_quantities(tmp_path):
     assert wa == wb and hb > ha * 1.5
     V.plot_scoreboard(_scoreboard_rows().iloc[0:0], tmp_path / "empty.png")       # no row: a figure that says so
     assert (tmp_path / "empty.png").stat().st_size > 0
+
+
+def test_fitted_mask_names_exactly_the_rows_the_calibration_was_pinned_to():
+    """A real-target file's rows are calibration targets only where the calibration's final fit used them (same
+    scenario, value and source); the same scenario from another source, or another value, is independent."""
+    real = pd.DataFrame({"stage": "intact", "direction": ["flexion", "extension", "flexion"], "moment_nm": 10.0,
+                         "rom_mean_deg": [8.9, 5.8, 8.9], "source": ["Yamamoto", "Yamamoto", "Heuer"]})
+    fitted = pd.DataFrame({"stage": ["intact"], "direction": ["flexion"], "moment_nm": [10], "rom_mean_deg": [8.9],
+                           "source": ["Yamamoto"]})
+    assert V.fitted_mask(real, fitted).tolist() == [True, False, False]
+    assert V.fitted_mask(real, fitted.iloc[:0]).tolist() == [False, False, False]
+    assert V.fitted_mask(real.iloc[:0], fitted).tolist() == []

@@ -27,6 +27,7 @@ rule calibrate:
         characteristics=CALIBRATION_CHARACTERISTICS,
         summary="results/calibration/calibration_summary.csv",
         real_fit="results/calibration/calibration_real_fit.csv",
+        targets="results/calibration/calibration_targets.csv",
         prior="results/calibration/calibration_prior.csv",
         penalties="results/calibration/calibration_penalties.csv",
         rom_fit="results/calibration/calibration_rom_fit.csv",

@@ -211,6 +211,7 @@ REPORT_OPTIONAL = [
     "results/tables/multilevel_admissibility.csv",
     "results/tables/multilevel_transfer_readings.csv",
     "results/calibration/calibration_real_fit.csv",
+    "results/calibration/calibration_targets.csv",
     "results/muscle_model/in_vivo_metrics.json",
     "results/tables/muscle_model_segment_loads.csv",
     "results/tables/in_vivo_validation.csv",

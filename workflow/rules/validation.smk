@@ -3,6 +3,8 @@ rule validation_real_data:
         geometry_inputs,
         synopsis="results/tables/table4_rom_synopsis.csv",
         real_targets=config["stepwise_reduction"]["real_targets"],
+        # the rows the calibration's final fit was pinned to: those are calibration targets, the rest independent
+        fitted="results/calibration/calibration_targets.csv",
         calibrated=CALIBRATION_CHARACTERISTICS,
         va_artefact=config["discovery"]["va_artefact"],
         anatomy="data/anatomy/l4l5_magnitudes_original_text.csv",

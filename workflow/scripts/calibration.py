@@ -40,11 +40,18 @@ if snakemake.rule == "calibrate":
     geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
     paper = load_characteristic_set("calibrated", data_dir=snakemake.input.characteristics)
     anchor = cal.read_fit_start(_common.first(snakemake.input.generator_fit))
+    targets, origin = cal.admissible_fit_targets(ref, real)
+    if targets is None:
+        log.warning("no intact ROM rows at 10 N*m in %s nor in stepwise_reduction.real_targets: the calibration ends "
+                    "at the stepwise fits, WITHOUT the admissibility constraints (results/calibration/"
+                    "admissibility.csv says which criteria the set fails)", snakemake.input.experiment)
+    else:
+        log.info("final fit (admissibility-constrained) pinned to %s (%d rows)", origin, len(targets))
     res = cal.calibrate(geo, ref, initial=paper, level=f["level"], k_shear=f.get("disc_shear_stiffness_n_per_m"),
                         tolerance_deg=sr["outlier_tolerance_deg"], data_kind=data_kind, max_iter=s["max_iter"],
                         surrogate_weight=sr["surrogate_weight"], family=sr["calibration_family"],
                         final_surrogate_weight=sr["final_surrogate_weight"],
-                        real_targets=real if data_kind == "surrogate" else None,
+                        real_targets=targets,
                         transfer=sr["ligament_transfer"],
                         geometry_path=g["path"] if g["kind"] == "visible_human" else None,
                         anchor_start_values=anchor)
@@ -54,6 +61,8 @@ if snakemake.rule == "calibrate":
                               reference_source=f"{snakemake.input.experiment} ({data_kind})")
     load_characteristic_set("calibrated", data_dir=out_dir)   # round trip through the validated loader
     res.summary.assign(data_kind=data_kind).pipe(write_table_atomic, snakemake.output.summary)
+    (targets if targets is not None else pd.DataFrame(columns=list(cal.TARGET_COLUMNS)))[
+        list(cal.TARGET_COLUMNS)].pipe(write_table_atomic, snakemake.output.targets)
     rf = res.info.get("real_fit")
     (rf if rf is not None else pd.DataFrame(columns=["parameter", "start", "value", "unit", "identifiable",
                                                      "at_bound"])).pipe(write_table_atomic, snakemake.output.real_fit)

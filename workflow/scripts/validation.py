@@ -12,6 +12,7 @@ import _common  # noqa: E402
 
 snakemake, log = _common.start(globals())
 
+import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from lumbar.experiments import validation as V  # noqa: E402
@@ -28,8 +29,6 @@ from lumbar.geometry import load_geometry  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 
 if snakemake.rule == "multilevel_validation":
-    import numpy as np  # noqa: E402
-
     from lumbar.experiments import admissibility as ADM  # noqa: E402
     from lumbar.experiments.calibration import elongation_prior  # noqa: E402
     from lumbar.experiments import level_transfer as LT  # noqa: E402
@@ -103,12 +102,20 @@ from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
 from lumbar.experiments.stepwise_reduction import read_experiment_table  # noqa: E402
 
 rows = V.rom_rows(pd.read_csv(snakemake.input.synopsis), sr["outlier_tolerance_deg"])
-for p in _common.as_list(snakemake.input.real_targets):
-    real = read_experiment_table(p)
-    rows += V.measured_rom_rows(geo, cs, real, "calibrated", f["level"], role=V.TARGET)
+fitted = pd.read_csv(snakemake.input.fitted)
+real_files = [read_experiment_table(p) for p in _common.as_list(snakemake.input.real_targets)]
+for real in real_files:
+    # rows the final fit was pinned to are calibration targets; the others (e.g. Yamamoto et al. 1989 when a
+    # measured stepwise table brings its own intact rows) are independent checks
+    is_fit = V.fitted_mask(real, fitted)
+    rows += V.measured_rom_rows(geo, cs, real[is_fit], "calibrated", f["level"], role=V.TARGET)
+    rows += V.measured_rom_rows(geo, cs, real[~is_fit], "calibrated", f["level"], role=V.INDEPENDENT)
     # the paper's published set on this geometry, as printed (no re-calibration): how far it is from real data
     rows += V.measured_rom_rows(geo, load_characteristic_set("calibrated"), real, "paper_table3_as_published",
                                 f["level"], role=V.INDEPENDENT)
+# fitted rows of no real_targets file: the measured stepwise table's own intact rows
+own = fitted[~np.any([V.fitted_mask(fitted, r) for r in real_files], axis=0)] if real_files else fitted
+rows += V.measured_rom_rows(geo, cs, own, "calibrated", f["level"], role=V.TARGET)
 rows += V.va_artefact_rows(geo, cs, pd.read_csv(snakemake.input.va_artefact), level=f["level"])
 rows += V.in_vivo_rows(pd.read_csv(snakemake.input.in_vivo))
 rows += V.anatomy_rows(geo, pd.read_csv(snakemake.input.anatomy), level=f["level"])

@@ -93,8 +93,16 @@ def eq3(phi_rad, p):
 
 
 # ------------------------------------------------------------------ disc
+#: smallest p1 [N*m] of Eq. 3 a disc fit may take: the tanh term is the law's stiffening term (the paper's Table 1
+#: has p1 > 0 in every direction); a negative p1 makes a law that is stiffest at zero and softens with the load, the
+#: opposite of a disc (measured: a table with a neutral-zone laxity drove the free fit of flexion to p1 = -7.6 N*m,
+#: p3 = +58 N*m/rad). At the bound (flagged ``at_bound``) the rows show no stiffening and the law is linear.
+P1_MIN_NM = 0.0
+
+
 def fit_disc_direction(phi_rad, torque_nm):
-    """Eq. 3 parameters (p1 [N*m], p2 [rad^3], p3 [N*m/rad]) with T(phi) = torque, least squares (trf)."""
+    """Eq. 3 parameters (p1 [N*m], p2 [rad^3], p3 [N*m/rad]) with T(phi) = torque, least squares (trf) with
+    p1 >= :data:`P1_MIN_NM` (p3 is free: the paper's flexion law has p3 < 0)."""
     phi = np.asarray(phi_rad, float)
     M = np.asarray(torque_nm, float)
     ok = np.isfinite(phi) & np.isfinite(M)
@@ -106,6 +114,9 @@ def fit_disc_direction(phi_rad, torque_nm):
         p2 = 10.0 ** lp2
         A = np.column_stack([np.tanh(phi**3 / p2), phi])
         (p1, p3), *_ = np.linalg.lstsq(A, M, rcond=None)
+        if p1 < P1_MIN_NM:                      # the linear law alone, p1 at its bound
+            p1 = P1_MIN_NM
+            p3 = float(np.linalg.lstsq(A[:, 1:], M - p1 * A[:, 0], rcond=None)[0][0])
         r = float(np.sum((A @ [p1, p3] - M) ** 2))
         if best is None or r < best[0]:
             best = (r, (p1, p2, p3))
@@ -115,7 +126,7 @@ def fit_disc_direction(phi_rad, torque_nm):
         return eq3(phi, (q[0], 10.0 ** q[1], q[2])) - M
 
     sol = least_squares(res, [p0[0], math.log10(p0[1]), p0[2]], method="trf",
-                        bounds=([-1e3, -9, -1e3], [1e3, 1, 1e3]), x_scale=[1.0, 0.1, 1.0],
+                        bounds=([P1_MIN_NM, -9, -1e3], [1e3, 1, 1e3]), x_scale=[1.0, 0.1, 1.0],
                         xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=2000)
     return float(sol.x[0]), float(10.0 ** sol.x[1]), float(sol.x[2])
 
@@ -264,10 +275,14 @@ def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_
             disc_pts.append({"direction": d, "moment_nm": m, "rom_deg": math.degrees(ph),
                              "torque_fit_nm": float(eq3(ph, p))})
         resid = eq3(phi, p) - M
+        p1_bound = p[0] <= P1_MIN_NM + 1e-9
+        if p1_bound:
+            log.info("calibration step 1 (disc %s): p1 at its bound %g N*m: the rows show no stiffening, the law is "
+                     "linear (p3 = %.4g N*m/rad)", d, P1_MIN_NM, p[2])
         steps.append({"step": 1, "structure": f"disc:{d}", "stage": DISC_STAGE, "n_scenarios": len(r),
                       "parameters": "p1,p2,p3", "rms_residual": float(np.sqrt(np.mean(resid**2))),
                       "residual_unit": "N*m", "n_not_converged": 0, "n_evaluations": 1,
-                      "identifiable": True, "at_bound": False, "at_bound_parameters": ""})
+                      "identifiable": True, "at_bound": bool(p1_bound), "at_bound_parameters": "p1" if p1_bound else ""})
     disc = _replace(base.disc, torque=torque)
     # ---- model with every calibrated ligament (start values); unfitted ones are masked by the stages
     start = dict(start or {})
@@ -1164,6 +1179,37 @@ def _rom_of(mt, directions):
         else:
             out.append(mt["rot"][(d, 10.0)])
     return np.array(out)
+
+
+#: columns of the table of the rows the final, admissibility-constrained fit is pinned to
+TARGET_COLUMNS = ("stage", "direction", "moment_nm", "rom_mean_deg", "rom_min_deg", "rom_max_deg", "n_specimens", "kind",
+                  "source")
+
+
+def admissible_fit_targets(reference: pd.DataFrame, real_targets: pd.DataFrame | None = None,
+                           moment_nm: float = 10.0) -> tuple[pd.DataFrame | None, str]:
+    """The intact-unit ROM rows at ``moment_nm`` that the final fit (real rows plus the admissibility criteria,
+    :func:`fit_admissible`) is pinned to, and where they come from.
+
+    A measured reference table (no ``surrogate`` row) that has intact rows at ``moment_nm``: those rows, the same
+    specimens as every other stage of the table (``real_targets``, e.g. Yamamoto et al. 1989, then stay an
+    independent check). Otherwise ``real_targets``: a surrogate is made by this model and carries no information
+    about real specimens. None when neither has such rows (the calibration then ends at the stepwise fits, without
+    the admissibility constraints; the caller says so)."""
+    def intact(t):
+        if t is None or not len(t):
+            return None
+        sel = t[(t["stage"] == "intact") & np.isclose(t["moment_nm"].astype(float), moment_nm)]
+        return sel.reset_index(drop=True) if len(sel) else None
+
+    measured = "kind" in reference.columns and not (reference["kind"] == "surrogate").any()
+    own = intact(reference) if measured else None
+    if own is not None:
+        return own, f"the measured table's intact rows at {moment_nm:g} N*m"
+    real = intact(real_targets)
+    if real is not None:
+        return real, f"the real intact rows at {moment_nm:g} N*m of stepwise_reduction.real_targets"
+    return None, "none"
 
 
 def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", published=None, geometry_path=None,

@@ -61,6 +61,16 @@ def rom_rows(synopsis: pd.DataFrame, tolerance_deg: float = 0.5, kinds=("derived
     return rows
 
 
+def fitted_mask(table: pd.DataFrame, fitted: pd.DataFrame) -> np.ndarray:
+    """Boolean mask of the rows of ``table`` that are in ``fitted`` (the calibration's targets,
+    ``results/calibration/calibration_targets.csv``): same stage, direction, moment, measured value and source."""
+    def keys(t):
+        return list(zip(t["stage"], t["direction"], np.round(t["moment_nm"].astype(float), 9),
+                        np.round(t["rom_mean_deg"].astype(float), 9), t["source"].astype(str)))
+    have = set(keys(fitted)) if len(fitted) else set()
+    return np.array([k in have for k in keys(table)], dtype=bool) if len(table) else np.zeros(0, dtype=bool)
+
+
 def measured_rom_rows(geometry, charset, table: pd.DataFrame, set_name="calibrated", level="L4-L5",
                       role=TARGET, tol=1e-7) -> list[dict]:
     """ROM of ``charset`` at the scenarios of a measured table (e.g. Yamamoto et al. 1989, intact, 10 N*m),

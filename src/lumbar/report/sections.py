@@ -661,9 +661,15 @@ class ReportBuilder:
         self.csv_table("results/calibration/calibration_summary.csv",
                        "Calibration steps and RMS residuals (identifiable: the stage's ROM responds to the structure; "
                        "at_bound: a fitted parameter ends within 1 % of its bound)", s)
+        targets = "results/calibration/calibration_targets.csv"
+        origin = ""
+        if self.has(targets):
+            t = _read_csv(self.path(targets))
+            origin = "; ".join(dict.fromkeys(str(v).split(",")[0] for v in t["source"])) if len(t) else ""
         self.csv_table("results/calibration/calibration_real_fit.csv",
-                       "Final fit on the real targets (intact ROM at 10 N*m, Yamamoto et al. 1989): force scales, "
-                       "facet stiffness, disc shear stiffness within its sourced range", False)
+                       f"Final fit on the real targets (intact ROM at 10 N*m{', ' + origin if origin else ''}) and "
+                       "the admissibility criteria: force scales, facet stiffness, disc shear stiffness within its "
+                       "sourced range", False)
 
     def forward_section(self):
         s = self.sr_surrogate
