@@ -189,6 +189,23 @@ def test_report_surrogate_results_are_labelled(fake_results):
     assert all("surrogate" in c.lower() for c in titles if c.startswith("Table 1."))
 
 
+def test_report_measured_stepwise_table_is_not_called_surrogate(fake_results):
+    """With a measured stepwise table, Table 4 compares with it: the report says so (its outlier-count table's
+    header still names the word 'surrogate': the data-kind column decides), and Table 5 keeps its SURROGATE label."""
+    tmp, config, inputs = fake_results
+    t = Path("results/tables")
+    (t / "table4_outlier_counts.csv").write_text(
+        "set,n_scenarios,n_outliers,n_not_converged,data_kinds,n_scenarios_real,n_outliers_real,surrogate_comparison\n"
+        "calibrated,160,17,0,measured,160,17,none: every reference row is measured or published\n")
+    syn = t / "table4_rom_synopsis.csv"
+    syn.write_text(syn.read_text().replace(",surrogate,", ",measured,"))
+    cfg = {**config, "stepwise_reduction": {**config["stepwise_reduction"], "measured_table": "heuer2007.csv"}}
+    text = parse_report(_build(tmp, cfg, inputs)[0]).text
+    assert "outliers against the measured reference table: calibrated (this model) 17 of 160" in text
+    assert "The outlier counts of Table 5 compare with SURROGATE data" in text
+    assert "Table 4 and Table 5 compare with SURROGATE" not in text
+
+
 def test_report_muscle_and_discrepancy_sections(fake_muscle_discrepancy):
     html_path, pdf_path, _ = _build(*fake_muscle_discrepancy)
     refs = check_references(html_path)

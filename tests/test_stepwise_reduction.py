@@ -228,3 +228,14 @@ def test_rom_measured_from_a_saddle_is_flagged_in_the_table():
         assert r.converged[0], M
         x, R = r.x, r.R
     assert stable_rest_states(m, x, R, fm, cm)[0]
+
+
+def test_unreferenced_scenarios_names_what_a_measured_table_lacks():
+    from lumbar.experiments.stepwise_reduction import unreferenced_scenarios
+
+    sim = pd.DataFrame({"stage": ["intact", "intact", "wo_all", "wo_all"],
+                        "direction": ["flexion", "flexion", "flexion", "flexion"],
+                        "moment_nm": [5.0, 5.0, 10.0, 7.5]})                     # a specimen repeats a scenario
+    ref = pd.DataFrame({"stage": ["intact", "wo_all"], "direction": ["flexion", "flexion"], "moment_nm": [5, 7.5]})
+    assert unreferenced_scenarios(sim, ref) == ["wo_all flexion 10 N*m"]
+    assert unreferenced_scenarios(sim.iloc[:2], ref) == []

@@ -22,6 +22,8 @@ def test_table4_counts_split_real_from_surrogate_rows():
     assert (c["n_scenarios"], c["n_outliers"]) == (5, 3)
     assert (c["n_scenarios_real"], c["n_outliers_real"]) == (3, 2)
     assert "method check" in c["surrogate_comparison"]
+    measured = outlier_counts(_synopsis().assign(data_kind="measured")).set_index("set").loc["calibrated"]
+    assert "method check" not in measured["surrogate_comparison"]
 
 
 def test_table5_counts_split_real_from_surrogate_rows():

@@ -38,10 +38,14 @@ elif snakemake.rule == "table4":
         if _common.first(snakemake.input.derived) else None
     real = [sr_mod.read_experiment_table(p) for p in _common.as_list(snakemake.input.real_targets)]
     ref = sr_mod.reference_table(exp, derived, pd.concat(real, ignore_index=True) if real else None)
-    parts = []
+    parts, missing = [], set()
     for p in snakemake.input.sims:
         sim = pd.read_csv(p)
         parts.append(sr_mod.assess(sim, ref, str(sim["set"].iloc[0]), sr["outlier_tolerance_deg"]))
+        missing.update(sr_mod.unreferenced_scenarios(sim, ref))
+    if missing and not (ref["kind"] == "surrogate").any():
+        log.warning("the measured table %s has no row for %d simulated scenario(s), not assessed in any set: %s",
+                    snakemake.input.experiment, len(missing), "; ".join(sorted(missing)))
     syn = pd.concat(parts, ignore_index=True)
     counts = sr_mod.outlier_counts(syn)
     vs = sr_mod.compare_with_paper(counts, snakemake.params.published)

@@ -495,7 +495,9 @@ def outlier_counts(syn: pd.DataFrame, published: pd.DataFrame | None = None) -> 
     real = syn["data_kind"].astype(str) != "surrogate"
     out["n_scenarios_real"] = real.groupby(syn["set"], sort=False).sum().astype(int).to_numpy()
     out["n_outliers_real"] = (syn["outlier"].astype(bool) & real).groupby(syn["set"], sort=False).sum().astype(int).to_numpy()
-    out["surrogate_comparison"] = "method check (round trip on virtual specimens)"
+    out["surrogate_comparison"] = np.where(out["data_kind"].astype(str).str.contains("surrogate"),
+                                           "method check (round trip on virtual specimens)",
+                                           "none: every reference row is measured or published")
     return out
 
 

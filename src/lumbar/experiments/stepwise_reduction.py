@@ -207,6 +207,14 @@ def reference_table(experiment: pd.DataFrame, derived: pd.DataFrame | None = Non
     return exp.sort_values(["_s", "_d", "moment_nm"]).drop(columns=["_s", "_d"]).reset_index(drop=True)
 
 
+def unreferenced_scenarios(sim: pd.DataFrame, ref: pd.DataFrame) -> list[str]:
+    """The simulated scenarios (stage, direction, moment) that ``ref`` has no row for, as "stage direction M N*m"."""
+    keys = ["stage", "direction", "moment_nm"]
+    have = set(map(tuple, ref[keys].astype({"moment_nm": float}).to_numpy().tolist()))
+    return [f"{a} {b} {float(c):g} N*m" for a, b, c in sim[keys].drop_duplicates().to_numpy().tolist()
+            if (a, b, float(c)) not in have]
+
+
 def assess(sim: pd.DataFrame, ref: pd.DataFrame, set_name: str, tolerance_deg: float = 0.5) -> pd.DataFrame:
     """Table 4 rows for one set: simulated ROM beside the reference, outlier flag, data kind.
 
@@ -226,11 +234,10 @@ def assess(sim: pd.DataFrame, ref: pd.DataFrame, set_name: str, tolerance_deg: f
             "stepwise_reduction.measured_table)")
     if len(df) < len(sim):
         # a surrogate leaves out the rows its virtual specimens cannot reach (a model limit, logged where the
-        # surrogate is made): expected; a measured table without a simulated scenario is for the user to check
-        surrogate = "kind" in ref.columns and (ref["kind"] == "surrogate").any()
-        log.log(logging.INFO if surrogate else logging.WARNING,
-                "set %s: %d simulated scenario(s) have no reference row and are not assessed", set_name,
-                len(sim) - len(df))
+        # surrogate is made); a measured table's missing scenarios are named once by the caller
+        # (:func:`unreferenced_scenarios`)
+        log.info("set %s: %d simulated scenario(s) have no reference row and are not assessed", set_name,
+                 len(sim) - len(df))
     no_range = df["rom_min_deg"].isna()
     # rows without a range: the derived (published-fit) and surrogate rows use mean +- tolerance_deg; a
     # published population value without a range (e.g. Yamamoto et al. 1989) uses mean +- 25 %, the rule of
@@ -265,7 +272,9 @@ def outlier_counts(synopsis: pd.DataFrame) -> pd.DataFrame:
                         "data_kinds": g["data_kind"].apply(lambda k: "+".join(sorted(set(k))))})
     out["n_scenarios_real"] = real.groupby(synopsis["set"], sort=False).sum().astype(int)
     out["n_outliers_real"] = (synopsis["outlier"].astype(bool) & real).groupby(synopsis["set"], sort=False).sum().astype(int)
-    out["surrogate_comparison"] = "method check (round trip on virtual specimens)"
+    out["surrogate_comparison"] = np.where(out["data_kinds"].astype(str).str.contains("surrogate"),
+                                           "method check (round trip on virtual specimens)",
+                                           "none: every reference row is measured or published")
     return out.reset_index()
 
 

@@ -207,7 +207,17 @@ class ReportBuilder:
         return self.inputs[_norm(rel)]
 
     def _file_surrogate(self, rel) -> bool:
-        return self.has(rel) and _mentions_surrogate(self.path(rel))
+        """Whether a result file compares with SURROGATE data: a table by its data-kind column (its header may name
+        the word, e.g. the outlier counts' ``surrogate_comparison``), any other file by its text."""
+        if not self.has(rel):
+            return False
+        path = self.path(rel)
+        if path.suffix == ".csv":
+            df = _read_csv(path)
+            for col in ("data_kinds", "data_kind", "kind"):
+                if col in df.columns:
+                    return bool(df[col].astype(str).str.contains("surrogate", case=False).any())
+        return _mentions_surrogate(path)
 
     def _published(self, published):
         if not published or not Path(published).is_file():
