@@ -43,9 +43,18 @@ def test_within_rule(sim, measured, lo, hi, within):
     assert V._within(sim, measured, lo, hi)[0] is within
 
 
-def test_rom_rows_take_only_published_fit_rows_as_calibration_targets():
-    rows = V.rom_rows(_synopsis())
-    assert len(rows) == 1 and rows[0]["role"] == V.TARGET and rows[0]["kind"] == "derived_from_published_fit"
+def test_rom_rows_take_the_disc_fits_real_rows_as_calibration_targets():
+    """The disc-only rows with a real reference (derived from the published fit, or a measured table's) are what the
+    disc law is fitted to: targets. Surrogate rows and the other stages' rows give none (the intact rows the
+    final fit used come from measured_rom_rows)."""
+    syn = pd.concat([_synopsis(), _synopsis().assign(stage="wo_all")], ignore_index=True)
+    syn.loc[len(syn)] = {**syn.iloc[-1].to_dict(), "data_kind": "measured", "rom_min_deg": 0.5, "rom_max_deg": 0.9}
+    rows = V.rom_rows(syn)
+    assert [r["kind"] for r in rows] == ["derived_from_published_fit", "original_text", "original_text", "measured"]
+    assert all(r["role"] == V.TARGET and r["condition"].startswith("wo_all") for r in rows)
+    assert rows[-1]["within"] is False and rows[-1]["tolerance_rule"] == "measured range"    # 1.0 outside 0.5-0.9
+    # a literature set's disc is the paper's, not fitted to a measured table: its rows are Table 4's, not targets
+    assert len(V.rom_rows(syn.assign(set="rupp2015"))) == 1                 # the derived row only
 
 
 def test_in_vivo_rows_flag_unconverged_postures():
@@ -118,3 +127,17 @@ def test_fitted_mask_names_exactly_the_rows_the_calibration_was_pinned_to():
     assert V.fitted_mask(real, fitted).tolist() == [True, False, False]
     assert V.fitted_mask(real, fitted.iloc[:0]).tolist() == [False, False, False]
     assert V.fitted_mask(real.iloc[:0], fitted).tolist() == []
+
+
+def test_measured_in_vitro_idp_rows_are_independent_and_judged_by_table5s_rule():
+    syn = pd.DataFrame({"set": ["calibrated", "calibrated", "rupp2015"], "muscle_setup": ["none", "all", "none"],
+                        "load_case": ["neutral", "flexion", "neutral"], "idp_sim_mpa": [0.30, 0.55, 0.2],
+                        "idp_mean_mpa": [0.25, 0.40, 0.25], "idp_sd_mpa": [0.06, 0.10, 0.06], "outlier": False,
+                        "converged": [True, True, True], "data_kind": "measured"})
+    table = pd.DataFrame({"muscle_setup": ["none", "all"], "load_case": ["neutral", "flexion"],
+                          "source": ["Wilke 1996, Table 2", "Wilke 1996, Table 2"]})
+    rows = V.idp_in_vitro_rows(syn, table)
+    assert [r["within"] for r in rows] == [True, False]            # 0.30 in 0.25 +- 0.06; 0.55 outside 0.40 +- 0.10
+    assert all(r["role"] == V.INDEPENDENT and r["set"] == "calibrated" for r in rows)
+    assert rows[0]["source"] == "Wilke 1996, Table 2" and rows[0]["measured_low"] == pytest.approx(0.19)
+    assert V.idp_in_vitro_rows(syn.assign(data_kind="surrogate"), table) == []   # a method check, not validation

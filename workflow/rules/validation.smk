@@ -2,6 +2,7 @@ rule validation_real_data:
     input:
         geometry_inputs,
         synopsis="results/tables/table4_rom_synopsis.csv",
+        idp_synopsis="results/tables/table5_idp_synopsis.csv",
         real_targets=config["stepwise_reduction"]["real_targets"],
         # the rows the calibration's final fit was pinned to: those are calibration targets, the rest independent
         fitted="results/calibration/calibration_targets.csv",
@@ -24,6 +25,7 @@ rule validation_real_data:
         geometry=config["geometry"],
         fsu=config["fsu"],
         sr=config["stepwise_reduction"],
+        idp_table=config["l2s1"]["measured_table"],
     script:
         "../scripts/validation.py"
 

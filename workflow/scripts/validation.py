@@ -118,6 +118,9 @@ own = fitted[~np.any([V.fitted_mask(fitted, r) for r in real_files], axis=0)] if
 rows += V.measured_rom_rows(geo, cs, own, "calibrated", f["level"], role=V.TARGET)
 rows += V.va_artefact_rows(geo, cs, pd.read_csv(snakemake.input.va_artefact), level=f["level"])
 rows += V.in_vivo_rows(pd.read_csv(snakemake.input.in_vivo))
+# a measured in-vitro IDP table (l2s1.measured_table): independent, no fit uses it
+idp_table = snakemake.params.idp_table
+rows += V.idp_in_vitro_rows(pd.read_csv(snakemake.input.idp_synopsis), pd.read_csv(idp_table) if idp_table else None)
 rows += V.anatomy_rows(geo, pd.read_csv(snakemake.input.anatomy), level=f["level"])
 rows += V.multilevel_rows(pd.read_csv(snakemake.input.multilevel))
 df = V.scoreboard(rows)

@@ -40,19 +40,26 @@ def _within(sim, measured, lo, hi, rel=REL_TOLERANCE, abs_tol=None):
     return bool(abs(sim - measured) <= rel * abs(measured)), f"measured +- {rel * 100:g} % (no range published)"
 
 
-def rom_rows(synopsis: pd.DataFrame, tolerance_deg: float = 0.5, kinds=("derived_from_published_fit",)) -> list[dict]:
-    """ROM rows of a Table 4 synopsis whose reference is real and of one of ``kinds`` (the derived
-    disc-only rows by default; the measured intact rows come from :func:`measured_rom_rows`)."""
+def rom_rows(synopsis: pd.DataFrame, tolerance_deg: float = 0.5,
+             kinds=("derived_from_published_fit", "measured", "original_text", "original_figure", "third_party"),
+             stage="wo_all", fitted_set="calibrated") -> list[dict]:
+    """ROM rows of a Table 4 synopsis at the disc-only ``stage`` whose reference is real and of one of ``kinds``:
+    the rows the disc law (Eq. 3) is fitted to, calibration targets: the rows derived from the published fit (every
+    set carries the paper's disc, which they come from), or a measured table's own, for ``fitted_set`` only (the
+    literature sets keep the paper's disc; their comparison is Table 4's). The intact rows the final fit used come
+    from :func:`measured_rom_rows`."""
     rows = []
-    real = synopsis[synopsis["data_kind"].isin(kinds)]
+    derived_kind = synopsis["data_kind"] == "derived_from_published_fit"
+    real = synopsis[synopsis["data_kind"].isin(kinds) & (synopsis["stage"] == stage)
+                    & (derived_kind | (synopsis["set"] == fitted_set))]
     for r in real.itertuples(index=False):
         lo = float(r.rom_min_deg) if pd.notna(r.rom_min_deg) else np.nan
         hi = float(r.rom_max_deg) if pd.notna(r.rom_max_deg) else np.nan
         derived = r.data_kind == "derived_from_published_fit"
         ok, rule = _within(float(r.rom_sim_deg), float(r.rom_mean_deg), lo, hi,
                            abs_tol=tolerance_deg if derived else None)
-        src = ("Heuer et al. 2007 disc-only stage derived from the paper's Table 1 (Eq. 3) fit"
-               if derived else "Yamamoto et al. 1989, Spine 14(11):1256-1260, abstract")
+        src = ("Heuer et al. 2007 disc-only stage derived from the paper's Table 1 (Eq. 3) fit" if derived else
+               "the measured stepwise-reduction table (stepwise_reduction.measured_table)")
         rows.append({"quantity": "L4-L5 ROM", "condition": f"{r.stage} {r.direction} {r.moment_nm:g} N*m",
                      "unit": "deg", "sim": float(r.rom_sim_deg), "measured": float(r.rom_mean_deg),
                      "measured_low": lo, "measured_high": hi, "kind": r.data_kind, "source": src,
@@ -116,6 +123,27 @@ def va_artefact_rows(geometry, charset, artefact: pd.DataFrame, set_name="calibr
              "kind": str(a.loc["wo_va", "kind"]), "source": str(a.loc["wo_va", "source"]), "within": ok,
              "tolerance_rule": rule, "set": set_name, "role": INDEPENDENT,
              "note": "paper 1 Sect. 4.2 attributes the measured change to the sawing of the arches (artefact)"}]
+
+
+def idp_in_vitro_rows(synopsis: pd.DataFrame, table: pd.DataFrame | None = None, set_name="calibrated") -> list[dict]:
+    """Independent rows of a Table 5 synopsis whose reference is measured (a real in-vitro IDP table with wire
+    cables, config ``l2s1.measured_table``, given as ``table`` for its ``source`` column; no fit uses it): the set's
+    L4-L5 IDP against mean +- SD, Table 5's own outlier rule. Surrogate rows are a method check and give none."""
+    src = {} if table is None or "source" not in table else \
+        {(a, b): str(c) for a, b, c in zip(table["muscle_setup"], table["load_case"], table["source"])}
+    rows = []
+    real = synopsis[(synopsis["set"] == set_name) & (synopsis["data_kind"].astype(str) != "surrogate")]
+    for r in real.itertuples(index=False):
+        sim = float(r.idp_sim_mpa) if bool(r.converged) else float("nan")
+        lo, hi = float(r.idp_mean_mpa) - float(r.idp_sd_mpa), float(r.idp_mean_mpa) + float(r.idp_sd_mpa)
+        ok, rule = _within(sim, float(r.idp_mean_mpa), lo, hi)
+        rows.append({"quantity": "L4-L5 IDP in vitro, wire cables", "unit": "MPa",
+                     "condition": f"{r.muscle_setup.replace('_', ' ')}, {r.load_case.replace('_', ' ')}",
+                     "sim": sim, "measured": float(r.idp_mean_mpa), "measured_low": lo, "measured_high": hi,
+                     "kind": str(r.data_kind), "source": src.get((r.muscle_setup, r.load_case), ""), "within": ok,
+                     "tolerance_rule": "measured mean +- SD (Table 5's outlier rule)", "set": set_name,
+                     "role": INDEPENDENT, "note": "L2-S1 model with wire cables; no fit uses this table"})
+    return rows
 
 
 def in_vivo_rows(validation: pd.DataFrame) -> list[dict]:
@@ -386,6 +414,9 @@ def plot_scoreboard(df: pd.DataFrame, path) -> None:
     fig, _ = subplots(figsize=(W, H), dpi=200)
     fig.delaxes(fig.axes[0])
     col_w = 1.0 / len(roles)
+    # the row labels' share of a column: room for the longest label at 5.6 pt (about 0.04 in per character)
+    longest = max((len(lab) for lab in _row_labels(d)), default=0)
+    lab_frac = float(np.clip((0.04 * longest + 0.12) / (W * col_w), 0.42, 0.65))
     title = {INDEPENDENT: "Independent checks (validation)", TARGET: "Calibration targets (fit quality)"}
     for ci, role in enumerate(roles):
         w_in, _ = counts_text(d, role)
@@ -394,8 +425,8 @@ def plot_scoreboard(df: pd.DataFrame, path) -> None:
         top = H - 0.42
         for (q, unit, sets), g in groups[role]:
             h = len(g) * row_in
-            left = ci * col_w + col_w * 0.42
-            ax = fig.add_axes([left, (top - h - 0.16) / H, col_w * 0.55, h / H])
+            left = ci * col_w + col_w * lab_frac
+            ax = fig.add_axes([left, (top - h - 0.16) / H, col_w * (0.97 - lab_frac), h / H])
             _draw_panel(ax, g)
             fig.text(ci * col_w + 0.01, (top - 0.06) / H, f"{condition_label(q)} [{unit_label(unit)}], {sets_label(sets)}",
                      fontsize=6.6, fontweight="bold", va="top")
