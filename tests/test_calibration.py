@@ -324,3 +324,25 @@ def test_noisy_round_trip_reaches_noise_level_from_away_and_reports_identifiabil
     # the best-determined ligament parameter is known within a factor ~1.5 (ALL's log d), none below 10 %
     assert min(min(v.values()) for k, v in ident.items() if k != "facets") < 0.5
     assert not any(fit.loc[k, "identifiable"] for k in TRUTH)
+
+
+def test_force_scale_penalty_is_the_criterions_own_exception():
+    """Inside the fit, a force scale below 0.1 x its source law is free only while the ligament's tension at 10 N*m
+    flexion stays within the allowed factor of the Remus et al. (2021) law of the same fibres; without a Remus
+    tension to compare with, the scale itself is pulled back; inside 0.1-10 nothing acts."""
+    import math
+
+    names = ["PLL:scale", "PLL:pre_elongation", "FL:scale", "SSL:scale"]
+    q = [math.log10(0.05), 0.0, math.log10(0.05), math.log10(0.5)]
+
+    def pen(t_pll, t_fl, remus):
+        mt = {"flex_tension": {"PLL": t_pll, "FL": t_fl, "SSL": 3.0}, "flex_remus": remus}
+        return dict(cal._scale_penalties(names, q, mt))
+
+    p = pen(1.2, 30.0, {"PLL": 10.0, "FL": 70.0, "SSL": 0.5})
+    assert p["force scale PLL"] > 0            # 1.2 N vs 10 N: below 1 / 5 of the Remus law
+    assert p["force scale FL"] == 0            # 30 N vs 70 N: within the factor
+    assert p["force scale SSL"] == 0           # scale 0.5: inside 0.1-10
+    assert pen(3.0, 30.0, {"PLL": 10.0, "FL": 70.0})["force scale PLL"] == 0      # 3 N vs 10 N: within
+    assert pen(1.2, 30.0, {"PLL": 0.5, "FL": 70.0})["force scale PLL"] > 0        # no Remus tension: the scale
+    assert "force scale PLL:pre_elongation" not in p

@@ -60,6 +60,7 @@ from .load_sharing import AXIS_OF, level_structures
 from ..inputs.io import save_figure_atomic, subplots, write_table_atomic
 from .stepwise_reduction import MAIN_DIRECTIONS, StageSolver
 from ..mechanics import so3
+from ..geometry.visible_human import uw_force
 from ..mechanics.solve import solve, solve_sequence
 
 log = logging.getLogger(__name__)
@@ -964,7 +965,7 @@ PROBE_DIRECTIONS = ("flexion", "extension", "lateral_bending_right", "lateral_be
 #: margins of the fit's penalties inside the admissibility limits (so that the 0.25 N*m check passes with room)
 FIT_MARGIN = {"rest_facet_n": 15.0, "pretension_fraction": 0.9, "nz_fraction": 0.8, "compression_share": 0.2,
               "functional_n": 2.0, "isl_ssl_share": 0.12, "compliance_rise": 0.05, "first_step_deg": 0.4,
-              "rom_rel": 0.2, "disc_compression_mm": 0.01}
+              "rom_rel": 0.2, "disc_compression_mm": 0.01, "remus_factor": 1.25}
 PENALTY_WEIGHT = 3.0
 #: regularisation toward the prior laws: per decade of force scale and per mm of pre-elongation change
 REG_WEIGHT = 0.1
@@ -1014,9 +1015,20 @@ class _Probe:
         for g, (_, k, _lv) in enumerate(m.fibre_groups):
             self.kinds.setdefault(k, []).append(g)
         self.group_masks = {k: np.isin(m.f_group, g) for k, g in self.st.groups.items()}
+        self.remus = None          # kind -> [(fibre mask, Remus et al. 2021 material)] (:meth:`set_remus`)
         self.warm = None
         self.state = None
         self.n_solves = 0
+
+    def set_remus(self, materials: dict):
+        """Evaluate the Remus et al. (2021) law of every fibre group named in ``materials`` (``read_uw_materials`` of
+        the level) at the 10 N*m flexion state too (metrics ``flex_remus``): the sourced exception of the force-scale
+        criterion, compared inside the fit."""
+        m = self.fsu.model
+        self.remus = {}
+        for g, (name, kind, lv) in enumerate(m.fibre_groups):
+            if lv == self.fsu.level.name and name in materials:
+                self.remus.setdefault(kind, []).append((m.f_group == g, materials[name]))
 
     def _cold(self):
         m = self.fsu.model
@@ -1077,7 +1089,10 @@ class _Probe:
         kinds = self.kinds
         # ligament moments about the disc centre at 10 N*m flexion, straight from the fibre forces
         i = sel[1]
-        _, _, T, _, d, dn, pa, _ = m.fibre_state(x[[i]], R[[i]], self.fm[[i]])
+        length, _, T, _, d, dn, pa, _ = m.fibre_state(x[[i]], R[[i]], self.fm[[i]])
+        flex_remus = {} if not self.remus else {
+            k: float(sum(uw_force(length[0, mask], m.f_lref[mask], mat).sum() for mask, mat in parts))
+            for k, parts in self.remus.items()}
         f = -T[..., None] * d / dn[..., None]                     # force on the upper vertebra at pa
         st = self.st
         centre = x[i, st.upper] + R[i, st.upper] @ (st.centre - m.c[st.upper])
@@ -1096,7 +1111,7 @@ class _Probe:
                 "rest_tension": {k: float(gf[0, g].sum()) for k, g in kinds.items()},
                 "rest_facet": cf[0].copy(),
                 "flex_tension": {k: float(gf[1, g].sum()) for k, g in kinds.items()},
-                "flex_moment": flex_moment,
+                "flex_moment": flex_moment, "flex_remus": flex_remus,
                 "compression_facet_share": max(up, 0.0) / max(max(up, 0.0) + max(disc_up, 0.0), 1e-9)}
 
 
@@ -1167,6 +1182,34 @@ def _fit_penalties(mt, limit, nz):
     # disc compressed by the ligaments' pre-tension at every probe moment
     p.append(("disc stays compressed", max(0.0, FIT_MARGIN["disc_compression_mm"] - mt["min_disc_compression_mm"]) /
               FIT_MARGIN["disc_compression_mm"]))
+    return p
+
+
+def _scale_penalties(names, q, mt):
+    """(name, value) of the force-scale criterion inside :func:`fit_admissible`: a ligament's force scale outside
+    [``ADM.SCALE_MIN``, ``ADM.SCALE_MAX``] x its source law must keep its tension at 10 N*m flexion within
+    ``ADM.REMUS_FACTOR`` (less a margin) of the Remus et al. (2021) law of the same fibres, where that law carries
+    more than 1 N there (the criterion's own exception); elsewhere the scale itself is pulled back inside. Zero
+    inside the range; continuous in the fit vector (the pull fades in over 0.05 decade beyond the range)."""
+    p = []
+    remus = mt.get("flex_remus") or {}
+    lo, hi = math.log10(ADM.SCALE_MIN), math.log10(ADM.SCALE_MAX)
+    allowed = math.log(ADM.REMUS_FACTOR / FIT_MARGIN["remus_factor"])
+    for j, n in enumerate(names):
+        if not n.endswith(":scale"):
+            continue
+        k = n.split(":")[0]
+        out = max(0.0, lo - q[j]) + max(0.0, q[j] - hi)
+        if out == 0.0:
+            p.append((f"force scale {k}", 0.0))
+            continue
+        t_remus = remus.get(k, 0.0)
+        if t_remus > 1.0:
+            log_ratio = math.log(max(mt["flex_tension"].get(k, 0.0), 1e-9) / t_remus)
+            miss = max(0.0, -allowed - log_ratio) if q[j] < lo else max(0.0, log_ratio - allowed)
+            p.append((f"force scale {k}", min(1.0, out / 0.05) * miss / 0.1))
+        else:
+            p.append((f"force scale {k}", out / 0.05))
     return p
 
 
@@ -1288,7 +1331,11 @@ def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", publ
     groups = {k: [g for g, (_, kk, _lv) in enumerate(m.fibre_groups) if kk == k] for k in charset.ligaments}
     k0 = m.k_stiff.copy()
     probe = _Probe(fsu, max_iter=max_iter, tol=tol)
+    if geometry_path is not None:
+        from ..geometry.visible_human import read_uw_materials  # noqa: PLC0415
+        probe.set_remus(read_uw_materials(geometry_path, level))
     n_eval = [0, 0]
+    n_res = [None]              # length of a residual vector (a failed probe returns one of the same length)
 
     def apply(q):
         cs = _set_with(base, names, q)
@@ -1304,7 +1351,7 @@ def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", publ
     last = {}
 
     def from_metrics(q, mt):
-        pen = _fit_penalties(mt, limit, nz)
+        pen = _fit_penalties(mt, limit, nz) + _scale_penalties(names, q, mt)
         rel = (_rom_of(mt, directions) - measured) / measured
         edge = np.maximum(0.0, np.abs(rel) - FIT_MARGIN["rom_rel"]) / 0.05
         return np.concatenate([rel / 0.25, PENALTY_WEIGHT * edge, PENALTY_WEIGHT * np.array([v for _, v in pen]),
@@ -1316,9 +1363,10 @@ def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", publ
         x, R, ok = probe.run()
         if not ok:
             last.clear()
-            return np.full(2 * len(measured) + 40 + len(q), PENALTY)
+            return np.full(n_res[0] or 2 * len(measured) + 40 + len(q), PENALTY)
         mt = probe.metrics(x, R)
         r, pen = from_metrics(q, mt)
+        n_res[0] = len(r)
         last.update(q=np.array(q), mt=mt, pen=pen, r=r)
         return r
 
