@@ -327,16 +327,17 @@ def test_noisy_round_trip_reaches_noise_level_from_away_and_reports_identifiabil
 
 
 def test_force_scale_penalty_is_the_criterions_own_exception():
-    """Inside the fit, a force scale below 0.1 x its source law is free only while the ligament's tension at 10 N*m
-    flexion stays within the allowed factor of the Remus et al. (2021) law of the same fibres; without a Remus
-    tension to compare with, the scale itself is pulled back; inside 0.1-10 nothing acts."""
+    """Inside the fit, a force scale below 0.1 x its source law is free only while the ligament's tension stays within
+    the allowed factor of the Remus et al. (2021) law of the same fibres (where that law loads it most); without a
+    Remus tension to compare with, the scale itself is pulled back; inside 0.1-10 (less a margin) nothing acts."""
     import math
 
     names = ["PLL:scale", "PLL:pre_elongation", "FL:scale", "SSL:scale"]
     q = [math.log10(0.05), 0.0, math.log10(0.05), math.log10(0.5)]
 
     def pen(t_pll, t_fl, remus):
-        mt = {"flex_tension": {"PLL": t_pll, "FL": t_fl, "SSL": 3.0}, "flex_remus": remus}
+        model = {"PLL": t_pll, "FL": t_fl, "SSL": 3.0}
+        mt = {"remus": {k: (model[k], v) for k, v in remus.items()}}
         return dict(cal._scale_penalties(names, q, mt))
 
     p = pen(1.2, 30.0, {"PLL": 10.0, "FL": 70.0, "SSL": 0.5})

@@ -965,7 +965,8 @@ PROBE_DIRECTIONS = ("flexion", "extension", "lateral_bending_right", "lateral_be
 #: margins of the fit's penalties inside the admissibility limits (so that the 0.25 N*m check passes with room)
 FIT_MARGIN = {"rest_facet_n": 15.0, "pretension_fraction": 0.9, "nz_fraction": 0.8, "compression_share": 0.2,
               "functional_n": 2.0, "isl_ssl_share": 0.12, "compliance_rise": 0.05, "first_step_deg": 0.4,
-              "rom_rel": 0.2, "disc_compression_mm": 0.01, "remus_factor": 1.25}
+              "rom_rel": 0.2, "disc_compression_mm": 0.01, "remus_factor": 1.25,
+              "scale_factor": 1.1}
 PENALTY_WEIGHT = 3.0
 #: regularisation toward the prior laws: per decade of force scale and per mm of pre-elongation change
 REG_WEIGHT = 0.1
@@ -1030,6 +1031,23 @@ class _Probe:
             if lv == self.fsu.level.name and name in materials:
                 self.remus.setdefault(kind, []).append((m.f_group == g, materials[name]))
 
+    def _remus_pairs(self, x, R):
+        """{kind: (model tension, Remus et al. 2021 tension) [N]} at the state of the admissibility criterion's
+        comparison (``ADM.REMUS_STATES``: rest and 10 N*m in four directions) where the Remus law carries the kind
+        most; {} without :meth:`set_remus`."""
+        if not self.remus:
+            return {}
+        m = self.fsu.model
+        rows = [0] + [self.scen.index(("moment", d, M)) for _, d, M in ADM.REMUS_STATES if d]
+        length, _, T = m.fibre_state(x[rows], R[rows], self.fm[rows])[:3]
+        out = {}
+        for k, parts in self.remus.items():
+            t_r = sum(uw_force(length[:, mask], m.f_lref[mask], mat).sum(axis=1) for mask, mat in parts)
+            t_m = sum(T[:, mask].sum(axis=1) for mask, _ in parts)
+            j = int(np.argmax(t_r))
+            out[k] = (float(t_m[j]), float(t_r[j]))
+        return out
+
     def _cold(self):
         m = self.fsu.model
         i_comp = len(self.scen) - 1
@@ -1089,10 +1107,7 @@ class _Probe:
         kinds = self.kinds
         # ligament moments about the disc centre at 10 N*m flexion, straight from the fibre forces
         i = sel[1]
-        length, _, T, _, d, dn, pa, _ = m.fibre_state(x[[i]], R[[i]], self.fm[[i]])
-        flex_remus = {} if not self.remus else {
-            k: float(sum(uw_force(length[0, mask], m.f_lref[mask], mat).sum() for mask, mat in parts))
-            for k, parts in self.remus.items()}
+        _, _, T, _, d, dn, pa, _ = m.fibre_state(x[[i]], R[[i]], self.fm[[i]])
         f = -T[..., None] * d / dn[..., None]                     # force on the upper vertebra at pa
         st = self.st
         centre = x[i, st.upper] + R[i, st.upper] @ (st.centre - m.c[st.upper])
@@ -1111,7 +1126,7 @@ class _Probe:
                 "rest_tension": {k: float(gf[0, g].sum()) for k, g in kinds.items()},
                 "rest_facet": cf[0].copy(),
                 "flex_tension": {k: float(gf[1, g].sum()) for k, g in kinds.items()},
-                "flex_moment": flex_moment, "flex_remus": flex_remus,
+                "flex_moment": flex_moment, "remus": self._remus_pairs(x, R),
                 "compression_facet_share": max(up, 0.0) / max(max(up, 0.0) + max(disc_up, 0.0), 1e-9)}
 
 
@@ -1187,13 +1202,15 @@ def _fit_penalties(mt, limit, nz):
 
 def _scale_penalties(names, q, mt):
     """(name, value) of the force-scale criterion inside :func:`fit_admissible`: a ligament's force scale outside
-    [``ADM.SCALE_MIN``, ``ADM.SCALE_MAX``] x its source law must keep its tension at 10 N*m flexion within
-    ``ADM.REMUS_FACTOR`` (less a margin) of the Remus et al. (2021) law of the same fibres, where that law carries
-    more than 1 N there (the criterion's own exception); elsewhere the scale itself is pulled back inside. Zero
-    inside the range; continuous in the fit vector (the pull fades in over 0.05 decade beyond the range)."""
+    [``ADM.SCALE_MIN``, ``ADM.SCALE_MAX``] x its source law must keep its tension within ``ADM.REMUS_FACTOR`` (less a
+    margin) of the Remus et al. (2021) law of the same fibres where that law loads it most (metrics ``remus``), when
+    it carries more than 1 N there (the criterion's own exception); elsewhere the scale itself is pulled back inside. Zero
+    inside the range narrowed by ``FIT_MARGIN["scale_factor"]`` (a fit that trades the pull against the data ends
+    inside the criterion's limit, not on it); continuous in the fit vector (the pull fades in over 0.05 decade)."""
     p = []
-    remus = mt.get("flex_remus") or {}
-    lo, hi = math.log10(ADM.SCALE_MIN), math.log10(ADM.SCALE_MAX)
+    remus = mt.get("remus") or {}
+    margin = math.log10(FIT_MARGIN["scale_factor"])
+    lo, hi = math.log10(ADM.SCALE_MIN) + margin, math.log10(ADM.SCALE_MAX) - margin
     allowed = math.log(ADM.REMUS_FACTOR / FIT_MARGIN["remus_factor"])
     for j, n in enumerate(names):
         if not n.endswith(":scale"):
@@ -1203,9 +1220,9 @@ def _scale_penalties(names, q, mt):
         if out == 0.0:
             p.append((f"force scale {k}", 0.0))
             continue
-        t_remus = remus.get(k, 0.0)
+        t_model, t_remus = remus.get(k, (0.0, 0.0))
         if t_remus > 1.0:
-            log_ratio = math.log(max(mt["flex_tension"].get(k, 0.0), 1e-9) / t_remus)
+            log_ratio = math.log(max(t_model, 1e-9) / t_remus)
             miss = max(0.0, -allowed - log_ratio) if q[j] < lo else max(0.0, log_ratio - allowed)
             p.append((f"force scale {k}", min(1.0, out / 0.05) * miss / 0.1))
         else:
