@@ -141,3 +141,10 @@ def test_measured_in_vitro_idp_rows_are_independent_and_judged_by_table5s_rule()
     assert all(r["role"] == V.INDEPENDENT and r["set"] == "calibrated" for r in rows)
     assert rows[0]["source"] == "Wilke 1996, Table 2" and rows[0]["measured_low"] == pytest.approx(0.19)
     assert V.idp_in_vitro_rows(syn.assign(data_kind="surrogate"), table) == []   # a method check, not validation
+
+
+def test_near_limit_names_the_rows_a_small_change_can_flip():
+    rom = pd.DataFrame({"level": ["A", "B", "C", "D", "E"], "ratio": [1.247, 1.29, 0.74, 1.0, 2.15],
+                        "within": [True, False, False, True, False]})
+    assert V.near_limit(rom)["level"].tolist() == ["A", "B", "C"]
+    assert V.near_limit(rom, band=0.02)["level"].tolist() == ["A", "C"]

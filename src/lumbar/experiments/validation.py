@@ -224,6 +224,13 @@ def multilevel_rom(curves: pd.DataFrame, yamamoto: pd.DataFrame, moment_nm=10.0,
     return pd.DataFrame(rows)
 
 
+def near_limit(rom: pd.DataFrame, rel=REL_TOLERANCE, band=0.05) -> pd.DataFrame:
+    """Rows of :func:`multilevel_rom` whose ratio lies within ``band`` of the tolerance's edge, on either side (e.g.
+    0.20-0.30 off the measured value for 25 %): the rows a small change of the fit can move across it."""
+    off = (rom["ratio"].astype(float) - 1.0).abs()
+    return rom[(off - rel).abs() <= band]
+
+
 def _shares_at(at: pd.DataFrame, converged: bool) -> dict:
     """Shares of the applied moment resisted by the disc, both facet joints and all ligaments together (mean over
     the sides of a direction; ``lumbar.experiments.load_sharing.moment_shares``): why a level reaches its ROM."""

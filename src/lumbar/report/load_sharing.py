@@ -117,6 +117,14 @@ def load_sharing_section(b: ReportBuilder):
                + ". The shares say how each level reaches its rotation: the levels differ only in their geometry, "
                  "so a level whose real segments are more mobile than the others (or stiffer) in one direction "
                  "shows it here as a ratio far from 1 with the same structures resisting.")
+        from ..experiments.validation import near_limit  # noqa: PLC0415
+
+        edge = near_limit(m)
+        if len(edge):
+            b.para("Near the 25 % limit (model / measured within 0.05 of 0.75 or 1.25), where a fit that leaves L4-L5 "
+                   "as it is can move a row across it (docs/load_sharing.md, \"How firm a count is\"): "
+                   + "; ".join(f"{r['level']} {human_direction(r['direction'])} {r['ratio']:.3f} "
+                               f"({'inside' if r['within'] else 'outside'})" for _, r in edge.iterrows()) + ".")
         share = [c for c in ("disc_share", "facets_share", "ligaments_share") if c in m.columns]
         b.table_block("ROM at 10 N*m of the other levels against Yamamoto et al. (1989) (independent), and the "
                       "share of the moment each structure resists",
