@@ -5,6 +5,7 @@
 rule admissibility:
     input:
         geometry_inputs,
+        prior="results/calibration/calibration_prior.csv",
         curves="results/load_sharing/curves_calibrated.csv",
         compression="results/load_sharing/compression_calibrated.csv",
         characteristics=CALIBRATION_CHARACTERISTICS,

@@ -30,6 +30,8 @@ rule calibrate:
         targets="results/calibration/calibration_targets.csv",
         prior="results/calibration/calibration_prior.csv",
         penalties="results/calibration/calibration_penalties.csv",
+        posterior="results/calibration/posterior.csv",
+        covariance="results/calibration/posterior_covariance.csv",
         rom_fit="results/calibration/calibration_rom_fit.csv",
         disc_points="results/calibration/fig4_points.csv",
         ligament_points="results/calibration/fig5_points.csv",
@@ -97,3 +99,21 @@ rule fig5_ligament_characteristics:
         "../envs/lumbar.yaml"
     script:
         "../scripts/calibration.py"
+
+
+# What the data told us: every calibrated parameter's prior and posterior (Laplace) 90 % interval.
+rule posterior_figure:
+    input:
+        posterior="results/calibration/posterior.csv",
+    output:
+        report(
+            "results/figures/calibration_posterior.png",
+            caption="../report/calibration_posterior.rst",
+            category="Stepwise reduction",
+        ),
+    log:
+        "logs/posterior_figure.log",
+    conda:
+        "../envs/lumbar.yaml"
+    script:
+        "../scripts/posterior_figure.py"

@@ -56,6 +56,10 @@ def final_outputs():
         "results/figures/load_sharing_curves.png",
         "results/figures/load_sharing_shares.png",
         "results/calibration/admissibility.csv",
+        # the calibration's posterior (MAP + Laplace) and the bands of the intact curves
+        "results/calibration/posterior.csv",
+        "results/figures/calibration_posterior.png",
+        "results/load_sharing/bands_calibrated.csv",
         "results/tables/multilevel_rom.csv",
         "results/figures/multilevel_rom.png",
         "results/figures/validation_scoreboard.png",

@@ -27,6 +27,31 @@ rule load_sharing_curves:
         "../scripts/load_sharing.py"
 
 
+# The 90 % posterior bands of the calibrated unit's intact curves and internal loads (linearisation of the
+# calibration's Laplace posterior: one finite-difference step per fitted parameter).
+rule load_sharing_bands:
+    input:
+        geometry_inputs,
+        characteristics=CALIBRATION_CHARACTERISTICS,
+        posterior="results/calibration/posterior.csv",
+        covariance="results/calibration/posterior_covariance.csv",
+    output:
+        bands="results/load_sharing/bands_calibrated.csv",
+    log:
+        "logs/load_sharing_bands.log",
+    benchmark:
+        "results/benchmarks/load_sharing_bands.tsv"
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        geometry=config["geometry"],
+        fsu=config["fsu"],
+        solver=config["solver"],
+        ls=config["load_sharing"],
+    script:
+        "../scripts/load_sharing_bands.py"
+
+
 rule load_sharing_summary:
     input:
         curves=expand(
@@ -39,6 +64,7 @@ rule load_sharing_summary:
         ),
         l2s1="results/l2s1/idp_calibrated.csv",
         yamamoto="data/experiments/yamamoto1989_levels_original_text.csv",
+        bands="results/load_sharing/bands_calibrated.csv",
     output:
         summary=report(
             "results/load_sharing/load_sharing_summary.csv",

@@ -11,6 +11,10 @@ rule validation_real_data:
         anatomy="data/anatomy/l4l5_magnitudes_original_text.csv",
         in_vivo="results/tables/in_vivo_validation.csv",
         multilevel="results/tables/multilevel_rom.csv",
+        curves="results/load_sharing/curves_calibrated.csv",
+        compression="results/load_sharing/compression_calibrated.csv",
+        literature="data/load_sharing/load_sharing_literature.csv",
+        bands="results/load_sharing/bands_calibrated.csv",
     output:
         report(
             "results/tables/validation_real_data.csv",
@@ -33,6 +37,7 @@ rule validation_real_data:
 rule multilevel_validation:
     input:
         geometry_inputs,
+        prior="results/calibration/calibration_prior.csv",
         characteristics=CALIBRATION_CHARACTERISTICS,
         published=characteristic_tables(
             config["characteristics"]["data_dir"], ["calibrated"]

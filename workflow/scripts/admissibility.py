@@ -14,7 +14,7 @@ snakemake, log = _common.start(globals())
 import pandas as pd  # noqa: E402
 
 from lumbar.experiments import admissibility as ADM  # noqa: E402
-from lumbar.experiments.calibration import elongation_prior  # noqa: E402
+from lumbar.experiments.calibration import read_prior_set  # noqa: E402
 from lumbar.geometry import load_geometry  # noqa: E402
 from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
@@ -24,7 +24,7 @@ geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" el
 published = load_characteristic_set("calibrated", data_dir=snakemake.params.data_dir)
 cal = load_characteristic_set("calibrated", data_dir=Path(_common.as_list(snakemake.input.characteristics)[0]).parent)
 on_elongation = any(getattr(law, "law_length_m", None) is not None for law in cal.ligaments.values())
-prior = elongation_prior(published)[0] if on_elongation else published
+prior = read_prior_set(snakemake.input.prior, published) if on_elongation else published
 limits = ADM.pretension_limits(published, prior, geo, f["level"],
                                g["path"] if g["kind"] == "visible_human" else None)
 remus = None

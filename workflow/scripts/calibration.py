@@ -54,7 +54,7 @@ if snakemake.rule == "calibrate":
                         real_targets=targets,
                         transfer=sr["ligament_transfer"],
                         geometry_path=g["path"] if g["kind"] == "visible_human" else None,
-                        anchor_start_values=anchor)
+                        anchor_start_values=anchor, prior=sr["ligament_prior"])
     log.info("calibration wall time %.1f s", res.wall_time_s)
     out_dir = Path(snakemake.output.characteristics[0]).parent
     cal.write_characteristics(res, snakemake.input.characteristics, out_dir,
@@ -72,6 +72,14 @@ if snakemake.rule == "calibrate":
     ff = res.info.get("final_fit")
     (ff.penalties if ff is not None else pd.DataFrame(columns=["penalty", "value"])).pipe(
         write_table_atomic, snakemake.output.penalties)
+    post_tab, cov_tab = cal.posterior_tables(ff, res.info.get("prior_name", ""))
+    write_table_atomic(post_tab, snakemake.output.posterior)
+    write_table_atomic(cov_tab, snakemake.output.covariance)
+    if ff is not None and ff.posterior is not None:
+        moved = post_tab[post_tab["data_moved_it"]]
+        log.info("posterior: the data moved %d of %d parameters (%s); the others stay at their prior (%s)",
+                 len(moved), len(post_tab), ", ".join(moved["parameter"]),
+                 ", ".join(post_tab.loc[~post_tab["data_moved_it"], "parameter"]) or "none")
     bound = [r for r in res.summary.itertuples() if getattr(r, "at_bound", False)]
     unidentifiable = [r for r in res.summary.itertuples() if not getattr(r, "identifiable", True)]
     log.info("calibration: %d of %d steps with a parameter at a bound (%s), %d not identifiable from their stage "

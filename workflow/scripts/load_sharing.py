@@ -57,7 +57,7 @@ elif snakemake.rule == "load_sharing_summary":
     lvl = snakemake.params.fsu["level"]
     ref = y[(y["level"] == lvl) & (y["quantity"] == "rom")].assign(
         direction=lambda d: d["direction"].str.replace("_one_side", "", regex=False))
-    LS.plot_curves(curves, ref, snakemake.output.curves_figure)
+    LS.plot_curves(curves, ref, snakemake.output.curves_figure, bands=pd.read_csv(snakemake.input.bands))
     if "calibrated" in curves:
         LS.plot_shares(curves["calibrated"], snakemake.output.shares_figure,
                        title=f"Moment carried by each structure, calibrated {lvl} unit (below 0: acting with the applied "

@@ -30,7 +30,7 @@ from lumbar.inputs.io import write_table_atomic  # noqa: E402
 
 if snakemake.rule == "multilevel_validation":
     from lumbar.experiments import admissibility as ADM  # noqa: E402
-    from lumbar.experiments.calibration import elongation_prior  # noqa: E402
+    from lumbar.experiments.calibration import read_prior_set  # noqa: E402
     from lumbar.experiments import level_transfer as LT  # noqa: E402
     from lumbar.experiments.fsu import build_fsu  # noqa: E402
     from lumbar.experiments.load_sharing import moment_rotation_curves  # noqa: E402
@@ -44,7 +44,7 @@ if snakemake.rule == "multilevel_validation":
     cal = load_characteristic_set("calibrated",
                                   data_dir=Path(_common.as_list(snakemake.input.characteristics)[0]).parent)
     on_elongation = any(getattr(law, "law_length_m", None) is not None for law in cal.ligaments.values())
-    prior = elongation_prior(published)[0] if on_elongation else published
+    prior = read_prior_set(snakemake.input.prior, published) if on_elongation else published
     lit = ADM.read_literature(snakemake.input.literature)
     moments = np.round(np.arange(0.0, ls["max_moment_nm"] + 1e-9, ls["moment_step_nm"]), 6)
     curves, adm = [], []
@@ -123,7 +123,11 @@ idp_table = snakemake.params.idp_table
 rows += V.idp_in_vitro_rows(pd.read_csv(snakemake.input.idp_synopsis), pd.read_csv(idp_table) if idp_table else None)
 rows += V.anatomy_rows(geo, pd.read_csv(snakemake.input.anatomy), level=f["level"])
 rows += V.multilevel_rows(pd.read_csv(snakemake.input.multilevel))
-df = V.scoreboard(rows)
+# the calibrated unit's internal loads against sourced ranges (judged, never fitted; rows the admissible fit also holds
+# as penalties are marked as fit constraints)
+rows += V.internal_load_rows(pd.read_csv(snakemake.input.curves), pd.read_csv(snakemake.input.compression),
+                             pd.read_csv(snakemake.input.literature))
+df = V.scoreboard(rows, pd.read_csv(snakemake.input.bands))
 write_table_atomic(df, snakemake.output[0])
 ind = df[df["role"] == V.INDEPENDENT]
 tgt = df[df["role"] == V.TARGET]

@@ -23,16 +23,17 @@ cs = load_characteristic_set(sr["generator_set"], data_dir=snakemake.input.chara
 if sr.get("anchor_generator") and sr.get("real_targets"):
     import pandas as pd  # noqa: E402
 
-    from lumbar.experiments.calibration import elongation_prior, fit_admissible, fit_real_targets  # noqa: E402
+    from lumbar.experiments.calibration import calibration_prior, fit_admissible, fit_real_targets  # noqa: E402
     from lumbar.experiments.stepwise_reduction import read_experiment_table  # noqa: E402
 
     targets = pd.concat([read_experiment_table(p) for p in sr["real_targets"]], ignore_index=True)
     if sr["ligament_transfer"] == "elongation":
         published = cs
-        cs = elongation_prior(published)[0]
-        fit = fit_admissible(geo, cs, targets, level=f["level"], published=published,
-                             geometry_path=g["path"] if g["kind"] == "visible_human" else None,
-                             k_shear=f.get("disc_shear_stiffness_n_per_m"), max_iter=s["max_iter"])
+        vh_path = g["path"] if g["kind"] == "visible_human" else None
+        cs, _, spreads = calibration_prior(published, geo, f["level"], vh_path, sr["ligament_prior"])
+        fit = fit_admissible(geo, cs, targets, level=f["level"], published=published, geometry_path=vh_path,
+                             k_shear=f.get("disc_shear_stiffness_n_per_m"), max_iter=s["max_iter"],
+                             prior_spread=spreads)
     else:
         fit = fit_real_targets(geo, cs, targets, level=f["level"], k_shear=f.get("disc_shear_stiffness_n_per_m"),
                                max_iter=s["max_iter"])

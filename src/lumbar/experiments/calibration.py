@@ -57,6 +57,8 @@ from ..mechanics.elements.ligament import softplus_force
 from . import admissibility as ADM
 from .fsu import MIN_SLACK_FRACTION, build_fsu, facet_surfaces, moment_loads, set_ligament_law
 from .load_sharing import AXIS_OF, level_structures
+from .posterior import Posterior, laplace_posterior
+from .priors import default_spreads
 from ..inputs.io import save_figure_atomic, subplots, write_table_atomic
 from .stepwise_reduction import MAIN_DIRECTIONS, StageSolver
 from ..mechanics import so3
@@ -198,7 +200,7 @@ def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_
               start=None, concave=CONCAVE_CANDIDATES, surrogate_weight=1.0,
               real_targets: pd.DataFrame | None = None, real_fit_kw=None, family="monotone",
               anchor_start=True, final_surrogate_weight=0.0, transfer="strain", geometry_path=None,
-              anchor_start_values: dict | None = None) -> CalibrationResult:
+              anchor_start_values: dict | None = None, prior="remus2021") -> CalibrationResult:
     """Calibrate disc, facet stiffness and ligaments on ``reference`` (see module doc).
 
     ``family``: the ligament law family of steps 2-8. "monotone" (module doc: a, b, d fitted with F(0) = 0,
@@ -244,15 +246,18 @@ def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_
     info = {}
     if transfer not in ("strain", "elongation"):
         raise ValueError(f"ligament transfer {transfer!r}; expected 'strain' or 'elongation'")
+    spreads = {}
     if transfer == "elongation":
-        base, info["prior"] = elongation_prior(published)
+        base, info["prior"], spreads = calibration_prior(published, geometry, level, geometry_path, prior)
         info["prior_set"] = base
+        info["prior_name"] = prior if spreads else "table3"
+        info["prior_spreads"] = spreads
     # ---- step 0: the start set anchored on the real rows (the same fit as the surrogate generator's)
     if real_targets is not None and len(real_targets) and anchor_start:
         if transfer == "elongation":
             a0 = fit_admissible(geometry, base, real_targets, level=level, published=published,
                                 geometry_path=geometry_path, k_shear=k_shear, max_iter=max_iter,
-                                start=anchor_start_values, **(real_fit_kw or {}))
+                                start=anchor_start_values, prior_spread=spreads, **(real_fit_kw or {}))
             info["anchor_fit"] = a0
         else:
             a0 = fit_real_targets(geometry, base, real_targets, level=level, k_shear=k_shear, max_iter=max_iter,
@@ -458,11 +463,12 @@ def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_
         if transfer == "elongation":
             # the final set: the admissible fit again, with the fitted disc, from the step-0 optimum (the prior's
             # laws are its reference: scales and pre-elongation changes are relative to the prior)
-            prior = _replace(info["prior_set"], disc=_replace(cal.disc, k_shear=info["prior_set"].disc.k_shear))
+            prior_set = _replace(info["prior_set"], disc=_replace(cal.disc, k_shear=info["prior_set"].disc.k_shear))
             a0 = info.get("anchor_fit")
             st = None if a0 is None else dict(zip(a0.parameters["parameter"], a0.parameters["fit_value"]))
-            rf = fit_admissible(geometry, prior, real_targets, level=level, published=published,
+            rf = fit_admissible(geometry, prior_set, real_targets, level=level, published=published,
                                 geometry_path=geometry_path, k_shear=k_shear, max_iter=max_iter, start=st,
+                                prior_spread=spreads, disc_rows=_stage_rows(reference, DISC_STAGE),
                                 **(real_fit_kw or {}))
             info["final_fit"] = rf
         else:
@@ -487,7 +493,7 @@ def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_
             surf_rows.append({"parameter": name, "side": side, "value": float(v), "unit": unit,
                               "rms_landmark_mm": s.rms_m * 1e3})
     return CalibrationResult(
-        charset=cal, disc=torque, facet_stiffness=k_fac, ligaments=fitted,
+        charset=cal, disc=dict(cal.disc.torque), facet_stiffness=k_fac, ligaments=fitted,
         summary=pd.DataFrame(steps), rom_fit=pd.concat(rom_fit, ignore_index=True),
         disc_points=pd.DataFrame(disc_pts), ligament_points=pd.DataFrame(lig_pts),
         facet_surfaces=pd.DataFrame(surf_rows), data_kind=data_kind,
@@ -517,7 +523,10 @@ def write_characteristics(result: CalibrationResult, src_dir, out_dir, reference
             k = int(r["parameter"][-1]) - 1
             disc.loc[i, "value"] = repr(float(result.disc[r["direction"]][k]))
             disc.loc[i, ["kind", "source"]] = [kind, src_note]
-            disc.loc[i, "note"] = f"Eq. 3 fitted (trf) to T(ROM_mean) = M on stage {DISC_STAGE}"
+            disc.loc[i, "note"] = f"Eq. 3 fitted (trf) to T(ROM_mean) = M on stage {DISC_STAGE}" + (
+                "; p1 and p3 then scaled by the admissible fit (disc_torque posterior, results/calibration/"
+                "posterior.csv)" if result.info.get("final_fit") is not None and
+                result.info["final_fit"].posterior is not None else "")
     ks = getattr(result.charset.disc, "k_shear", None)
     if ks is not None and "real_fit" in result.info:
         disc = disc[disc["parameter"] != "shear_stiffness"]
@@ -953,6 +962,53 @@ def elongation_prior(published=None, data_dir=None):
     return cs, pd.DataFrame(rows)
 
 
+def calibration_prior(published=None, geometry=None, level="L4-L5", geometry_path=None, prior="remus2021",
+                      data_dir=None):
+    """The admissible fit's prior: (prior characteristic set on elongation, provenance table, {fit parameter: prior
+    spread in fit units}).
+
+    ``prior``: "remus2021" (default): every ligament law is the Remus et al. (2021) law of the same fibres
+    (:func:`lumbar.experiments.priors.remus_prior`; needs the Visible Human folder ``geometry_path`` with its
+    ``*_UWMat.lig`` files); "table3": paper 1 Table 3 on elongation (:func:`elongation_prior`). The ligament spreads
+    are how much the two sources disagree on this level's fibres, per kind (:func:`priors.ligament_spreads`); without
+    the Remus files (another geometry) the prior is Table 3 with the default spreads, and the provenance says so."""
+    from ..geometry.visible_human import read_uw_materials  # noqa: PLC0415 - only with a Visible Human folder
+    from . import priors as PR  # noqa: PLC0415 - calibration-only helper module
+
+    if prior not in PR.PRIORS:
+        raise ValueError(f"ligament prior {prior!r}; expected one of {PR.PRIORS}")
+    table3, prov = elongation_prior(published, data_dir)
+    if geometry_path is None or geometry is None or level not in getattr(geometry, "levels", {}):
+        prov = prov.assign(spread_source="default spreads (no Remus et al. 2021 laws for this geometry)")
+        return table3, prov, {}
+    remus, rprov = PR.remus_prior(table3, geometry.levels[level], read_uw_materials(geometry_path, level),
+                                  ELONGATION_LIGAMENTS)
+    spreads = PR.ligament_spreads(PR.source_disagreement(remus.ligaments, table3.ligaments))
+    chosen, cprov = (remus, rprov) if prior == "remus2021" else (table3, prov)
+    cprov = cprov.assign(scale_spread_log10=[spreads.get(f"{k}:scale") for k in cprov["ligament"]],
+                         pre_elongation_spread_mm=[spreads.get(f"{k}:pre_elongation") for k in cprov["ligament"]],
+                         prior=prior)
+    return chosen, cprov, spreads
+
+
+def read_prior_set(path, published):
+    """The prior characteristic set the calibration used, rebuilt from its provenance table
+    (results/calibration/calibration_prior.csv: ligament, a_n, b_pct, c_n, d_pct, prestrain_pct, law_length_mm) on
+    ``published`` (disc and facet): the one record of the prior, read by the admissibility and the other levels (the
+    force-scale criterion is relative to it)."""
+    df = pd.read_csv(path)
+    need = {"ligament", "a_n", "b_pct", "c_n", "d_pct", "prestrain_pct", "law_length_mm"}
+    if not need <= set(df.columns):
+        raise ValueError(f"{path}: the prior table needs the columns {sorted(need)}; has {sorted(df.columns)}")
+    ligs = dict(published.ligaments)
+    for r in df.itertuples():
+        ligs[r.ligament] = SoftplusLaw(float(r.a_n), float(r.b_pct), float(r.c_n), float(r.d_pct),
+                                       float(r.prestrain_pct), source=f"prior ({path})",
+                                       law_length_m=float(r.law_length_mm) * 1e-3)
+    return dataclasses.replace(published, name="calibrated", ligaments=ligs, absent={}, alternatives={},
+                               source=f"calibration prior ({path})")
+
+
 # ------------------------------------------------------------------ the admissible fit
 #: moments [N*m] of the fit's probe (the admissibility check itself uses 0.25 N*m steps); 0.25 N*m watches the
 #: compliance at the neutral position (the snap-through criterion's first step), 1 N*m gives the neutral-zone proxy
@@ -968,8 +1024,12 @@ FIT_MARGIN = {"rest_facet_n": 15.0, "pretension_fraction": 0.9, "nz_fraction": 0
               "rom_rel": 0.2, "disc_compression_mm": 0.01, "remus_factor": 1.25,
               "scale_factor": 1.1}
 PENALTY_WEIGHT = 3.0
-#: regularisation toward the prior laws: per decade of force scale and per mm of pre-elongation change
-REG_WEIGHT = 0.1
+#: spread of a real ROM row when its source gives none (Yamamoto et al. 1989's abstract gives means only): 25 % of the
+#: measured value, the validation's acceptance band (an assumption, stated in results/calibration/posterior.csv)
+DATA_SD_REL = 0.25
+#: bounds of the disc torque-law scales (p1 and p3 of Eq. 3 of one direction scaled together) of the admissible fit;
+#: their prior is the disc-only fit (step 1) with the spread of a measured row (DATA_SD_REL)
+DISC_TORQUE_SCALE_BOUNDS = (0.25, 4.0)
 #: a fitted pre-elongation may leave a ligament slack by this much [mm] at rest ...
 PRE_ELONGATION_SLACK_MM = 1.5
 #: ... or stretch it by at most this prestrain [% of its law length]: 2.5 x the paper's largest prestrain (10 %,
@@ -1137,6 +1197,7 @@ class AdmissibleFit(RealFit):
     probe: dict = field(default_factory=dict)
     penalties: pd.DataFrame | None = None
     prior: object = None
+    posterior: Posterior | None = None
 
 
 def _set_with(charset, names, q):
@@ -1156,7 +1217,22 @@ def _set_with(charset, names, q):
             facet = dataclasses.replace(facet, stiffness=10.0 ** v)
         elif name == "disc_shear":
             disc = dataclasses.replace(disc, k_shear=10.0 ** v)
+        elif kind == "disc_torque":
+            p1, p2, p3 = disc.torque[what]
+            disc = dataclasses.replace(disc, torque={**disc.torque, what: (p1 * 10.0 ** v, p2, p3 * 10.0 ** v)})
     return dataclasses.replace(charset, ligaments=ligs, facet=facet, disc=disc)
+
+
+def shift_parameter(charset, name: str, delta: float):
+    """``charset`` with the admissible fit's parameter ``name`` moved by ``delta`` in fit units (a force or torque
+    scale by 10**delta, a pre-elongation by delta mm, the facet or disc shear stiffness by 10**delta): the
+    perturbation of a prediction's finite-difference gradient for the posterior bands
+    (:func:`lumbar.experiments.posterior.linearised_band`)."""
+    if name == "facet_stiffness":
+        return _set_with(charset, [name], [math.log10(charset.facet.stiffness) + delta])
+    if name == "disc_shear":
+        return _set_with(charset, [name], [math.log10(charset.disc.k_shear) + delta])
+    return _set_with(charset, [name], [delta])
 
 
 def _fit_penalties(mt, limit, nz):
@@ -1273,8 +1349,10 @@ def admissible_fit_targets(reference: pd.DataFrame, real_targets: pd.DataFrame |
 
 
 def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", published=None, geometry_path=None,
-                   k_shear=None, reg_weight=REG_WEIGHT, max_iter=50, tol=1e-8, max_nfev=100,
-                   nz_reference=None, start: dict | None = None) -> AdmissibleFit:
+                   k_shear=None, max_iter=50, tol=1e-8, max_nfev=100,
+                   nz_reference=None, start: dict | None = None, prior_spread: dict | None = None,
+                   data_sd_rel: float = DATA_SD_REL, fit_disc_torque: bool = True,
+                   disc_rows: pd.DataFrame | None = None) -> AdmissibleFit:
     """Fit a characteristic set to real ROM rows AND the admissibility criteria (constrained least squares).
 
     Parameters (bounded; ``least_squares(method="trf")``): per ligament on elongation, log10 of its force scale in
@@ -1288,8 +1366,12 @@ def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", publ
     PENALTY_WEIGHT, active only beyond FIT_MARGIN, inside the criteria's limits): unloaded facet contact and ligament
     tensions (:func:`admissibility.pretension_limits`), the neutral-zone proxy, the rotation of the first 0.25 N*m step,
     ISL/SSL/FL/CL in tension and the ISL+SSL share at 10 N*m flexion, the ordering ISL > SSL and CL > FL moment, the
-    compliance not rising from 2.5 to 10 N*m, the facets' share of a 1000 N follower load; and ``reg_weight`` x
-    (each log10 scale, each pre-elongation change in mm): a pull toward the prior laws. The Jacobian is finite
+    compliance not rising from 2.5 to 10 N*m, the facets' share of a 1000 N follower load; and the prior: (parameter
+    - prior centre) / prior spread for every parameter (``prior_spread``: {name: spread in fit units}, default
+    :func:`lumbar.experiments.priors.default_spreads`; the centre is ``charset``'s own value, i.e. force scale 1 and
+    no pre-elongation change for the ligaments). The data rows enter as (sim - measured) / (``data_sd_rel`` x
+    measured). The minimum is a MAP estimate (penalties = soft constraints); its Laplace posterior (the Gauss-Newton
+    Hessian of the same stacked residuals at the optimum) is :attr:`AdmissibleFit.posterior`. The Jacobian is finite
     differences of the linearised equilibria (one Newton step per parameter, :class:`_Probe`). ``start``: {parameter
     name: value in fit units} to start from (e.g. a previous fit). The admissibility of the result is checked
     afterwards on 0.25 N*m curves (:func:`admissibility.evaluate`).
@@ -1336,6 +1418,12 @@ def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", publ
         lo.append(math.log10(charset.disc.k_shear_range[0]))
         hi.append(math.log10(charset.disc.k_shear_range[1]))
         x0.append(float(np.clip(math.log10(ks0), lo[-1], hi[-1])))
+    if fit_disc_torque:
+        for d in charset.disc.torque:
+            names.append(f"disc_torque:{d}")
+            lo.append(math.log10(DISC_TORQUE_SCALE_BOUNDS[0]))
+            hi.append(math.log10(DISC_TORQUE_SCALE_BOUNDS[1]))
+            x0.append(0.0)
     lo, hi, prior_q = np.array(lo), np.array(hi), np.array(x0)
     q_start = prior_q.copy()
     for j, n in enumerate(names):
@@ -1362,17 +1450,42 @@ def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", publ
         m.k_stiff[:] = k0 * (cs.facet.stiffness / base.facet.stiffness)
         for d in m.discs:
             d.k_shear = cs.disc.k_shear
+            d.torque = dict(cs.disc.torque)
         return cs
 
     directions = list(t["direction"])
     last = {}
 
+    prior_sd = np.array([(prior_spread or {}).get(n, d) for n, d in zip(names, default_spreads(names, lo, hi))], float)
+    if np.any(~np.isfinite(prior_sd)) or np.any(prior_sd <= 0):
+        raise ValueError(f"fit_admissible: every prior spread must be finite and > 0, got {dict(zip(names, prior_sd))}")
+
+    # the disc-only rows (the stage the disc law was fitted on) as data too, in torque space at the measured angle
+    # (Eq. 3 as step 1 fits it): the disc torque scales are then informed by their own data, not only by a prior
+    dr = [] if disc_rows is None or not fit_disc_torque else \
+        [(str(r.direction), float(r.moment_nm), math.radians(float(r.rom_mean_deg)))
+         for r in disc_rows.itertuples(index=False) if str(r.direction) in charset.disc.torque]
+    torque_idx = {n.split(":")[1]: j for j, n in enumerate(names) if n.startswith("disc_torque:")}
+
+    def disc_residuals(q):
+        out = []
+        for d, M, phi in dr:
+            p1, p2, p3 = charset.disc.torque[d]
+            sc = 10.0 ** q[torque_idx[d]] if d in torque_idx else 1.0
+            out.append((float(eq3(phi, (p1 * sc, p2, p3 * sc))) - M) / (data_sd_rel * M))
+        return np.array(out)
+
     def from_metrics(q, mt):
         pen = _fit_penalties(mt, limit, nz) + _scale_penalties(names, q, mt)
         rel = (_rom_of(mt, directions) - measured) / measured
         edge = np.maximum(0.0, np.abs(rel) - FIT_MARGIN["rom_rel"]) / 0.05
-        return np.concatenate([rel / 0.25, PENALTY_WEIGHT * edge, PENALTY_WEIGHT * np.array([v for _, v in pen]),
-                               reg_weight * (q - prior_q)]), pen
+        return np.concatenate([rel / data_sd_rel, disc_residuals(q), PENALTY_WEIGHT * edge,
+                               PENALTY_WEIGHT * np.array([v for _, v in pen]), (q - prior_q) / prior_sd]), pen
+
+    def residual_names(pen):
+        return [f"ROM {d} (data)" for d in directions] + \
+            [f"disc-only {d} {M:g} N*m (data)" for d, M, _ in dr] + \
+            [f"ROM {d} (25 % band constraint)" for d in directions] + [n for n, _ in pen] + [f"prior {n}" for n in names]
 
     def residual(q):
         apply(q)
@@ -1380,7 +1493,7 @@ def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", publ
         x, R, ok = probe.run()
         if not ok:
             last.clear()
-            return np.full(n_res[0] or 2 * len(measured) + 40 + len(q), PENALTY)
+            return np.full(n_res[0] or 2 * len(measured) + len(dr) + 40 + len(q), PENALTY)
         mt = probe.metrics(x, R)
         r, pen = from_metrics(q, mt)
         n_res[0] = len(r)
@@ -1428,6 +1541,10 @@ def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", publ
     residual(q)
     if not last:
         raise RuntimeError("fit_admissible: the fitted set has no equilibrium in every probe scenario")
+    J_map = jacobian(q)
+    residual(q)
+    post = laplace_posterior(names, q, prior_q, prior_sd, lo, hi, J_map, last["r"], residual_names(last["pen"]),
+                             n_data=len(measured) + len(dr))
     cs = _set_with(base, names, q)
     cs = dataclasses.replace(cs, ligaments={k: dataclasses.replace(v, source="calibrated on elongation (fit_admissible)")
                                             for k, v in cs.ligaments.items()})
@@ -1437,7 +1554,7 @@ def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", publ
     at_bound = (q - lo <= AT_BOUND_FRACTION * width) | (hi - q <= AT_BOUND_FRACTION * width)
     rows = []
     for j, n in enumerate(names):
-        if n.endswith(":scale"):
+        if n.endswith(":scale") or n.startswith("disc_torque:"):
             value, unit, start_v, lower, upper, bu = 10.0 ** q[j], "force scale (-)", 1.0, 10.0 ** lo[j], \
                 10.0 ** hi[j], "force scale (-)"
         elif n.endswith(":pre_elongation"):
@@ -1457,7 +1574,35 @@ def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", publ
              "penalties: %s", n_eval[0], n_eval[1], 0.5 * float(r_start @ r_start), float(sol.cost),
              np.round(rom, 2).tolist(), ", ".join(f"{n} {v:.2g}" for n, v in last["pen"] if v > 0) or "none")
     return AdmissibleFit(cs, pd.DataFrame(rows), tt, float(sol.cost), n_eval[0], probe=mt, penalties=pen,
-                         prior=charset)
+                         prior=charset, posterior=post)
+
+
+POSTERIOR_COLUMNS = ("parameter", "unit", "fit_unit", "prior_centre", "prior_90_low", "prior_90_high",
+                     "prior_centre_fit", "prior_spread_fit", "map", "posterior_90_low", "posterior_90_high", "map_fit",
+                     "posterior_spread_fit", "spread_ratio", "shift_prior_sd", "moved_by", "data_moved_it", "at_bound",
+                     "bound_reason", "prior_source", "prior", "data_spread")
+
+
+def posterior_tables(fit: AdmissibleFit | None, prior_name: str = "") -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(results/calibration/posterior.csv, posterior_covariance.csv) of the final admissible fit: per parameter the
+    prior (centre, spread, source), the MAP, the Laplace 90 % interval, posterior/prior spread, which rows moved it
+    and the at-bound flag with its reason (:func:`lumbar.experiments.posterior.posterior_table`); empty tables with
+    the columns when there was no admissible fit (a strain-transfer calibration)."""
+    from .posterior import covariance_table, posterior_table  # noqa: PLC0415 - only the calibration writes them
+    from .priors import prior_sources  # noqa: PLC0415
+
+    if fit is None or fit.posterior is None:
+        return pd.DataFrame(columns=list(POSTERIOR_COLUMNS)), \
+            pd.DataFrame(columns=["parameter_i", "parameter_j", "covariance"])
+    post = fit.posterior
+    src = prior_sources(post.names, prior_name or "table3")
+    for n in post.names:
+        if n.startswith("disc_torque:"):
+            src[n] = ("centre: the disc-only fit (step 1, Eq. 3 on the disc-only rows); spread: that of a measured "
+                      f"row, {DATA_SD_REL:.0%} (assumed: no specimen spread published)")
+    tab = posterior_table(post, src, BOUND_REASONS).assign(
+        prior=prior_name, data_spread=f"{DATA_SD_REL:.0%} of each measured ROM row (assumed; none published)")
+    return tab[list(POSTERIOR_COLUMNS)], covariance_table(post)
 
 
 def read_fit_start(path) -> dict | None:

@@ -346,13 +346,20 @@ def cable_load_paths(idp: pd.DataFrame) -> pd.DataFrame:
     return out
 
 
-def plot_curves(curves_by_set: dict, reference: pd.DataFrame | None, path, stage="intact") -> None:
+def plot_curves(curves_by_set: dict, reference: pd.DataFrame | None, path, stage="intact",
+                bands: pd.DataFrame | None = None) -> None:
     """Moment-rotation curves of the unit (one panel per direction, one line per characteristic set) with the
-    in-vitro ROM at 10 N*m (and its +-25 % band) of ``reference`` (columns direction, value_deg)."""
+    in-vitro ROM at 10 N*m (and its +-25 % band) of ``reference`` (columns direction, value_deg) and, shaded, the
+    calibrated set's 90 % posterior band of the rotation (``bands``: results/load_sharing/bands_calibrated.csv)."""
     from ..inputs.io import save_figure_atomic, subplots  # noqa: PLC0415 - io draws only for figure callers
     fig, axes = subplots(2, 3, figsize=(12, 7))
     ref = {} if reference is None else dict(zip(reference["direction"], reference["value_deg"]))
     for ax, d in zip(axes.ravel(), CURVE_DIRECTIONS):
+        if bands is not None and len(bands) and stage == "intact":
+            b = bands[(bands["direction"] == d) & (bands["quantity"] == "rotation_deg")].sort_values("moment_nm")
+            if len(b):
+                ax.fill_between(b["moment_nm"], b["low90"], b["high90"], color="C0", alpha=0.18, lw=0,
+                                label="calibrated, 90 % posterior band")
         for i, (name, cv) in enumerate(curves_by_set.items()):
             g = cv[(cv["stage"] == stage) & (cv["direction"] == d)].sort_values("moment_nm")
             lw = 2.2 if name == "calibrated" else 1.0

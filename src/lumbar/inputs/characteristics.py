@@ -263,7 +263,9 @@ _BOUNDS = {
     "n_strands": (1.0, 20.0, "1"),
     "softplus.a": (-1e6, 1e6, "N"), "softplus.c": (-1e6, 1e6, "N"),
     "softplus.b": (-200.0, 200.0, "%"), "softplus.d": (-200.0, 200.0, "%"),
-    "softplus.law_length": (0.0, 200.0, "mm"), "softplus.prestrain": (-50.0, 50.0, "%"),
+    # a law on elongation keeps its pre-elongation in percent of its law length: a short capsule slack by more than
+    # half its law length at rest is a model value (the Remus et al. 2021 capsules are), a whole law length is the limit
+    "softplus.law_length": (0.0, 200.0, "mm"), "softplus.prestrain": (-100.0, 100.0, "%"),
 }
 
 

@@ -426,6 +426,16 @@ class ReportBuilder:
             if miss:
                 text += "; it misses " + "; ".join(miss)
             out.append(text + ".")
+            w, n = counts.get(V.INTERNAL, (0, 0))
+            if n:
+                g = d[d["role"] == V.INTERNAL]
+                miss = [f"{V.condition_label(r.condition)}" for r in g.itertuples() if not r.within]
+                wc, nc = counts.get(V.CONSTRAINT, (0, 0))
+                out.append(f"Internal loads of the calibrated unit (facet contact forces against in-vitro "
+                           f"measurements; judged, never fitted): {w} of {n} within"
+                           + (f" (outside: {', '.join(miss)})" if miss else "")
+                           + (f"; the ligament roles and the facet share of compression, which the fit also holds "
+                              f"as constraints, {wc} of {nc}" if nc else "") + " (Tables R3 and R4).")
             w, n = counts.get(V.TARGET, (0, 0))
             out.append(f"Calibration targets (a fit quality, not a validation): {w} of {n} met." if n else
                        "Calibration targets: none in this configuration.")
@@ -479,7 +489,9 @@ class ReportBuilder:
                           f"the CSV's tolerance_rule. Every row, with its source: {rel}. Agreement with the "
                           "SURROGATE tables further below is a method check, not a validation."))
         titles = {V.INDEPENDENT: ("R1", "Independent checks (validation)"),
-                  V.TARGET: ("R2", "Calibration targets (fit quality, not validation)")}
+                  V.TARGET: ("R2", "Calibration targets (fit quality, not validation)"),
+                  V.INTERNAL: ("R3", "Internal loads, independent checks (judged, never fitted)"),
+                  V.CONSTRAINT: ("R4", "Internal loads the fit also holds as constraints (not independent)")}
         for role, (w, n) in V.role_counts(d).items():
             g = d[d["role"] == role]
             label, title = titles.get(role, (None, role))
@@ -488,11 +500,14 @@ class ReportBuilder:
                 q = f"{V.condition_label(r.quantity)} [{V.unit_label(r.unit)}]"
                 band = (f"{fmt(r.band_low)} to {fmt(r.band_high)}" if np.isfinite(r.band_low) else "")
                 sim = fmt(r.sim) if np.isfinite(r.sim) else "no value"
+                if np.isfinite(getattr(r, "sim_band_low", np.nan)):
+                    sim += f" ({fmt(r.sim_band_low)} to {fmt(r.sim_band_high)})"
                 rows.append([q if q != last else "", V.condition_label(r.condition), sim, fmt(r.measured), band,
                              CHECK if r.within else CROSS, V.sets_label(r.sets)])
                 last = q
             self.table_block(f"{title}: {w} of {n} distinct comparisons within", ["quantity [unit]", "condition",
-                             "simulated", "measured", "acceptance interval", "within", "simulated by"], rows,
+                             "simulated (90 % posterior band)", "measured", "acceptance interval", "within",
+                             "simulated by"], rows,
                              source=rel, label=f"Table {label}" if label else None, marks=True, key_cols=2)
 
     def warnings(self) -> list[tuple[str, str]] | None:

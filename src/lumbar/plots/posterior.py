@@ -1,0 +1,39 @@
+"""Figure of the calibration's posterior (matplotlib object API, no pyplot, no backend switching): every fitted
+parameter's prior and posterior 90 % interval on one axis, in units of its prior spread."""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from ..inputs.io import save_figure_atomic, subplots
+
+#: two-sided 90 % interval of a normal distribution: +- Z90 standard deviations (lumbar.experiments.posterior.Z90)
+Z90 = 1.6448536269514722
+
+
+def plot_prior_posterior(table: pd.DataFrame, path) -> None:
+    """One row per parameter of results/calibration/posterior.csv: the prior's 90 % interval (grey, -1.645 to +1.645
+    prior spreads about its centre) and the posterior's (blue bar, MAP dot), both in prior spreads from the prior
+    centre, so that a shift and a narrowing read alike for every unit; a parameter at a bound is marked red."""
+    t = table.reset_index(drop=True)
+    n = len(t)
+    fig, ax = subplots(1, 1, figsize=(8.0, 0.32 * n + 1.4))
+    y = np.arange(n)[::-1]
+    s = t["prior_spread_fit"].to_numpy(float)
+    shift = (t["map_fit"].to_numpy(float) - t["prior_centre_fit"].to_numpy(float)) / s
+    half = Z90 * t["posterior_spread_fit"].to_numpy(float) / s
+    ax.barh(y, 2 * Z90, left=-Z90, height=0.7, color="0.85", label="prior, 90 %")
+    ax.barh(y, 2 * half, left=shift - half, height=0.38, color="C0", alpha=0.75, label="posterior, 90 % (Laplace)")
+    at_b = t["at_bound"].astype(bool).to_numpy()
+    ax.plot(shift[~at_b], y[~at_b], "o", color="C0", ms=4, label="MAP")
+    if at_b.any():
+        ax.plot(shift[at_b], y[at_b], "s", color="C3", ms=5, label="MAP at a bound")
+    ax.axvline(0.0, color="0.4", lw=0.8)
+    ax.set_yticks(y)
+    ax.set_yticklabels([p.replace("_", " ") for p in t["parameter"]], fontsize=8)
+    ax.set_xlabel("(value - prior centre) / prior spread  [fit units: log10 scale, mm, log10 N/m]")
+    ax.set_title("What the data told us: prior and posterior of every calibrated parameter", fontsize=10)
+    ax.legend(fontsize=7, loc="lower right")
+    ax.grid(axis="x", alpha=0.3)
+    fig.tight_layout()
+    save_figure_atomic(fig, path, dpi=110)

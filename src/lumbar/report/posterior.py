@@ -1,0 +1,96 @@
+"""Report section "What the data told us": the calibration as a regularised inverse problem. Every fitted parameter's
+sourced prior beside its posterior (MAP and Laplace 90 % interval), which rows moved it, and the 90 % posterior
+bands of the calibrated unit's range of motion and internal loads. Every number is read from the result files
+(workflow/rules/calibration.smk, load_sharing.smk); registered after the calibration section."""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from .sections import ReportBuilder, fmt, report_section
+
+POSTERIOR = "results/calibration/posterior.csv"
+BANDS = "results/load_sharing/bands_calibrated.csv"
+FIGURE = "results/figures/calibration_posterior.png"
+#: the rows of the band table shown in the report: (direction, moment, quantity, label)
+BAND_ROWS = (("flexion", 10.0, "rotation_deg", "flexion ROM, 10 N*m [deg]"),
+             ("extension", 10.0, "rotation_deg", "extension ROM, 10 N*m [deg]"),
+             ("lateral_bending", 10.0, "rotation_deg", "lateral bending ROM (mean of sides), 10 N*m [deg]"),
+             ("axial_rotation", 10.0, "rotation_deg", "axial rotation ROM (mean of sides), 10 N*m [deg]"),
+             ("extension", 7.5, "facet_max_contact_n", "facet force (larger joint), extension 7.5 N*m [N]"),
+             ("axial_rotation_left", 7.5, "facet_max_contact_n", "facet force (loaded joint), axial rotation 7.5 N*m [N]"),
+             ("flexion", 10.0, "ISL_tension_n", "ISL tension, flexion 10 N*m [N]"),
+             ("flexion", 10.0, "SSL_tension_n", "SSL tension, flexion 10 N*m [N]"),
+             ("flexion", 10.0, "CL_tension_n", "capsular ligaments, flexion 10 N*m [N]"),
+             ("flexion", 10.0, "FL_tension_n", "flavum, flexion 10 N*m [N]"),
+             ("flexion", 10.0, "ITL_tension_n", "intertransverse ligaments, flexion 10 N*m [N]"),
+             ("extension", 7.5, "disc_axial_force_n", "disc axial force, extension 7.5 N*m [N]"))
+
+
+def _value(unit: str, v: float) -> str:
+    return fmt(v) if "mm" in unit else fmt(v, 3)
+
+
+def posterior_sentence(t: pd.DataFrame) -> str:
+    """How many parameters the data moved, which stayed at their prior, which are at a bound: for the summary."""
+    moved = t[t["data_moved_it"].astype(bool)]
+    stayed = t[~t["data_moved_it"].astype(bool)]
+    bound = t[t["at_bound"].astype(bool)]
+    s = (f"The calibration is a MAP estimate over {len(t)} parameters with sourced priors; the four intact ROM values "
+         f"and the admissibility constraints moved {len(moved)} of them, {len(stayed)} stay at their prior "
+         f"({', '.join(stayed['parameter']) or 'none'})")
+    s += f"; {len(bound)} end at a bound ({', '.join(bound['parameter'])})." if len(bound) else "; none ends at a bound."
+    far = t.loc[t["shift_prior_sd"].abs().idxmax()] if len(t) else None
+    if far is not None:
+        s += (f" The largest move is {far['parameter']}: {fmt(far['shift_prior_sd'])} prior spreads, moved by "
+              f"{far['moved_by'] or 'no single row'}.")
+    return s
+
+
+@report_section("posterior", "What the data told us: priors, posterior and bands", after="calibration")
+def posterior_section(b: ReportBuilder):
+    if not b.has(POSTERIOR):
+        b.missing("Calibration posterior (posterior.csv)")
+        return
+    t = pd.read_csv(b.path(POSTERIOR))
+    if t.empty:
+        b.para("This calibration has no admissible (MAP) fit, hence no posterior (ligament_transfer: strain).")
+        return
+    b.para("Four intact range-of-motion values cannot pin down twenty parameters: the calibration therefore gives "
+           "each parameter a sourced prior (centre and spread) and minimises the data misfit over the data's spread "
+           "plus the prior misfit over the prior's spread, with the admissibility criteria as soft penalties (a MAP "
+           "estimate). The posterior is the Laplace approximation of that same objective at its optimum. "
+           + posterior_sentence(t) + " Data spread: " + str(t["data_spread"].iloc[0]) + ". Design: "
+           "docs/load_sharing.md.")
+    rows = []
+    for r in t.itertuples(index=False):
+        rows.append([r.parameter.replace("_", " "), r.unit,
+                     f"{_value(r.unit, r.prior_centre)} ({_value(r.unit, r.prior_90_low)} to "
+                     f"{_value(r.unit, r.prior_90_high)})",
+                     f"{_value(r.unit, r.map)} ({_value(r.unit, r.posterior_90_low)} to "
+                     f"{_value(r.unit, r.posterior_90_high)})",
+                     fmt(r.spread_ratio, 2), fmt(r.shift_prior_sd, 2),
+                     (r.moved_by if isinstance(r.moved_by, str) and r.moved_by else "stays at its prior"),
+                     ("yes: " + str(r.bound_reason)) if bool(r.at_bound) else "no"])
+    b.table_block("Prior and posterior of every calibrated parameter", [
+        "parameter", "unit", "prior centre (90 %)", "MAP (posterior 90 %)", "posterior / prior spread",
+        "shift [prior spreads]", "moved by (share of the pull)", "at a bound"], rows, source=POSTERIOR,
+        label="Table P",
+        note="Prior sources per parameter: the CSV's prior_source column. A spread ratio near 1 with a shift near 0: "
+             "the data did not inform the parameter.")
+    b.figure(FIGURE, "Prior (grey) and posterior (blue) 90 % interval of every calibrated parameter, in prior "
+             "spreads from the prior centre.", label="Fig. P")
+    if b.has(BANDS):
+        bd = pd.read_csv(b.path(BANDS))
+        rows = []
+        for d, M, q, label in BAND_ROWS:
+            g = bd[(bd["direction"] == d) & np.isclose(bd["moment_nm"], M) & (bd["quantity"] == q)]
+            if len(g):
+                r = g.iloc[0]
+                rows.append([label, fmt(r["map"]), f"{fmt(r['low90'])} to {fmt(r['high90'])}"])
+        b.table_block("The calibrated unit's predictions with their 90 % posterior band (intact)",
+                      ["prediction", "MAP", "90 % band"], rows, source=BANDS,
+                      note="Linearisation of the posterior (one finite-difference step per parameter); every "
+                           "direction and moment of the curves is in the CSV.")
+    else:
+        b.missing("Posterior bands of the intact curves (bands_calibrated.csv)")

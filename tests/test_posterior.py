@@ -1,0 +1,243 @@
+"""The calibration as a regularised inverse problem: sourced priors (lumbar.experiments.priors), the Laplace posterior
+and the linearised prediction bands (lumbar.experiments.posterior), the internal-load rows of the real-data
+scoreboard (lumbar.experiments.validation.internal_load_rows). Analytic cases, limits and controls that fail for the
+wrong mechanism."""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from lumbar.experiments import posterior as P
+from lumbar.experiments import priors as PR
+from lumbar.experiments import validation as V
+from lumbar.inputs.characteristics import SoftplusLaw, load_characteristic_set
+
+
+# ------------------------------------------------------------------ Laplace posterior: the linear-Gaussian case
+def _linear_posterior(A, y, sigma, centre, spread, q=None):
+    """Posterior of y = A q + noise(sigma), q ~ N(centre, spread^2), through laplace_posterior at the exact MAP."""
+    A, y = np.asarray(A, float), np.asarray(y, float)
+    centre, spread = np.asarray(centre, float), np.asarray(spread, float)
+    H = A.T @ A / sigma**2 + np.diag(1.0 / spread**2)
+    q_map = np.linalg.solve(H, A.T @ y / sigma**2 + centre / spread**2) if q is None else q
+    J = np.vstack([A / sigma, np.diag(1.0 / spread)])
+    r = np.concatenate([(A @ q_map - y) / sigma, (q_map - centre) / spread])
+    names = [f"p{j}" for j in range(A.shape[1])]
+    rnames = [f"row {i}" for i in range(len(y))] + [f"prior {n}" for n in names]
+    post = P.laplace_posterior(names, q_map, centre, spread, np.full(len(names), -1e9), np.full(len(names), 1e9), J,
+                               r, rnames, n_data=len(y))
+    return post, np.linalg.inv(H)
+
+
+def test_laplace_posterior_equals_the_analytic_gaussian_posterior():
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(4, 3))
+    post, cov = _linear_posterior(A, rng.normal(size=4), 0.3, np.zeros(3), np.array([1.0, 0.5, 2.0]))
+    np.testing.assert_allclose(post.cov, cov, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(post.sd, np.sqrt(np.diag(cov)), rtol=1e-10)
+
+
+def test_band_narrows_with_the_data_spread_and_widens_with_the_prior_spread():
+    A = np.array([[1.0, 0.5], [0.2, 1.0], [1.0, -1.0]])
+    g = np.array([[1.0, 1.0]])                       # a prediction that depends on both parameters
+    base = _linear_posterior(A, np.ones(3), 0.5, np.zeros(2), np.ones(2))[0].band(g)[0]
+    tight_data = _linear_posterior(A, np.ones(3), 0.1, np.zeros(2), np.ones(2))[0].band(g)[0]
+    wide_prior = _linear_posterior(A, np.ones(3), 0.5, np.zeros(2), np.full(2, 5.0))[0].band(g)[0]
+    assert tight_data < base < wide_prior
+    # limits: no data information -> the prior's own spread; a prediction of nothing -> 0
+    none = _linear_posterior(np.zeros((3, 2)), np.ones(3), 0.5, np.zeros(2), np.array([2.0, 3.0]))[0]
+    assert none.band(g)[0] == pytest.approx(math.hypot(2.0, 3.0))
+    assert none.band(np.zeros((1, 2)))[0] == 0.0
+
+
+def test_moved_by_names_the_row_that_pulls_and_stayed_at_prior_the_parameter_no_row_touches():
+    # p0 is measured by row 0 only (far from its prior), p1 by nothing
+    A = np.array([[1.0, 0.0], [0.0, 0.0]])
+    post, _ = _linear_posterior(A, np.array([3.0, 0.0]), 0.2, np.zeros(2), np.ones(2))
+    assert post.moved_by(0)[0].startswith("row 0")
+    assert post.moved_by(1) == []
+    assert list(post.stayed_at_prior()) == [False, True]
+    t = P.posterior_table(post)
+    assert bool(t.loc[0, "data_moved_it"]) and not bool(t.loc[1, "data_moved_it"])
+    assert t.loc[0, "spread_ratio"] < 0.3 and t.loc[1, "spread_ratio"] == pytest.approx(1.0)
+    # control: the same parameter with no data row keeps its prior: a test built to fail if moved_by ignored signs
+    post2, _ = _linear_posterior(A, np.array([0.0, 0.0]), 0.2, np.zeros(2), np.ones(2))
+    assert post2.moved_by(0) == []
+
+
+def test_covariance_table_round_trip():
+    post, cov = _linear_posterior(np.eye(2), np.ones(2), 0.5, np.zeros(2), np.ones(2))
+    names, C = P.read_covariance(P.covariance_table(post))
+    assert names == post.names
+    np.testing.assert_allclose(C, cov, rtol=1e-12)
+
+
+def test_linearised_band_of_a_linear_prediction_is_exact():
+    cov = np.array([[0.04, 0.01], [0.01, 0.09]])
+    g = np.array([[2.0, -1.0], [0.5, 3.0]])
+
+    def predict(q):
+        return g @ np.asarray(q, float)
+
+    def shift(q, name, d):
+        q = np.array(q, float)
+        q[int(name[1:])] += d
+        return q
+
+    y, sd, G = P.linearised_band(predict, np.zeros(2), ["p0", "p1"], cov, shift)
+    np.testing.assert_allclose(G, g, rtol=1e-9)
+    np.testing.assert_allclose(sd, np.sqrt(np.einsum("ij,jk,ik->i", g, cov, g)), rtol=1e-9)
+
+
+# ------------------------------------------------------------------ the Remus et al. (2021) prior
+MAT = {"reference_strain": -0.02, "transition_strain": 0.06, "stiffness_n": 200.0, "cross_section_mm2": 10.0}
+
+
+def test_remus_as_softplus_reproduces_the_uw_law_of_the_fibres():
+    lengths = np.array([0.010, 0.012, 0.015])
+    law, info = PR.remus_as_softplus([("G", lengths)], {"G": MAT})
+    e = np.linspace(0.0, PR.REMUS_FIT_ELONGATION_M, 61)
+    F = PR.remus_group_force(lengths, MAT, e)
+    assert np.abs(PR.law_force(law, e) - F).max() <= 0.03 * F.max()
+    assert info["fit_max_deviation_n"] <= 0.03 * F.max()
+    # pre-elongation: the fibres' mean l_geometric - l0 = -reference strain x l_geometric (pre-stretched here)
+    assert law.pre_elongation_m == pytest.approx(0.02 * lengths.mean(), rel=1e-9)
+    # a slack ligament (positive reference strain) has a negative pre-elongation
+    slack, _ = PR.remus_as_softplus([("G", lengths)], {"G": {**MAT, "reference_strain": 0.1}})
+    assert slack.pre_elongation_m < 0
+
+
+def test_remus_group_force_is_zero_until_slack_and_linear_beyond_transition():
+    L = np.array([0.02])
+    m = {**MAT, "reference_strain": 0.0}
+    e = np.array([0.0, 0.02 * 0.03, 0.02 * 0.10, 0.02 * 0.20])
+    F = PR.remus_group_force(L, m, e)
+    assert F[0] == 0.0
+    assert F[1] == pytest.approx(200.0 * 0.03**2 / (2 * 0.06))
+    assert F[3] - F[2] == pytest.approx(200.0 * 0.10)
+
+
+def _law(a, pre_mm=1.0, L=0.01):
+    return SoftplusLaw(a, -2.0, 0.0, 1.0, 100.0 * pre_mm * 1e-3 / L, law_length_m=L)
+
+
+def test_ligament_spreads_follow_the_disagreement_of_the_two_sources():
+    a = {"ALL": _law(10.0), "CL": _law(10.0), "ISL": _law(10.0, 2.0), "ITL": _law(10.0)}
+    b = {"ALL": _law(10.0), "CL": _law(100.0), "ISL": _law(1000.0, 0.0), "ITL": _law(1.0e4)}
+    dis = PR.source_disagreement(a, b)
+    s = PR.ligament_spreads(dis)
+    # agreeing sources: the floor; a factor of 10: one decade; a factor of 100 and 2 mm: two decades, 2 mm
+    assert s["ALL:scale"] == PR.MIN_SCALE_LOG10_SD
+    assert s["ALL:pre_elongation"] == PR.MIN_PRE_ELONGATION_SD_MM
+    assert s["CL:scale"] == pytest.approx(1.0, rel=1e-6)
+    assert s["ISL:scale"] == pytest.approx(2.0, rel=0.05)
+    assert s["ISL:pre_elongation"] == pytest.approx(2.0, rel=1e-9)
+    # the ITL's second source is no calibration: its 3-decade disagreement is replaced by the calibrated kinds' median
+    assert s["ITL:scale"] == pytest.approx(1.0, rel=1e-6)
+
+
+def test_default_spreads_cover_every_fit_parameter_and_reject_an_unknown_one():
+    names = ["ALL:scale", "ALL:pre_elongation", "facet_stiffness", "disc_shear", "disc_torque:flexion"]
+    sd = PR.default_spreads(names, np.zeros(5), np.array([0, 0, 0, 0.4, 0]))
+    assert sd[3] == pytest.approx(0.1)
+    assert np.all(sd > 0)
+    with pytest.raises(ValueError, match="no default prior spread"):
+        PR.default_spreads(["bogus"], np.zeros(1), np.ones(1))
+
+
+@pytest.fixture(scope="module")
+def vh_geometry():
+    from lumbar.geometry import load_geometry
+    return load_geometry("visible_human", path=_vh_path(), levels=["L4-L5"])
+
+
+def _vh_path():
+    from lumbar.inputs.resources import data_dir
+    return data_dir() / "geometry" / "visible_human_lss"
+
+
+def test_calibration_prior_is_the_remus_law_of_the_same_fibres(vh_geometry):
+    from lumbar.experiments.calibration import calibration_prior
+    from lumbar.geometry.visible_human import read_uw_materials
+
+    path = _vh_path()
+    cs, prov, spreads = calibration_prior(None, vh_geometry, "L4-L5", path, "remus2021")
+    mats = read_uw_materials(path, "L4-L5")
+    for kind in ("ALL", "CL", "ISL"):
+        groups = PR.level_fibre_groups(vh_geometry.levels["L4-L5"], kind)
+        e = np.array([3e-3])
+        remus = np.mean([PR.remus_group_force(L, mats[n], e) for n, L in groups])
+        assert float(PR.law_force(cs.ligaments[kind], e)[0]) == pytest.approx(float(remus), rel=0.05)
+        assert f"{kind}:scale" in spreads and f"{kind}:pre_elongation" in spreads
+    assert set(prov["prior"]) == {"remus2021"}
+    t3, _, _ = calibration_prior(None, vh_geometry, "L4-L5", path, "table3")
+    assert t3.ligaments["ALL"].a != cs.ligaments["ALL"].a       # control: the switch changes the centre
+    with pytest.raises(ValueError, match="ligament prior"):
+        calibration_prior(None, vh_geometry, "L4-L5", path, "remus")
+
+
+def test_shift_parameter_moves_one_parameter_in_fit_units():
+    from lumbar.experiments.calibration import shift_parameter
+    cs = load_characteristic_set("calibrated")
+    cs = dataclasses.replace(cs, ligaments={**cs.ligaments, "ALL": dataclasses.replace(cs.ligaments["ALL"],
+                                                                                          law_length_m=0.01)})
+    s = shift_parameter(cs, "ALL:scale", 1.0)
+    assert s.ligaments["ALL"].a == pytest.approx(10 * cs.ligaments["ALL"].a)
+    assert s.ligaments["ALL"].c == pytest.approx(10 * cs.ligaments["ALL"].c)
+    p = shift_parameter(cs, "ALL:pre_elongation", 0.5)
+    assert p.ligaments["ALL"].pre_elongation_m - cs.ligaments["ALL"].pre_elongation_m == pytest.approx(0.5e-3)
+    f = shift_parameter(cs, "facet_stiffness", math.log10(2.0))
+    assert f.facet.stiffness == pytest.approx(2 * cs.facet.stiffness)
+    d = shift_parameter(cs, "disc_torque:extension", math.log10(3.0))
+    p1, p2, p3 = cs.disc.torque["extension"]
+    assert d.disc.torque["extension"] == pytest.approx((3 * p1, p2, 3 * p3))
+    assert d.disc.torque["flexion"] == cs.disc.torque["flexion"]
+
+
+# ------------------------------------------------------------------ internal loads in the real-data scoreboard
+def _curves(facet_ext=60.0, isl=50.0, ssl=15.0, cl=2.0, fl=1.0):
+    rows = []
+    for d in ("flexion", "extension", "lateral_bending_right", "axial_rotation_left"):
+        for M in (7.5, 10.0):
+            rows.append({"stage": "intact", "direction": d, "moment_nm": M, "converged": True,
+                         "facet_left_contact_n": facet_ext if d == "extension" else 10.0, "facet_right_contact_n": 5.0,
+                         "ISL_tension_n": isl, "SSL_tension_n": ssl, "CL_moment_y_nm": -cl, "FL_moment_y_nm": -fl})
+    return pd.DataFrame(rows)
+
+
+def test_internal_load_rows_judge_facets_independently_and_mark_fit_constraints():
+    from lumbar.experiments.admissibility import read_literature
+    lit = read_literature()
+    comp = pd.DataFrame({"force_n": [0.0, 1000.0], "facet_share": [0.0, 0.1]})
+    rows = pd.DataFrame(V.internal_load_rows(_curves(), comp, lit))
+    facet = rows[rows["quantity"] == "facet contact force per joint"]
+    assert set(facet["role"]) == {V.INTERNAL} and len(facet) == 4
+    assert set(rows.loc[rows["quantity"] != "facet contact force per joint", "role"]) == {V.CONSTRAINT}
+    ext = facet[facet["condition"].str.startswith("extension")].iloc[0]
+    assert ext["sim"] == 60.0 and ext["within"]
+    # the band is mean +- 2 SD of the in-vitro row (51.5 +- 39 N)
+    assert ext["measured_high"] == pytest.approx(51.5 + 2 * 39.0)
+    # controls: a facet force beyond the band, an ISL weaker than the SSL, the flavum ahead of the capsules fail
+    bad = pd.DataFrame(V.internal_load_rows(_curves(facet_ext=200.0, isl=5.0, ssl=50.0, cl=1.0, fl=2.0), comp, lit))
+    assert not bad.loc[bad["condition"].str.startswith("extension"), "within"].iloc[0]
+    assert not bad.loc[bad["quantity"] == "ISL fraction of the ISL + SSL force", "within"].iloc[0]
+    assert not bad.loc[bad["quantity"] == "capsular over flavum moment", "within"].iloc[0]
+
+
+def test_scoreboard_band_columns_come_from_the_band_table_and_never_change_within():
+    rows = [{"quantity": "L4-L5 ROM", "condition": "intact flexion 10 N*m", "unit": "deg", "sim": 7.0, "measured": 8.9,
+             "measured_low": np.nan, "measured_high": np.nan, "kind": "original_text", "source": "s", "within": True,
+             "tolerance_rule": "r", "set": "calibrated", "role": V.INDEPENDENT, "note": ""},
+            {"quantity": "L4-L5 ROM", "condition": "intact flexion 10 N*m", "unit": "deg", "sim": 2.0, "measured": 8.9,
+             "measured_low": np.nan, "measured_high": np.nan, "kind": "original_text", "source": "s", "within": False,
+             "tolerance_rule": "r", "set": "paper_table3_as_published", "role": V.INDEPENDENT, "note": ""}]
+    bands = pd.DataFrame({"direction": ["flexion"], "moment_nm": [10.0], "quantity": ["rotation_deg"], "map": [7.0],
+                          "sd": [0.2], "low90": [6.6], "high90": [7.4], "converged": [True]})
+    df = V.scoreboard(rows, bands)
+    assert (df.loc[0, "sim_band_low"], df.loc[0, "sim_band_high"]) == (6.6, 7.4)
+    assert np.isnan(df.loc[1, "sim_band_low"])              # another set has no posterior band
+    assert list(df["within"]) == [True, False]

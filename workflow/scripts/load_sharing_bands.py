@@ -1,0 +1,52 @@
+"""Load-sharing stage, rule load_sharing_bands: the 90 % posterior bands of the calibrated unit's intact
+moment-rotation curves and internal loads, by linearisation (the calibration's Laplace posterior,
+results/calibration/posterior_covariance.csv; lumbar.experiments.posterior.curve_bands).
+
+By hand: python workflow/scripts/load_sharing_bands.py load_sharing_bands --configfile config/test/config.yaml
+"""
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _common.py
+import _common  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+from lumbar.experiments import load_sharing as LS  # noqa: E402
+from lumbar.experiments.calibration import shift_parameter  # noqa: E402
+from lumbar.experiments.fsu import build_fsu  # noqa: E402
+from lumbar.experiments.posterior import BAND_COLUMNS, curve_bands, read_posterior  # noqa: E402
+from lumbar.geometry import load_geometry  # noqa: E402
+from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
+from lumbar.inputs.io import write_table_atomic  # noqa: E402
+
+
+def main(snakemake, log):
+    g, f, s, ls = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solver, snakemake.params.ls
+    post = read_posterior(snakemake.input.posterior, snakemake.input.covariance)
+    if post is None:
+        log.info("the calibration has no posterior (no admissible fit): no bands")
+        write_table_atomic(pd.DataFrame(columns=list(BAND_COLUMNS)), snakemake.output.bands)
+        return
+    names, cov = post
+    geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
+    cs = load_characteristic_set("calibrated", data_dir=Path(_common.as_list(snakemake.input.characteristics)[0]).parent)
+    moments = np.round(np.arange(0.0, ls["max_moment_nm"] + 1e-9, ls["moment_step_nm"]), 6)
+
+    def build(c):
+        return build_fsu(geo, c, f["level"], facet_stiffness=f.get("facet_stiffness_n_per_m"),
+                         k_shear=f.get("disc_shear_stiffness_n_per_m"))
+
+    def curves_of(fsu):
+        return LS.moment_rotation_curves(fsu, moments_nm=moments, stages=("intact",), max_iter=s["max_iter"])
+
+    bands = curve_bands(build, cs, names, cov, shift_parameter, curves_of, list(LS.CURVE_DIRECTIONS), moments)
+    write_table_atomic(bands, snakemake.output.bands)
+    top = bands[np.isclose(bands["moment_nm"], moments[-1]) & (bands["quantity"] == "rotation_deg")]
+    log.info("posterior bands of the intact curves (%d parameters, %d values); rotation at %g N*m: %s", len(names),
+             len(bands), moments[-1], "; ".join(f"{r.direction} {r.map:.2f} +- {1.645 * r.sd:.2f} deg"
+                                               for r in top.itertuples()))
+
+
+if __name__ == "__main__":
+    smk, logger = _common.start(globals())
+    main(smk, logger)
