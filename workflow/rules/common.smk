@@ -300,8 +300,14 @@ def discovery_config(wildcards):
     """The config sections lumbar.discovery reads (canonical key order, see _sorted_keys)."""
     keys = ("geometry", "characteristics", "fsu", "solver", "l2s1", "discovery", "seed")
     cfg = {k: config[k] for k in keys if k in config}
-    # lumbar.discovery reads only characteristics.data_dir: a changed list of sets must not re-run discovery
+    # lumbar.discovery reads characteristics.data_dir and, for the set "calibrated", characteristics.calibrated_dir
+    # (the calibration output, declared input discovery_calibrated_tables): a changed list of sets must not re-run
+    # discovery, a dropped calibrated_dir would silently compare with the published Table 3 set
     cfg["characteristics"] = {"data_dir": config["characteristics"]["data_dir"]}
+    if config["discovery"]["characteristic_set"] == "calibrated":
+        cfg["characteristics"]["calibrated_dir"] = config["characteristics"][
+            "calibrated_dir"
+        ]
     # and of the stepwise-reduction section only the specimen variation (the ROM null bank's)
     cfg["stepwise_reduction"] = {
         "variation": config["stepwise_reduction"]["variation"],
