@@ -149,6 +149,23 @@ def discovery_calibrated_tables():
     )
 
 
+def muscle_passive_tables():
+    """The tables of the muscle model's passive set (muscle_model.passive_set): the calibration output
+    (characteristics.calibrated_dir; rule calibrate's files, so the DAG chains) for workflow_calibrated, the
+    published set "calibrated" of characteristics.data_dir for published_table3, else that literature set's tables.
+    The script reads the set from the folder of these files (lumbar.muscles.muscle_model.passive_characteristics).
+    """
+    name = config["muscle_model"]["passive_set"]
+    if name == "workflow_calibrated":
+        return characteristic_tables(
+            config["characteristics"]["calibrated_dir"], ["calibrated"]
+        )
+    return characteristic_tables(
+        config["characteristics"]["data_dir"],
+        ["calibrated" if name == "published_table3" else name],
+    )
+
+
 def characteristics_dir():
     """characteristics.data_dir as the location input of a rule (ancient, so its mtime is never a trigger)."""
     return ancient(config["characteristics"]["data_dir"])
