@@ -113,6 +113,23 @@ def test_invalid_characteristic_set():
     assert "characteristics.sets[0]" in _error({"characteristics": {"sets": ["nolte1991"]}})
 
 
+def test_muscle_passive_set_is_explicit():
+    """The muscle model's passive set defaults to the workflow's calibration and is one name, never the ambiguous
+    "calibrated" (the published Table 3 set is published_table3); the schema's names are the library's."""
+    from lumbar.muscles.muscle_model import passive_set_names
+
+    assert load_config({})["muscle_model"]["passive_set"] == "workflow_calibrated"
+    assert "characteristics" not in load_config({})["muscle_model"]
+    assert load_config({"muscle_model": {"passive_set": "published_table3"}})["muscle_model"]["passive_set"] == \
+        "published_table3"
+    assert "muscle_model.passive_set" in _error({"muscle_model": {"passive_set": "calibrated"}})
+    assert "muscle_model.characteristics" in _error({"muscle_model": {"characteristics": "calibrated"}})
+    import yaml
+    schema = yaml.safe_load(SCHEMA.read_text())
+    enum = schema["properties"]["muscle_model"]["properties"]["passive_set"]["enum"]
+    assert set(enum) == set(passive_set_names())
+
+
 def test_invalid_all_errors_reported():
     err = pytest.raises(ConfigError, load_config, {"seed": -1, "solver": {"load_steps": 0}}).value
     assert {p for p, _ in err.errors} == {"seed", "solver.load_steps"}

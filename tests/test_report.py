@@ -168,6 +168,19 @@ def test_report_numbers_read_from_files(fake_results):
     assert "Pure moments [2.5, 7.5] N*m" in text                # methods from the config
 
 
+def test_report_methods_name_the_set_of_each_model(fake_results):
+    """"Calibrated" is the workflow's own fit in every model; the muscle model's passive set is named by its config
+    key. Control: with the published set configured the methods say Table 3, not the workflow's calibration."""
+    tmp, config, inputs = fake_results
+    text = " ".join(parse_report(_build(tmp, config, inputs)[0]).text.split())
+    assert "'Calibrated' means this workflow's own calibration (rule calibrate, tables in " \
+           "results/calibration/characteristics" in text
+    assert "muscle_model.passive_set = workflow_calibrated): the workflow's calibrated set" in text
+    config["muscle_model"]["passive_set"] = "published_table3"
+    text = " ".join(parse_report(_build(tmp, config, inputs, "published")[0]).text.split())
+    assert "muscle_model.passive_set = published_table3): paper 1's published Table 3 set as printed" in text
+
+
 def test_report_absent_stages_are_notes_not_errors(fake_results):
     html_path, _, summary = _build(*fake_results)
     text = parse_report(html_path).text

@@ -153,6 +153,23 @@ def discovery_calibrated_tables():
     )
 
 
+def muscle_passive_tables():
+    """The tables of the muscle model's passive set (muscle_model.passive_set): the calibration output
+    (characteristics.calibrated_dir; rule calibrate's files, so the DAG chains) for workflow_calibrated, the
+    published set "calibrated" of characteristics.data_dir for published_table3, else that literature set's tables.
+    The script reads the set from the folder of these files (lumbar.muscles.muscle_model.passive_characteristics).
+    """
+    name = config["muscle_model"]["passive_set"]
+    if name == "workflow_calibrated":
+        return characteristic_tables(
+            config["characteristics"]["calibrated_dir"], ["calibrated"]
+        )
+    return characteristic_tables(
+        config["characteristics"]["data_dir"],
+        ["calibrated" if name == "published_table3" else name],
+    )
+
+
 def characteristics_dir():
     """characteristics.data_dir as the location input of a rule (ancient, so its mtime is never a trigger)."""
     return ancient(config["characteristics"]["data_dir"])
@@ -304,8 +321,14 @@ def discovery_config(wildcards):
     """The config sections lumbar.discovery reads (canonical key order, see _sorted_keys)."""
     keys = ("geometry", "characteristics", "fsu", "solver", "l2s1", "discovery", "seed")
     cfg = {k: config[k] for k in keys if k in config}
-    # lumbar.discovery reads only characteristics.data_dir: a changed list of sets must not re-run discovery
+    # lumbar.discovery reads characteristics.data_dir and, for the set "calibrated", characteristics.calibrated_dir
+    # (the calibration output, declared input discovery_calibrated_tables): a changed list of sets must not re-run
+    # discovery, a dropped calibrated_dir would silently compare with the published Table 3 set
     cfg["characteristics"] = {"data_dir": config["characteristics"]["data_dir"]}
+    if config["discovery"]["characteristic_set"] == "calibrated":
+        cfg["characteristics"]["calibrated_dir"] = config["characteristics"][
+            "calibrated_dir"
+        ]
     # and of the stepwise-reduction section only the specimen variation (the ROM null bank's)
     cfg["stepwise_reduction"] = {
         "variation": config["stepwise_reduction"]["variation"],

@@ -36,11 +36,10 @@ rule muscle_validation:
     input:
         in_vivo=config["muscle_model"]["in_vivo_table"],
         landmarks=geometry_inputs,
+        # the passive set's tables (muscle_model.passive_set; the script reads the set from their folder)
+        passive=muscle_passive_tables(),
         # read by lumbar.muscles.muscle_model from the repository's data/ (its defaults), not from config paths
-        data=characteristic_tables(
-            "data/characteristics", [config["muscle_model"]["characteristics"]]
-        )
-        + [
+        data=[
             "data/muscles/muscle_groups.csv",
             "data/anthropometry/upper_body_segments.csv",
         ],
@@ -69,6 +68,7 @@ rule muscle_validation:
         ),
         baseline="results/muscle_model/baseline.npz",
         fascicles="results/tables/muscle_fascicles.csv",
+        facet_contact="results/tables/muscle_facet_contact.csv",
         capacity=report(
             "results/tables/muscle_capacity.csv",
             caption="../report/muscle_capacity.rst",
@@ -90,6 +90,7 @@ rule muscle_validation:
 rule muscle_sensitivity:
     input:
         baseline="results/muscle_model/baseline.npz",
+        passive=muscle_passive_tables(),
     output:
         f"results/muscle_model/sensitivity/{MUSCLE_CHUNKS.wildcard_pattern}.csv",
     log:
@@ -147,6 +148,7 @@ rule muscle_sensitivity_table:
 rule muscle_sobol_chunk:
     input:
         baseline="results/muscle_model/baseline.npz",
+        passive=muscle_passive_tables(),
     output:
         "results/muscle_model/sobol/{posture}_{chunk}.csv",
     log:

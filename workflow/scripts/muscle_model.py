@@ -41,7 +41,10 @@ def _plt():
 
 
 def _model(p):
-    return mm.LumbarMuscleModel(body_mass_kg=p["body_mass_kg"], characteristics=p["characteristics"],
+    # the passive set's folder: the folder of its declared tables (rule input passive; muscle_model.passive_set)
+    d = Path(_common.as_list(snakemake.input.passive)[0]).parent
+    return mm.LumbarMuscleModel(body_mass_kg=p["body_mass_kg"], passive_set=p["passive_set"], data_dir=d,
+                                calibrated_dir=d,
                                 symmetric_passive=p.get("symmetric_passive", True),
                                 in_situ_posture=p.get("in_situ_posture", "reference"),
                                 iap_force_n=p.get("iap_force_n", 0.0))
@@ -191,6 +194,13 @@ if rule == "muscle_validation":
     tmp = Path(snakemake.output.baseline).with_suffix(".tmp.npz")
     np.savez(tmp, **base)
     tmp.replace(snakemake.output.baseline)
+    contact = mm.facet_contact(model, sols, names)
+    contact = contact[contact["activity"].isin(keep)]
+    write_table_atomic(contact, snakemake.output.facet_contact)
+    for lv, d in contact.groupby("level", sort=False):
+        log.info("facets %s (set %s, %.3g N/m): rest gap %.2f mm; contact force per posture %s", lv, p["passive_set"],
+                 d["facet_stiffness_n_per_m"].iat[0], d["rest_min_gap_mm"].min(),
+                 {a: round(float(v), 1) for a, v in d.groupby("activity", sort=False)["contact_n"].sum().items()})
     fas = model.ms.table()
     fas["l_ref_m"] = model.props.l_ref_m
     fas["l_opt_m"] = model.props.l_opt_m

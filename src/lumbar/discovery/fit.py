@@ -578,6 +578,9 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
     scen["model_after"] = after
     scen["z_after"] = z1
     scen["unit"] = problem.unit
+    for k in ("quantity", "nominal_model"):      # what is compared, and with which model (when the problem says)
+        if k in problem.meta:
+            scen[k] = problem.meta[k]
     eff = fx.EFFECTS.get(named) if named else None
 
     def at_bound(c):

@@ -75,8 +75,25 @@ def fsu_variants_from_config(config):
 
 def resolve_charset(name, data_dir, calibrated_dir):
     """The one resolver (lumbar.inputs.characteristics.resolve_characteristic_set): "calibrated" from the workflow's
-    calibration output when it exists, else the published tables."""
+    calibration output when it exists, else the published tables (logged: then the comparison is with paper 1's
+    Table 3 set, not with a calibrated unit)."""
+    if name == "calibrated" and not (calibrated_dir is not None and (Path(calibrated_dir) / "disc.csv").is_file()):
+        log.warning("discovery: characteristic set 'calibrated' has no calibration output (characteristics."
+                    "calibrated_dir = %s): comparing with the published Table 3 set of %s", calibrated_dir, data_dir)
     return resolve_characteristic_set(name, data_dir=data_dir, calibrated_dir=calibrated_dir)
+
+
+def nominal_model_label(config) -> str:
+    """Which nominal model a discovery compares with: the characteristic set and the folder it is read from
+    (scenarios.csv column ``nominal_model``)."""
+    c = (config or {}).get("characteristics") or {}
+    name = discovery_settings(config)["characteristic_set"]
+    cs = resolve_charset(name, c.get("data_dir"), c.get("calibrated_dir"))
+    f = (config or {}).get("fsu") or {}
+    k_f = f.get("facet_stiffness_n_per_m") or cs.facet.stiffness
+    k_s = f.get("disc_shear_stiffness_n_per_m") or cs.disc.k_shear
+    return (f"set {name} from {Path(cs.source).parent} (facet stiffness {k_f:.4g} N/m, disc shear stiffness "
+            f"{k_s:.4g} N/m)")
 
 
 def _grouped_folds(labels, k):
@@ -120,7 +137,9 @@ def rom_problem(df, config, solver_kw=None, bank=None) -> Problem:
     return Problem("stepwise_rom", keys, d0["rom_mean_deg"].to_numpy(float), _rom_sigma(d0, s),
                    "deg", forward, _candidates(s, "stepwise_rom"), "stage", ["direction", "moment_nm"],
                    _grouped_folds(cells, s["cv_folds"]),
-                   meta={"n_per_row": n, "has_range": has_range, "spec_sd": spec_sd,
+                   meta={"quantity": "range of motion at the row's moment [deg]",
+                         "nominal_model": nominal_model_label(config),
+                         "n_per_row": n, "has_range": has_range, "spec_sd": spec_sd,
                          "sigma_floor": float(s["sigma_floor_deg"]), "groups": keys["direction"].to_numpy(str),
                          "bank": _bank("stepwise_rom", keys, config, s, bank),
                          "design_keys": design, "design_forward": design_forward})
@@ -136,6 +155,13 @@ def _bank(experiment, keys, config, s, bank=None):
         return a
     K = int(s["null_specimens"])
     return bank_for(experiment, keys, config, K) if K > 0 else None
+
+
+#: what a neutral-angle row compares (scenarios.csv column ``quantity``)
+NEUTRAL_QUANTITY = ("change of the lordotic angle at 0 N*m from reference_stage to stage [deg]. The nominal model has "
+                    "no vertebral-arch artefact: its change comes only from the structures the step removes that "
+                    "carry load at rest (facet contact, prestrained ligaments) and is 0 where none does; the "
+                    "measured change includes the artefact")
 
 
 def neutral_problem(df, config) -> Problem:
@@ -164,7 +190,8 @@ def neutral_problem(df, config) -> Problem:
 
     return Problem("neutral_angle", keys, y[1:] - y[0], np.hypot(sd[1:], ref_sd), "deg", forward,
                    _candidates(s, "neutral_angle"), "reference_stage", ["stage"], np.arange(len(stages) - 1),
-                   meta={"design_keys": pd.DataFrame({"stage": dstages[1:], "reference_stage": stages[0]}),
+                   meta={"quantity": NEUTRAL_QUANTITY, "nominal_model": nominal_model_label(config),
+                         "design_keys": pd.DataFrame({"stage": dstages[1:], "reference_stage": stages[0]}),
                          "design_forward": design_forward})
 
 

@@ -1,7 +1,12 @@
 """Muscle-driven lumbar spine (paper 2, Sect. 2.1-2.4): L1-L5 free, thorax fused to L1, sacrum/pelvis fixed.
 
 Passive intervertebral behaviour: the project's disc, facet and ligament elements at every level
-(:func:`lumbar.experiments.fsu.add_level`, characteristic set selectable). With ``symmetric_passive`` (default, config
+(:func:`lumbar.experiments.fsu.add_level`), from the passive set named by ``passive_set`` (config
+``muscle_model.passive_set``, :func:`passive_characteristics`): ``workflow_calibrated`` = the workflow's own
+calibration output (results/calibration/characteristics, fitted on the passive models' geometry) applied unchanged at
+every level (ligament laws on elongation, the same facet and disc shear stiffness: the adopted "as_calibrated" rule of
+:mod:`lumbar.experiments.level_transfer`), ``published_table3`` = paper 1's published Table 3 set as printed
+(data/characteristics, set "calibrated" there), or a literature set by name. With ``symmetric_passive`` (default, config
 ``muscle_model.symmetric_passive``) the geometry is first mirror-averaged about y = 0
 (:func:`lumbar.geometry.symmetry.mirror_average`: left/right partner points averaged, midline points
 projected to y = 0, disc centres/normals and body centroids on the plane) and the segment COMs are put on
@@ -29,7 +34,7 @@ import pandas as pd
 
 from ..inputs import resources
 from ..mechanics import so3
-from ..experiments.fsu import add_level, disc_frame
+from ..experiments.fsu import add_level, disc_frame, facet_surfaces
 from ..geometry.core import LEVEL_NAMES
 from ..mechanics.model import SpineModel
 from .nlp import IpoptPostureSolver
@@ -104,13 +109,51 @@ class PointForces:
         return iter(self.items)
 
 
+#: the passive sets of the muscle model that are not a literature set's own name (config muscle_model.passive_set)
+PASSIVE_SETS = {
+    "workflow_calibrated": "the workflow's calibrated set (results/calibration/characteristics: fitted on the passive "
+                           "models' geometry), applied unchanged at every level (laws on elongation)",
+    "published_table3": "paper 1's published Table 3 set as printed (data/characteristics, set 'calibrated' there)",
+}
+
+
+def passive_set_names() -> tuple:
+    """Every value ``muscle_model.passive_set`` accepts: :data:`PASSIVE_SETS` and the literature sets."""
+    from ..inputs.characteristics import CHARACTERISTIC_SETS  # noqa: PLC0415
+
+    return tuple(PASSIVE_SETS) + tuple(n for n in CHARACTERISTIC_SETS if n != "calibrated")
+
+
+def passive_characteristics(passive_set, data_dir=None, calibrated_dir=None):
+    """The characteristic set of the muscle model's passive spine (every level the same, as paper 1's L2-S1 model).
+
+    ``workflow_calibrated``: the tables in ``calibrated_dir`` (the workflow's calibration output, which must exist:
+    no silent fall-back to the published values); ``published_table3``: the set "calibrated" of ``data_dir``
+    (data/characteristics: paper 1's Table 3 as printed); a literature set name: that set from ``data_dir``.
+    """
+    from ..inputs.characteristics import default_data_dir, load_characteristic_set  # noqa: PLC0415
+
+    names = passive_set_names()
+    if passive_set not in names:
+        hint = " ('calibrated' is ambiguous here: say which)" if passive_set == "calibrated" else ""
+        raise ValueError(f"muscle_model.passive_set: unknown passive set {passive_set!r}{hint}; expected one of "
+                         f"{', '.join(names)}")
+    if passive_set == "workflow_calibrated":
+        if calibrated_dir is None or not (Path(calibrated_dir) / "disc.csv").is_file():
+            raise FileNotFoundError(f"muscle_model.passive_set = workflow_calibrated: no calibration output in "
+                                    f"{calibrated_dir} (expected disc.csv, facet.csv and the ligament tables written "
+                                    f"by rule calibrate, characteristics.calibrated_dir)")
+        return load_characteristic_set("calibrated", data_dir=calibrated_dir)
+    d = data_dir if data_dir is not None else default_data_dir()
+    return load_characteristic_set("calibrated" if passive_set == "published_table3" else passive_set, data_dir=d)
+
+
 class LumbarMuscleModel:
     """Bodies, passive levels, muscles and weights; ``evaluate`` is the equilibrium residual + Jacobian."""
 
     def __init__(self, geometry=None, charset=None, muscle_set: MuscleSet | None = None, body_mass_kg=71.0,
-                 anthropometry_csv=None, iap_force_n=0.0, characteristics="calibrated", data_dir=None,
-                 symmetric_passive=True, in_situ_posture="reference"):
-        from ..inputs.characteristics import load_characteristic_set
+                 anthropometry_csv=None, iap_force_n=0.0, passive_set="published_table3", data_dir=None,
+                 calibrated_dir=None, symmetric_passive=True, in_situ_posture="reference"):
         from ..geometry import load_geometry
         from ..geometry.symmetry import mirror_average
         if not body_mass_kg > 0:
@@ -125,8 +168,9 @@ class LumbarMuscleModel:
             # passive elements (and body reference points) mirror-averaged about y = 0: the muscles are
             # already bilateral (load_muscle_set), so the whole model is mirror-symmetric
             self.geo = mirror_average(self.geo)
-        self.charset = charset if charset is not None else load_characteristic_set(
-            characteristics, **({"data_dir": data_dir} if data_dir else {}))
+        self.passive_set = "given" if charset is not None else passive_set
+        self.charset = charset if charset is not None else passive_characteristics(passive_set, data_dir,
+                                                                                   calibrated_dir)
         self.ms = muscle_set if muscle_set is not None else load_muscle_set()
         self.nb = len(FREE)
         cents = np.array([self.geo.vertebrae[v].centroid for v in FREE])
@@ -140,11 +184,13 @@ class LumbarMuscleModel:
 
         self.levels = list(LEVEL_NAMES)
         self.level_models = []
+        self.facet_sides = []              # per level: the side of each facet surface, in surface order
         for lv in self.levels:
             m = SpineModel()
             bodies(m)
-            add_level(m, self.geo.levels[lv], self.charset)
+            _, sides = add_level(m, self.geo.levels[lv], self.charset)
             self.level_models.append(m.finalize())
+            self.facet_sides.append(list(sides))
         self.paths = MusclePaths(self.ms, self.body_index, cents)
         cab = SpineModel()
         bodies(cab)
@@ -553,6 +599,52 @@ def flexion_relaxation(model, sols, names):
                      **certificate(s),
                      "extensor_sl_mean_um": float(np.sum(w * se) / np.sum(w)), "extensor_sl_max_um": float(se.max()),
                      "extensor_pcsa_fraction_beyond_ssl": float(np.sum(w[se > model.props.ssl_um[ext]]) / np.sum(w))})
+    return pd.DataFrame(rows)
+
+
+def _facet_gaps(m, x, R):
+    """Smallest gap [m] of each facet surface's contact points (B, n_surfaces); negative = penetration."""
+    p, _ = m._attach(x, R, m.k_a, m.k_s)
+    P = m._to_body(x, R, m.k_b, p)
+    return np.stack([surf.gap(P[:, m.k_surf == sid])[0].min(axis=-1) for sid, surf in enumerate(m.surfaces)],
+                    axis=-1)
+
+
+def face_separation(surface, landmarks) -> float:
+    """Mean distance [m] along the joint normal between the two articular faces fitted to a joint's landmarks
+    (superior-process and inferior-process surfaces of paper 1 Eq. 4), at the inferior-process landmarks: the joint
+    space the landmarks describe (negative: the faces cross, the landmark sets overlap)."""
+    def f(c, q):
+        p30, p03, p20, p02, p00 = c
+        u, v = q[:, 0], q[:, 1]
+        return p30 * u**3 + p03 * v**3 + p20 * u**2 + p02 * v**2 + p00
+
+    q = surface.local(landmarks.inferior)
+    return float(np.mean(f(surface.coef_inferior, q) - f(surface.coef_superior, q)))
+
+
+def facet_contact(model, sols, names) -> pd.DataFrame:
+    """Facet contact per level, side and solved posture: the total normal contact force [N], the smallest gap of
+    the contact points to the contact surface [mm] in the posture and at rest (the as-segmented reference pose;
+    negative = the points lie beyond the surface, i.e. a contact preload before any load), the joint space the
+    landmarks describe (:func:`face_separation`, [mm]; the lumbar facet joint space is 1.4-2.4 mm,
+    data/anatomy) and the facet contact stiffness of the passive set [N/m]. Where the anatomy has the cartilage
+    surfaces touching at rest (gap 0), a geometry whose rest gap is far from 0 makes a level's facets engage late
+    (gap > 0) or preloaded (gap < 0)."""
+    x0, R0 = model.reference_state()
+    rows = []
+    for lv, m, sides in zip(model.levels, model.level_models, model.facet_sides):
+        rest = _facet_gaps(m, x0, R0)[0]
+        space = {side: face_separation(surf, fl) for side, fl, surf in facet_surfaces(model.geo.levels[lv])}
+        for name, s in zip(names, sols):
+            xs, Rs = s.x[None], s.R[None]
+            cf, g = m.contact_forces(xs, Rs)[0], _facet_gaps(m, xs, Rs)[0]
+            for k, side in enumerate(sides):
+                rows.append({"activity": name, "level": lv, "side": side, "contact_n": float(cf[k]),
+                             "min_gap_mm": 1e3 * float(g[k]), "rest_min_gap_mm": 1e3 * float(rest[k]),
+                             "rest_face_separation_mm": 1e3 * space[side],
+                             "facet_stiffness_n_per_m": float(model.charset.facet.stiffness),
+                             "reached": bool(s.reached), "passive_set": model.passive_set})
     return pd.DataFrame(rows)
 
 

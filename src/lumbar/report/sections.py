@@ -634,6 +634,7 @@ class ReportBuilder:
             f"{fmt(c('fsu', 'facet_stiffness_n_per_m'))} N/m; disc shear stiffness "
             + (f"{fmt(c('fsu', 'disc_shear_stiffness_n_per_m'))} N/m." if c('fsu', 'disc_shear_stiffness_n_per_m')
                else "the characteristic set's default.")))
+        self.doc.add(Para(self._which_set_text()))
         self.doc.add(Para(
             f"Solver: batched Newton with exact tangent stiffness, tolerances {fmt(c('solver', 'tol_force_n'))} N "
             f"and {fmt(c('solver', 'tol_moment_nm'))} N*m, at most {fmt(c('solver', 'max_iter'))} iterations, "
@@ -662,6 +663,25 @@ class ReportBuilder:
                 continue
             items = _flatten(self.config[key])
             self.doc.add(Para(f"{key}: " + "; ".join(f"{k} = {fmt(v)}" for k, v in items) + "."))
+
+    def _which_set_text(self):
+        """Which characteristic set each model uses: "calibrated" is the workflow's own fit, named once."""
+        c = self._cfg
+        cal = fmt(c("characteristics", "calibrated_dir", default="results/calibration/characteristics"))
+        out = [f"'Calibrated' means this workflow's own calibration (rule calibrate, tables in {cal}, fitted on the "
+               f"'{fmt(c('geometry', 'kind'))}' geometry); it is used by the functional unit, the L2-S1 model "
+               f"(l2s1.calibrated_characteristics = {fmt(c('l2s1', 'calibrated_characteristics'))}), the other "
+               f"levels and the discrepancy discovery (discovery.characteristic_set = "
+               f"{fmt(c('discovery', 'characteristic_set'))})."]
+        ps = c("muscle_model", "passive_set")
+        if ps:
+            what = {"workflow_calibrated": f"the workflow's calibrated set ({cal}) applied unchanged at every myo-sim "
+                                           "level (ligament laws on elongation, its facet and disc shear stiffness)",
+                    "published_table3": f"paper 1's published Table 3 set as printed "
+                                        f"({fmt(c('characteristics', 'data_dir'))}), not the workflow's calibration"}
+            out.append(f"The muscle-driven model's passive spine (muscle_model.passive_set = {fmt(ps)}): "
+                       f"{what.get(ps, 'the literature set ' + SET_LABELS.get(ps, ps))}.")
+        return " ".join(out)
 
     # -- paper 1
     def model_section(self):
