@@ -1198,6 +1198,7 @@ class AdmissibleFit(RealFit):
     penalties: pd.DataFrame | None = None
     prior: object = None
     posterior: Posterior | None = None
+    objective: object = None
 
 
 def _set_with(charset, names, q):
@@ -1573,8 +1574,10 @@ def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", publ
     log.info("admissible fit: %d residual and %d linearised evaluations, cost %.4g -> %.4g; ROM %s deg; active "
              "penalties: %s", n_eval[0], n_eval[1], 0.5 * float(r_start @ r_start), float(sol.cost),
              np.round(rom, 2).tolist(), ", ".join(f"{n} {v:.2g}" for n, v in last["pen"] if v > 0) or "none")
-    return AdmissibleFit(cs, pd.DataFrame(rows), tt, float(sol.cost), n_eval[0], probe=mt, penalties=pen,
-                         prior=charset, posterior=post)
+    fit = AdmissibleFit(cs, pd.DataFrame(rows), tt, float(sol.cost), n_eval[0], probe=mt, penalties=pen,
+                        prior=charset, posterior=post)
+    fit.objective = residual          # q (fit units) -> the stacked residuals: for a sampling check of the posterior
+    return fit
 
 
 POSTERIOR_COLUMNS = ("parameter", "unit", "fit_unit", "prior_centre", "prior_90_low", "prior_90_high",
