@@ -12,7 +12,7 @@ their sum, anchoring + calibration, is reported too), the forward equilibria und
 The MAP fit with its Laplace posterior (the anchoring fit) is timed as such (target < 120 s); ``--mcmc`` adds a short
 MCMC on the same objective (emcee, benchmarks/requirements-mcmc.txt) and reports the sampled over the Laplace spread
 of every parameter: a check of the linearisation, run once, never in the DAG.
-Usage: python benchmarks/bench_calibration.py [--mcmc]
+Usage: python benchmarks/bench_calibration.py [--mcmc [--mcmc-steps N]]
 """
 from __future__ import annotations
 
@@ -48,7 +48,8 @@ def main():
     t = time.perf_counter()
     anchor = fit_admissible(geo, prior, real, published=paper, geometry_path=gdir, prior_spread=spreads)
     t_anchor = time.perf_counter() - t
-    mcmc = mcmc_check(anchor) if "--mcmc" in sys.argv else None
+    steps = int(sys.argv[sys.argv.index("--mcmc-steps") + 1]) if "--mcmc-steps" in sys.argv else 120
+    mcmc = mcmc_check(anchor, n_steps=steps, burn=steps // 3) if "--mcmc" in sys.argv else None
     zero = SpecimenVariation(**{f.name: 0.0 for f in dataclasses.fields(SpecimenVariation)})
     table = stepwise_reduction_table(geo, anchor.charset, 1, n_specimens=1, variation=zero, noise_sd_deg=0.0)
     ref = reference_table(table, real=real)

@@ -38,6 +38,8 @@ rule multilevel_validation:
     input:
         geometry_inputs,
         prior="results/calibration/calibration_prior.csv",
+        posterior="results/calibration/posterior.csv",
+        covariance="results/calibration/posterior_covariance.csv",
         characteristics=CALIBRATION_CHARACTERISTICS,
         published=characteristic_tables(
             config["characteristics"]["data_dir"], ["calibrated"]

@@ -65,6 +65,18 @@ if snakemake.rule == "multilevel_validation":
     curves = pd.concat(curves, ignore_index=True)
     adm = pd.concat(adm, ignore_index=True)
     rom = V.multilevel_rom(curves, pd.read_csv(snakemake.input.yamamoto))
+    # the 90 % posterior band of every level's ROM (linearisation of the calibration's posterior)
+    from lumbar.experiments.calibration import shift_parameter  # noqa: E402
+    from lumbar.experiments.posterior import read_posterior  # noqa: E402
+
+    post = read_posterior(snakemake.input.posterior, snakemake.input.covariance)
+    if post is not None and len(rom):
+        bands = V.level_rom_bands(geo, cal, levels, post[0], post[1], shift_parameter,
+                                  facet_stiffness=f.get("facet_stiffness_n_per_m"),
+                                  k_shear=f.get("disc_shear_stiffness_n_per_m"))
+        rom = rom.merge(bands[["level", "direction", "band_low", "band_high"]].rename(
+            columns={"band_low": "sim_band_low", "band_high": "sim_band_high"}), on=["level", "direction"],
+            how="left")
     write_table_atomic(curves, snakemake.output.curves)
     write_table_atomic(adm, snakemake.output.admissibility)
     write_table_atomic(rom, snakemake.output.rom)

@@ -300,8 +300,9 @@ def scoreboard(rows: list[dict], bands: pd.DataFrame | None = None) -> pd.DataFr
     beside it (sim_band_low, sim_band_high; NaN where no band is computed)."""
     df = pd.DataFrame(rows, columns=list(COLUMNS))
     if bands is not None and len(bands) and len(df):
-        lo, hi = zip(*[band_of(r, bands) for r in df.itertuples(index=False)])
-        df["sim_band_low"], df["sim_band_high"] = np.array(lo, float), np.array(hi, float)
+        lo, hi = (np.array(v, float) for v in zip(*[band_of(r, bands) for r in df.itertuples(index=False)]))
+        have = np.isfinite(lo)
+        df.loc[have, "sim_band_low"], df.loc[have, "sim_band_high"] = lo[have], hi[have]
     return df
 
 
@@ -364,6 +365,30 @@ def multilevel_rom(curves: pd.DataFrame, yamamoto: pd.DataFrame, moment_nm=10.0,
     return pd.DataFrame(rows)
 
 
+def level_rom_bands(geometry, charset, levels, names, cov, shift, moment_nm=10.0, **build_kw) -> pd.DataFrame:
+    """90 % posterior band of the ROM at ``moment_nm`` of every level in ``levels`` (the calibrated set applied
+    unchanged), by linearisation of the calibration's posterior (``names``, ``cov``; ``shift`` moves one fit
+    parameter, :func:`lumbar.experiments.calibration.shift_parameter`): level, direction (Yamamoto's, the two-side
+    mean for lateral bending and axial rotation), map_deg, sd_deg, band_low, band_high."""
+    from .fsu import range_of_motion  # noqa: PLC0415
+    from .posterior import Z90, linearised_band  # noqa: PLC0415
+
+    dirs = [d for ds in MULTILEVEL_DIRECTIONS.values() for d in ds]
+    keys = [(lv, yd) for lv in levels for yd in MULTILEVEL_DIRECTIONS]
+
+    def predict(cs):
+        out = []
+        for lv in levels:
+            rom = range_of_motion(build_fsu(geometry, cs, lv, **build_kw), [moment_nm], dirs, ["intact"])
+            by = dict(zip(rom["direction"], rom["rom_deg"]))
+            out += [float(np.mean([by[d] for d in ds])) for ds in MULTILEVEL_DIRECTIONS.values()]
+        return np.array(out)
+
+    y, sd, _ = linearised_band(predict, charset, names, cov, shift)
+    return pd.DataFrame({"level": [k[0] for k in keys], "direction": [k[1] for k in keys], "map_deg": y,
+                         "sd_deg": sd, "band_low": y - Z90 * sd, "band_high": y + Z90 * sd})
+
+
 def near_limit(rom: pd.DataFrame, rel=REL_TOLERANCE, band=0.05) -> pd.DataFrame:
     """Rows of :func:`multilevel_rom` whose ratio lies within ``band`` of the tolerance's edge, on either side (e.g.
     0.20-0.30 off the measured value for 25 %): the rows a small change of the fit can move across it."""
@@ -395,7 +420,9 @@ def multilevel_rows(table: pd.DataFrame, set_name="calibrated") -> list[dict]:
                      "unit": "deg", "sim": r.sim_deg, "measured": r.measured_deg, "measured_low": np.nan,
                      "measured_high": np.nan, "kind": r.kind, "source": r.source, "within": bool(r.within),
                      "tolerance_rule": r.tolerance_rule, "set": set_name, "role": INDEPENDENT,
-                     "note": "the L4-L5 calibrated characteristics applied unchanged (as paper 1 does for L2-S1)"})
+                     "note": "the L4-L5 calibrated characteristics applied unchanged (as paper 1 does for L2-S1)",
+                     "sim_band_low": getattr(r, "sim_band_low", np.nan),
+                     "sim_band_high": getattr(r, "sim_band_high", np.nan)})
     return rows
 
 

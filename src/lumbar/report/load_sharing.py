@@ -128,10 +128,12 @@ def load_sharing_section(b: ReportBuilder):
         share = [c for c in ("disc_share", "facets_share", "ligaments_share") if c in m.columns]
         b.table_block("ROM at 10 N*m of the other levels against Yamamoto et al. (1989) (independent), and the "
                       "share of the moment each structure resists",
-                      ["level", "direction", "model [deg]", "measured [deg]", "model / measured", "within 25 %"]
-                      + [f"{c[:-6]} [%]" for c in share] + ["largest step [deg]"],
+                      ["level", "direction", "model [deg] (90 % posterior band)", "measured [deg]", "model / measured",
+                       "within 25 %"] + [f"{c[:-6]} [%]" for c in share] + ["largest step [deg]"],
                       [[r["level"], DIRECTION_NAMES.get(r["direction"], human_direction(r["direction"])),
-                        fmt(r["sim_deg"]), fmt(r["measured_deg"]), fmt(r["ratio"]), "yes" if r["within"] else "no"]
+                        fmt(r["sim_deg"]) + (f" ({fmt(r['sim_band_low'])} to {fmt(r['sim_band_high'])})"
+                                             if pd.notna(r.get("sim_band_low")) else ""),
+                        fmt(r["measured_deg"]), fmt(r["ratio"]), "yes" if r["within"] else "no"]
                        + [fmt(100 * r[c]) for c in share] + [fmt(r["largest_jump_deg"])] for _, r in m.iterrows()],
                       source=MULTI, note="Lateral bending and axial rotation: the mean of both sides (the abstract "
                                          "gives one-side values). Shares of the applied moment about the disc "
