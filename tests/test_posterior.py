@@ -241,3 +241,48 @@ def test_scoreboard_band_columns_come_from_the_band_table_and_never_change_withi
     assert (df.loc[0, "sim_band_low"], df.loc[0, "sim_band_high"]) == (6.6, 7.4)
     assert np.isnan(df.loc[1, "sim_band_low"])              # another set has no posterior band
     assert list(df["within"]) == [True, False]
+
+
+# ------------------------------------------------------------------ what the model adds over a trivial model
+def _row(q, cond, sim, meas, within, role=V.INDEPENDENT, set_="calibrated"):
+    return {"quantity": q, "condition": cond, "unit": "deg", "sim": sim, "measured": meas, "measured_low": np.nan,
+            "measured_high": np.nan, "kind": "original_text", "source": "s", "within": within,
+            "tolerance_rule": "measured +- 25 % (no range published)", "set": set_, "role": role, "note": ""}
+
+
+def test_null_model_counts_copy_the_calibrated_level_and_the_mean_pressure():
+    yam = pd.DataFrame({"level": ["L4-L5", "L4-L5"], "quantity": ["rom", "rom"], "direction": ["flexion", "extension"],
+                        "value_deg": [8.9, 5.8]})
+    rows = [_row("ROM, other levels", "L3-L4 flexion 10 N*m", 8.0, 8.0, True),      # null 8.9: within 25 %
+            _row("ROM, other levels", "L5-S1 flexion 10 N*m", 9.0, 12.0, True),     # null 8.9: outside
+            _row("ROM, other levels", "L5-S1 extension 10 N*m", 3.0, 7.8, False),   # null 5.8: outside
+            _row("L4-L5 IDP in vivo", "standing", 0.5, 0.5, True),
+            _row("L4-L5 IDP in vivo", "crate", 1.0, 1.8, False),
+            _row("ROM, other levels", "L1-L2 flexion 10 N*m", 1.0, 5.8, False, role=V.TARGET)]   # not independent
+    t = V.null_model_counts(pd.DataFrame(rows), yam).set_index("quantity")
+    lv = t.loc["ROM, other levels"]
+    assert (lv["n_rows"], lv["model_within"], lv["null_within"]) == (3, 2, 1) and bool(lv["model_beats_null"])
+    iv = t.loc["L4-L5 IDP in vivo"]            # null 1.15 MPa: outside both bands
+    assert (iv["n_rows"], iv["model_within"], iv["null_within"]) == (2, 1, 0)
+    # control: a model that is the null scores the null's count and does not beat it
+    same = [dict(r, sim=v, within=abs(v - r["measured"]) <= 0.25 * r["measured"]) for r, v in
+            zip(rows[:3], (8.9, 8.9, 5.8))]
+    s = V.null_model_counts(pd.DataFrame(same), yam).iloc[0]
+    assert s["model_within"] == s["null_within"] and not bool(s["model_beats_null"])
+
+
+def test_table_bands_merge_only_into_the_calibrated_rows():
+    from lumbar.experiments.l2s1 import with_bands as idp_bands
+    from lumbar.experiments.stepwise_reduction import with_bands as rom_bands
+    syn = pd.DataFrame({"set": ["calibrated", "rupp2015"], "stage": ["intact"] * 2, "direction": ["flexion"] * 2,
+                        "moment_nm": [10, 10]})
+    b = pd.DataFrame({"stage": ["intact"], "direction": ["flexion"], "moment_nm": [10.0], "map": [7.0], "sd": [0.1],
+                      "low90": [6.8], "high90": [7.2]})
+    out = rom_bands(syn, b)
+    assert (out.loc[0, "rom_band_low"], out.loc[0, "rom_band_high"]) == (6.8, 7.2)
+    assert np.isnan(out.loc[1, "rom_band_low"])
+    assert np.isnan(rom_bands(syn, b.iloc[:0]).loc[0, "rom_band_low"])
+    syn5 = pd.DataFrame({"set": ["calibrated", "nolte1990"], "muscle_setup": ["all"] * 2, "load_case": ["neutral"] * 2})
+    b5 = pd.DataFrame({"muscle_setup": ["all"], "load_case": ["neutral"], "low90": [0.3], "high90": [0.4]})
+    o5 = idp_bands(syn5, b5)
+    assert o5.loc[0, "idp_band_high_mpa"] == 0.4 and np.isnan(o5.loc[1, "idp_band_low_mpa"])

@@ -226,6 +226,9 @@ def doc_template_inputs(wildcards):
 
 
 REPORT_OPTIONAL = [
+    "results/tables/validation_null_models.csv",
+    "results/stepwise_reduction/bands_calibrated.csv",
+    "results/l2s1/bands_calibrated.csv",
     "results/calibration/calibration_summary.csv",
     "results/load_sharing/compression_summary.csv",
     "results/calibration/remus2021_comparison.csv",

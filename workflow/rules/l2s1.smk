@@ -27,11 +27,38 @@ rule l2s1_idp:
         "../scripts/l2s1.py"
 
 
+# The 90 % posterior band of every Table 5 scenario of the calibrated set (linearisation of the calibration's
+# Laplace posterior).
+rule l2s1_bands:
+    input:
+        geometry_inputs,
+        characteristics=CALIBRATION_CHARACTERISTICS,
+        posterior="results/calibration/posterior.csv",
+        covariance="results/calibration/posterior_covariance.csv",
+        cables=config["l2s1"]["cables"],
+    output:
+        "results/l2s1/bands_calibrated.csv",
+    log:
+        "logs/l2s1_bands.log",
+    benchmark:
+        "results/benchmarks/l2s1_bands.tsv"
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        geometry=config["geometry"],
+        fsu=config["fsu"],
+        solver=config["solver"],
+        l2s1=config["l2s1"],
+    script:
+        "../scripts/l2s1_bands.py"
+
+
 rule table5:
     input:
         sims=expand("results/l2s1/idp_{set}.csv", set=config["l2s1"]["sets"]),
         reference=l2s1_idp_reference,
         published=published_model_results,
+        bands="results/l2s1/bands_calibrated.csv",
     output:
         synopsis=report(
             "results/tables/table5_idp_synopsis.csv",

@@ -22,6 +22,31 @@ rule stepwise_reduction_sim:
         "../scripts/stepwise_reduction.py"
 
 
+# The 90 % posterior band of every Table 4 scenario of the calibrated set (linearisation of the calibration's
+# Laplace posterior).
+rule stepwise_reduction_bands:
+    input:
+        geometry_inputs,
+        characteristics=CALIBRATION_CHARACTERISTICS,
+        posterior="results/calibration/posterior.csv",
+        covariance="results/calibration/posterior_covariance.csv",
+    output:
+        "results/stepwise_reduction/bands_calibrated.csv",
+    log:
+        "logs/stepwise_reduction_bands.log",
+    benchmark:
+        "results/benchmarks/stepwise_reduction_bands.tsv"
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        geometry=config["geometry"],
+        fsu=config["fsu"],
+        solver=config["solver"],
+        sr=config["stepwise_reduction"],
+    script:
+        "../scripts/stepwise_reduction_bands.py"
+
+
 rule table4:
     input:
         sims=expand(
@@ -32,6 +57,7 @@ rule table4:
         derived=stepwise_reduction_derived,
         real_targets=config["stepwise_reduction"]["real_targets"],
         published=published_model_results,
+        bands="results/stepwise_reduction/bands_calibrated.csv",
     output:
         synopsis=report(
             "results/tables/table4_rom_synopsis.csv",

@@ -15,10 +15,16 @@ rule validation_real_data:
         compression="results/load_sharing/compression_calibrated.csv",
         literature="data/load_sharing/load_sharing_literature.csv",
         bands="results/load_sharing/bands_calibrated.csv",
+        yamamoto="data/experiments/yamamoto1989_levels_original_text.csv",
     output:
-        report(
+        table=report(
             "results/tables/validation_real_data.csv",
             caption="../report/validation_real_data.rst",
+            category="Validation on real data",
+        ),
+        null_models=report(
+            "results/tables/validation_null_models.csv",
+            caption="../report/validation_null_models.rst",
             category="Validation on real data",
         ),
     log:

@@ -75,6 +75,8 @@ elif rule == "table5":
     log.info("reference IDP table %s, kind(s) %s%s", snakemake.input.reference, kinds,
              " -- SURROGATE, not measured" if "surrogate" in kinds else "")
     syn = l2s1.synopsis(sims, ref)
+    # the calibrated set's 90 % posterior band beside its MAP value (the outlier count stays on the MAP value)
+    syn = l2s1.with_bands(syn, pd.read_csv(snakemake.input.bands), "calibrated")
     counts = l2s1.outlier_counts(syn)
     vs = l2s1.versus_paper(counts, snakemake.params.published)
     out = snakemake.output

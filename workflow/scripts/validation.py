@@ -140,7 +140,12 @@ rows += V.multilevel_rows(pd.read_csv(snakemake.input.multilevel))
 rows += V.internal_load_rows(pd.read_csv(snakemake.input.curves), pd.read_csv(snakemake.input.compression),
                              pd.read_csv(snakemake.input.literature))
 df = V.scoreboard(rows, pd.read_csv(snakemake.input.bands))
-write_table_atomic(df, snakemake.output[0])
+write_table_atomic(df, snakemake.output.table)
+nulls = V.null_model_counts(df, pd.read_csv(snakemake.input.yamamoto), f["level"])
+write_table_atomic(nulls, snakemake.output.null_models)
+for r in nulls.itertuples(index=False):
+    log.info("%s: the model %d of %d within, a trivial model (%s) %d", r.quantity, r.model_within, r.n_rows,
+             r.null_model, r.null_within)
 ind = df[df["role"] == V.INDEPENDENT]
 tgt = df[df["role"] == V.TARGET]
 log.info("real-data scoreboard: independent comparisons %d of %d within; calibration targets %d of %d met",

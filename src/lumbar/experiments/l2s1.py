@@ -588,3 +588,18 @@ def plot_fig7(syn: pd.DataFrame, path, set_name="calibrated"):
     fig.tight_layout()
     with atomic_writer(path, "wb") as fh:
         fig.savefig(fh, format="png", metadata={"Software": None})
+
+
+def with_bands(synopsis: pd.DataFrame, bands: pd.DataFrame, set_name="calibrated") -> pd.DataFrame:
+    """The Table 5 synopsis with the 90 % posterior band of ``set_name``'s simulated IDP (idp_band_low_mpa,
+    idp_band_high_mpa; NaN for the other sets and where no band was computed); the outlier count stays on the MAP."""
+    out = synopsis.copy()
+    out["idp_band_low_mpa"], out["idp_band_high_mpa"] = np.nan, np.nan
+    if bands is None or not len(bands):
+        return out
+    key = ["muscle_setup", "load_case"]
+    m = out[key].merge(bands[key + ["low90", "high90"]], on=key, how="left")
+    sel = (out["set"] == set_name).to_numpy()
+    out.loc[sel, "idp_band_low_mpa"] = m.loc[sel, "low90"].to_numpy()
+    out.loc[sel, "idp_band_high_mpa"] = m.loc[sel, "high90"].to_numpy()
+    return out

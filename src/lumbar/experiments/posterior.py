@@ -243,3 +243,21 @@ def curve_bands(build, charset, names, cov, shift, curves_of, directions, moment
     return pd.DataFrame({"direction": [k[0] for k in keys], "moment_nm": [k[1] for k in keys],
                          "quantity": [k[2] for k in keys], "map": y, "sd": sd, "low90": y - Z90 * sd,
                          "high90": y + Z90 * sd, "converged": conv})[list(BAND_COLUMNS)]
+
+
+def table_bands(table_of, value_col: str, key_cols, charset, names, cov, shift) -> pd.DataFrame:
+    """90 % posterior band of every row of a result table ``table_of(charset) -> DataFrame`` (its rows in the same
+    order for every set; e.g. the 160 stepwise-reduction scenarios of Table 4 or the 49 IDP scenarios of Table 5),
+    by linearisation: ``key_cols`` of the table, then map, sd, low90, high90 of ``value_col``."""
+    keys = []
+
+    def predict(cs):
+        t = table_of(cs)
+        if not keys:
+            keys.append(t[list(key_cols)].reset_index(drop=True))
+        return t[value_col].to_numpy(float)
+
+    y, sd, _ = linearised_band(predict, charset, names, cov, shift)
+    out = keys[0].copy()
+    out["map"], out["sd"], out["low90"], out["high90"] = y, sd, y - Z90 * sd, y + Z90 * sd
+    return out

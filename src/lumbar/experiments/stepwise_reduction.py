@@ -367,3 +367,20 @@ def plot_rom_stepwise_reduction(synopsis: pd.DataFrame, path, set_name="calibrat
                  f"({kinds}; hatched = derived from the published Eq. 3 fit, no range)", fontsize=9)
     fig.tight_layout()
     save_figure_atomic(fig, path, dpi=110)
+
+
+def with_bands(synopsis: pd.DataFrame, bands: pd.DataFrame, set_name="calibrated") -> pd.DataFrame:
+    """The Table 4 synopsis with the 90 % posterior band of ``set_name``'s simulated ROM (rom_band_low,
+    rom_band_high; NaN for the other sets and where no band was computed); ``outlier`` stays on the MAP value."""
+    out = synopsis.copy()
+    out["rom_band_low"], out["rom_band_high"] = np.nan, np.nan
+    if bands is None or not len(bands):
+        return out
+    key = ["stage", "direction", "moment_nm"]
+    b = bands[key + ["low90", "high90"]].copy()
+    b["moment_nm"] = b["moment_nm"].astype(float)
+    m = out[key].assign(moment_nm=out["moment_nm"].astype(float)).merge(b, on=key, how="left")
+    sel = (out["set"] == set_name).to_numpy()
+    out.loc[sel, "rom_band_low"] = m.loc[sel, "low90"].to_numpy()
+    out.loc[sel, "rom_band_high"] = m.loc[sel, "high90"].to_numpy()
+    return out

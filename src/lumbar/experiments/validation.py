@@ -483,6 +483,46 @@ def condition_label(condition: str) -> str:
     return s.replace("_", " ").replace("N*m", "N\u00b7m")
 
 
+#: the trivial models the independent counts are set beside (what the model adds over a model that knows nothing
+#: of mechanics): quantity of the scoreboard -> (name, description)
+NULL_MODELS = {
+    "ROM, other levels": ("L4-L5 copied", "the measured L4-L5 ROM of the same direction (Yamamoto et al. 1989) "
+                                          "copied to every level"),
+    "L4-L5 IDP in vivo": ("mean of the measurements", "the mean of the measured in-vivo pressures over the "
+                                                      "activities, the same value for every activity"),
+}
+NULL_COLUMNS = ("quantity", "null_model", "description", "n_rows", "model_within", "null_within",
+                "model_beats_null")
+
+
+def null_model_counts(scoreboard_df: pd.DataFrame, yamamoto_levels: pd.DataFrame, calibrated_level="L4-L5"):
+    """Per scoreboard quantity of :data:`NULL_MODELS`: the independent rows the model has within their acceptance
+    band beside the rows a trivial model has within the same bands (results/tables/validation_null_models.csv).
+    The null's value for a row: other levels, the calibrated level's measured ROM of that direction (a model that
+    says every level moves like L4-L5); in-vivo IDP, the mean measured pressure. Rows the model could not simulate
+    count as misses for the model, never for the null."""
+    rows = []
+    ind = scoreboard_df[scoreboard_df["role"] == INDEPENDENT]
+    y = yamamoto_levels[(yamamoto_levels["quantity"] == "rom") & (yamamoto_levels["level"] == calibrated_level)]
+    ref = {str(d).replace("_one_side", ""): float(v) for d, v in zip(y["direction"], y["value_deg"])}
+    for q, (name, desc) in NULL_MODELS.items():
+        g = ind[(ind["quantity"] == q) & (ind["set"] != "paper_table3_as_published")]
+        if g.empty:
+            continue
+        if q == "ROM, other levels":
+            nulls = [ref.get(str(c).split()[1].replace("_one_side", ""), np.nan) for c in g["condition"]]
+        else:
+            nulls = [float(g["measured"].mean())] * len(g)
+        null_ok = []
+        for (_, r), v in zip(g.iterrows(), nulls):
+            lo, hi = acceptance_band(r)
+            null_ok.append(bool(np.isfinite(v) and lo <= v <= hi))
+        mw, nw = int(g["within"].astype(bool).sum()), int(sum(null_ok))
+        rows.append({"quantity": q, "null_model": name, "description": desc, "n_rows": len(g),
+                     "model_within": mw, "null_within": nw, "model_beats_null": mw > nw})
+    return pd.DataFrame(rows, columns=list(NULL_COLUMNS))
+
+
 def acceptance_band(row) -> tuple[float, float]:
     """The interval a simulated value must fall in to count as ``within``: the published range, or the
     measured value +- the absolute or relative tolerance named in ``tolerance_rule`` (NaN, NaN if neither)."""

@@ -426,6 +426,9 @@ class ReportBuilder:
             if miss:
                 text += "; it misses " + "; ".join(miss)
             out.append(text + ".")
+            nulls = self._null_sentence()
+            if nulls:
+                out.append(nulls)
             w, n = counts.get(V.INTERNAL, (0, 0))
             if n:
                 g = d[d["role"] == V.INTERNAL]
@@ -450,6 +453,22 @@ class ReportBuilder:
         else:
             out.append(f"Tables 4 and 5 compare with the configured measured tables; {tail}")
         return " ".join(out)
+
+    def _null_sentence(self) -> str:
+        """What the model adds over a trivial model on the same rows (results/tables/validation_null_models.csv),
+        in words where it does not beat it."""
+        rel = T + "validation_null_models.csv"
+        if not self.has(rel):
+            return ""
+        t = _read_csv(self.path(rel))
+        parts = []
+        for r in t.itertuples(index=False):
+            s = (f"{V.condition_label(r.quantity)}: the model {r.model_within} of {r.n_rows} within, a trivial model "
+                 f"({r.description}) {r.null_within}")
+            if not bool(r.model_beats_null):
+                s += " - the model does not beat it"
+            parts.append(s)
+        return ("Beside a trivial model on the same rows: " + "; ".join(parts) + ".") if parts else ""
 
     def _muscle_abstract(self) -> str:
         rel = MM + "in_vivo_metrics.json"

@@ -1,0 +1,49 @@
+"""Stepwise-reduction stage, rule stepwise_reduction_bands: the 90 % posterior band of every Table 4 scenario of the
+calibrated set (160 ROM values), by linearisation of the calibration's Laplace posterior
+(lumbar.experiments.posterior.table_bands; one finite-difference step per fitted parameter).
+
+By hand: python workflow/scripts/stepwise_reduction_bands.py stepwise_reduction_bands --configfile config/test/config.yaml
+"""
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _common.py
+import _common  # noqa: E402
+import pandas as pd  # noqa: E402
+from lumbar.experiments import stepwise_reduction as sr_mod  # noqa: E402
+from lumbar.experiments.calibration import shift_parameter  # noqa: E402
+from lumbar.experiments.fsu import build_fsu  # noqa: E402
+from lumbar.experiments.posterior import table_bands, read_posterior  # noqa: E402
+from lumbar.geometry import load_geometry  # noqa: E402
+from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
+from lumbar.inputs.io import write_table_atomic  # noqa: E402
+
+KEYS = ("stage", "direction", "moment_nm")
+
+
+def main(snakemake, log):
+    g, f, s, sr = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solver, snakemake.params.sr
+    post = read_posterior(snakemake.input.posterior, snakemake.input.covariance)
+    if post is None:
+        log.info("the calibration has no posterior (no admissible fit): no bands")
+        write_table_atomic(pd.DataFrame(columns=list(KEYS) + ["map", "sd", "low90", "high90"]), snakemake.output[0])
+        return
+    geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
+    cs = load_characteristic_set("calibrated", data_dir=Path(_common.as_list(snakemake.input.characteristics)[0]).parent)
+
+    def table_of(c):
+        fsu = build_fsu(geo, c, f["level"], facet_stiffness=f.get("facet_stiffness_n_per_m"),
+                        k_shear=f.get("disc_shear_stiffness_n_per_m"))
+        return sr_mod.simulate_stepwise_reduction(fsu, moments_nm=sr["moments_nm"], max_iter=s["max_iter"],
+                                                  tol=min(s["tol_force_n"], s["tol_moment_nm"]),
+                                                  load_steps=s["load_steps"])
+
+    bands = table_bands(table_of, "rom_deg", KEYS, cs, post[0], post[1], shift_parameter)
+    write_table_atomic(bands, snakemake.output[0])
+    log.info("posterior bands of %d stepwise-reduction scenarios (%d parameters); median 90 %% half-width %.3g deg",
+             len(bands), len(post[0]), float((bands["high90"] - bands["map"]).median()))
+
+
+if __name__ == "__main__":
+    smk, logger = _common.start(globals())
+    main(smk, logger)
