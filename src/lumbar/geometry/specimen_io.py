@@ -437,7 +437,8 @@ def _read_nifti(path: Path):
 
 
 def _mask_to_mesh(mask: np.ndarray, affine: np.ndarray, smooth_iterations: int, max_faces: int):
-    """Closed surface (world millimetres) of the largest connected part of ``mask``; (mesh, voxels dropped)."""
+    """Closed surface (world millimetres) of the largest connected part of ``mask``; (mesh, voxels dropped, what
+    the decimation did: a decimation that opens the surface is not kept)."""
     import trimesh  # noqa: PLC0415 - mesh library where meshes are built (docs/design.md)
     from scipy import ndimage  # noqa: PLC0415 - connected parts of the mask, only for label volumes
     from skimage.measure import marching_cubes  # noqa: PLC0415 - scikit-image (1 s import), only for label volumes
@@ -459,11 +460,15 @@ def _mask_to_mesh(mask: np.ndarray, affine: np.ndarray, smooth_iterations: int, 
         mesh.invert()
     if smooth_iterations:
         trimesh.smoothing.filter_taubin(mesh, lamb=0.5, nu=0.53, iterations=smooth_iterations)
+    note = "none"
     if len(mesh.faces) > max_faces:
         dec = mesh.simplify_quadric_decimation(face_count=max_faces)
         if dec.is_watertight and dec.is_winding_consistent and dec.volume > 0:
+            note = f"{len(mesh.faces)} -> {len(dec.faces)} triangles"
             mesh = dec
-    return mesh, dropped
+        else:
+            note = f"skipped: decimating {len(mesh.faces)} to {max_faces} triangles opened the surface"
+    return mesh, dropped, note
 
 
 def _volume_inputs(path: Path, label_table) -> list[tuple[str, Path, int | None]]:
@@ -526,8 +531,8 @@ def label_volume_to_meshes(path, out_dir, label_table=None, *, smooth_iterations
     ``label,value``). Marching cubes (scikit-image) on each mask's largest connected part at the header's affine
     (voxel spacing, orientation), Taubin smoothing (``smooth_iterations``; keeps the volume, unlike plain Laplacian
     smoothing), quadric decimation to at most ``max_faces`` triangles (kept only where the result stays closed).
-    Also writes ``out_dir/meshing_report.csv`` (per vertebra: source, voxel size, voxels, parts dropped,
-    triangles) and ``out_dir/resolution_limits.csv`` (:func:`resolution_limits`: what the voxel size cannot
+    Also writes ``out_dir/meshing_report.csv`` (per vertebra: source, voxel size, voxels, voxels of smaller parts
+    dropped, what the decimation did, triangles) and ``out_dir/resolution_limits.csv`` (:func:`resolution_limits`: what the voxel size cannot
     support). Returns level -> STL path.
     """
     import pandas as pd  # noqa: PLC0415 - only the meshing report writes tables
@@ -556,7 +561,7 @@ def label_volume_to_meshes(path, out_dir, label_table=None, *, smooth_iterations
     written, rows = {}, []
     for lv, f, val, mask, aff in masks:
         spacing = np.linalg.norm(aff[:3, :3], axis=0)
-        mesh, dropped = _mask_to_mesh(mask, aff, smooth_iterations, max_faces)
+        mesh, dropped, decimation = _mask_to_mesh(mask, aff, smooth_iterations, max_faces)
         if not mesh.is_watertight:
             raise SpecimenError(f"{f}: the {lv} surface meshed from the mask is not closed; expected a closed "
                                 "surface (report this volume)")
@@ -567,7 +572,8 @@ def label_volume_to_meshes(path, out_dir, label_table=None, *, smooth_iterations
         written[lv] = dest
         rows.append({"level": lv, "source": f.name, "label_value": "" if val is None else val,
                      "voxel_mm": "x".join(f"{s:g}" for s in spacing), "n_voxels": int(mask.sum()),
-                     "voxels_dropped": dropped, "n_faces": len(mesh.faces), "units": "mm", "axes": "RAS"})
+                     "voxels_dropped": dropped, "decimation": decimation, "n_faces": len(mesh.faces),
+                     "units": "mm", "axes": "RAS"})
     write_table_atomic(pd.DataFrame(rows), out_dir / "meshing_report.csv")
     spacing = np.max([np.linalg.norm(a[:3, :3], axis=0) for _, _, _, _, a in masks], axis=0)
     write_table_atomic(pd.DataFrame(resolution_limits(spacing)), out_dir / "resolution_limits.csv")
