@@ -294,8 +294,42 @@ def test_empty_mask_and_no_masks(tmp_path):
     with pytest.raises(GeometryError, match=r"vertebrae_L3\.nii\.gz: the L3 mask is empty"):
         S.label_volume_to_meshes(tmp_path, tmp_path / "out")
     assert not (tmp_path / "out").exists()                 # refused before anything is written
+    (tmp_path / "none").mkdir()
     with pytest.raises(GeometryError, match="no vertebra masks"):
-        S.label_volume_to_meshes(tmp_path / "out2", tmp_path / "o") if (tmp_path / "out2").mkdir() is None else None
+        S.label_volume_to_meshes(tmp_path / "none", tmp_path / "out")
+
+
+def test_mislabelled_mask_refused_before_writing(tmp_path):
+    for f in ("vertebrae_L4.nii.gz", "vertebrae_L5.nii.gz"):
+        shutil.copy(TS_MASKS / f, tmp_path / f)
+    assert set(S.label_volume_to_meshes(tmp_path, tmp_path / "ok", require="L4-L5")) == {"L4", "L5"}   # control
+    with pytest.raises(GeometryError, match="S1 required but missing"):
+        S.label_volume_to_meshes(tmp_path, tmp_path / "x", require="L5-S1")
+    shutil.copy(TS_MASKS / "vertebrae_L4.nii.gz", tmp_path / "vertebrae_L5.nii.gz")   # L4's voxels named L5
+    with pytest.raises(GeometryError, match=r"vertebrae_L5\.nii\.gz.*overlap"):
+        S.label_volume_to_meshes(tmp_path, tmp_path / "bad")
+    assert not (tmp_path / "bad").exists()
+
+
+def test_nifti_unit_in_header_followed(tmp_path):
+    import nibabel
+
+    img = nibabel.load(TS_MASKS / "vertebrae_L4.nii.gz")
+    aff = img.affine.copy()
+    aff[:3, :] /= 1000.0                                    # the same grid in metres, the header saying so
+    m = nibabel.Nifti1Image(np.asarray(img.dataobj), aff)
+    m.header.set_xyzt_units(xyz="meter")
+    d = tmp_path / "metres"
+    d.mkdir()
+    nibabel.save(m, d / "vertebrae_L4.nii.gz")
+    shutil.copy(TS_MASKS / "vertebrae_L4.nii.gz", tmp_path / "vertebrae_L4.nii.gz")
+    a = S.read_specimen_meshes(S.label_volume_to_meshes(tmp_path, tmp_path / "a")["L4"].parent)["L4"]
+    b = S.read_specimen_meshes(S.label_volume_to_meshes(d, tmp_path / "b")["L4"].parent)["L4"]
+    np.testing.assert_allclose(b.volume, a.volume, rtol=1e-6)
+    m.header.set_xyzt_units(xyz="mm")                       # control: the same numbers declared in mm are refused
+    nibabel.save(m, d / "vertebrae_L4.nii.gz")
+    with pytest.raises(GeometryError, match=r"vertebrae_L4\.nii\.gz.*units='m'"):
+        S.label_volume_to_meshes(d, tmp_path / "c")
 
 
 def test_decimation_keeps_a_closed_surface(tmp_path, ts_meshes):
@@ -373,37 +407,49 @@ def corrupt(folder: Path, op) -> None:
 
 
 def expected_state(ops) -> dict:
-    """file name -> (level, broken, moved, holed) after ``ops``, the model of :func:`corrupt`."""
-    files = {f"spec_{lv}.stl": (lv, False, False, False) for lv in LEVELS3}
+    """file name -> state after ``ops`` (the model of :func:`corrupt`): level, scale (about the origin), centre
+    (mm), broken (emptied, truncated, a large hole), holed (small holes)."""
+    files = {f"spec_{lv}.stl": {"level": lv, "scale": 1.0, "centre": np.array([0.0, 0.0, -PITCH_MM * i]),
+                                "broken": False, "holed": False} for i, lv in enumerate(LEVELS3)}
     for op in ops:
         kind, lv = op[0], op[1]
         name = f"spec_{lv}.stl"
         if name not in files:
             continue
-        lv_, broken, moved, holed = files[name]
+        f = files[name]
         if kind == "delete":
             del files[name]
         elif kind == "duplicate":
-            files[f"copy_{lv}.stl"] = files[name]
-        elif kind in ("truncate", "empty", "large_hole", "scale"):
-            files[name] = (lv_, True, moved, holed)
-        elif kind in ("translate", "overlap"):
-            files[name] = (lv_, broken, True, holed)
+            files[f"copy_{lv}.stl"] = dict(f)
+        elif kind in ("truncate", "empty", "large_hole"):
+            f["broken"] = True
+        elif f["broken"] and kind != "small_hole":
+            continue                                        # corrupt() leaves an unreadable file as it is
+        elif kind == "scale":
+            f["scale"] *= op[2]
+            f["centre"] = f["centre"] * op[2]
+        elif kind == "translate":
+            f["centre"] = f["centre"] + op[2]
+        elif kind == "overlap":
+            f["centre"] = f["centre"] + [0, 0, -0.6 * PITCH_MM]
         elif kind == "small_hole":
-            files[name] = (lv_, broken, moved, True)
+            f["holed"] = True
+    for f in files.values():
+        f["broken"] = f["broken"] or not np.isclose(f["scale"], 1.0)
+        f["moved"] = not np.allclose(f["centre"], [0, 0, -PITCH_MM * LEVELS3.index(f["level"])], atol=1e-6)
     return files
 
 
 def must_fail(files) -> bool:
     """Whether a folder in this state must be refused: a level twice, a broken file, a level missing between two
     present ones, a moved vertebra beside a present neighbour."""
-    levels = [st_[0] for st_ in files.values()]
-    if len(set(levels)) < len(levels) or any(st_[1] for st_ in files.values()):
+    levels = [f["level"] for f in files.values()]
+    if len(set(levels)) < len(levels) or any(f["broken"] for f in files.values()):
         return True
     idx = sorted(LEVELS3.index(lv) for lv in levels)
     if idx and idx[-1] - idx[0] + 1 != len(idx):
         return True
-    moved = {st_[0] for st_ in files.values() if st_[2]}
+    moved = {f["level"] for f in files.values() if f["moved"]}
     order = [LEVELS3[i] for i in idx]
     return any(a in moved or b in moved for a, b in zip(order, order[1:]))
 
@@ -426,16 +472,16 @@ def test_corruptions_give_a_named_error_or_a_correct_result(ops):
             assert any(lv in msg for lv in touched), msg                # names a corrupted level or its file
             return
         assert not must_fail(state), f"accepted a corrupted folder: {ops}"
-        assert r.levels == [lv for lv in LEVELS3 if any(s_[0] == lv for s_ in state.values())]
+        assert r.levels == [lv for lv in LEVELS3 if any(f["level"] == lv for f in state.values())]
         ref = ellipsoid(0.0)
         holed = set()
-        for name, (lv, _, moved, hole) in state.items():
+        for name, f in state.items():
+            lv = f["level"]
             m = r.meshes[lv]
             assert m.is_watertight and r.files[lv].name == name
-            np.testing.assert_allclose(m.volume, ref.volume * 1e-9, rtol=2e-3 if hole else 1e-6)
-            if not moved:
-                np.testing.assert_allclose(m.center_mass, [0, 0, -PITCH_MM * LEVELS3.index(lv) * 1e-3], atol=1e-4)
-            if hole:
+            np.testing.assert_allclose(m.volume, ref.volume * 1e-9, rtol=2e-3 if f["holed"] else 1e-5)
+            np.testing.assert_allclose(m.center_mass, f["centre"] * 1e-3, atol=2e-4 if f["holed"] else 1e-6)
+            if f["holed"]:
                 holed.add(lv)
         assert {x.level for x in r.repairs} == holed
     finally:

@@ -41,10 +41,11 @@ MAX_HOLE_PERIMETER_M = 0.015
 # neighbouring vertebrae: the disc between two bodies is 5-17 mm tall and the facet joint space 1-2 mm, so the
 # nearest points of two neighbours are far closer than this; 30 mm apart is a missing vertebra or a shifted file
 MAX_NEIGHBOUR_GAP_M = 0.030
-# neighbours overlapping: a surface point of one vertebra deeper than this inside its neighbour. Segmented facet
-# processes interpenetrate a little: the embedded Visible Human set (data/geometry/visible_human_lss, L*_vertebra.obj)
-# has up to 3.6 mm (L3 in L4); a shifted, doubled or mislabelled vertebra goes a body height (25-35 mm) deep
-MAX_OVERLAP_DEPTH_M = 0.006
+# neighbours overlapping: the radius of the largest ball inside both (half the thickness of their common volume).
+# Segmented facet processes interpenetrate a little: 1.0-1.8 mm for the neighbours of the embedded Visible Human set
+# (L*_vertebra.obj) and 0.9-1.5 mm for TotalSegmentator's 3 mm example meshed here (overlap_radius on a 1 mm grid);
+# a shifted, doubled or mislabelled vertebra shares half a body height (12-17 mm) or more
+MAX_OVERLAP_M = 0.004
 
 _TOKEN = {f"l{i}": f"L{i}" for i in range(1, 6)} | {"s1": "S1", "sacrum": "S1"}
 
@@ -237,16 +238,9 @@ def close_surface(mesh, level: str, file: Path, max_hole_m: float = MAX_HOLE_PER
     return mesh, repairs
 
 
-def read_specimen(path, units: str = "mm", axes: str = "LPS", pattern: str | None = None,
-                  require=None, max_hole_m: float = MAX_HOLE_PERIMETER_M) -> SpecimenMeshes:
-    """Read and check a folder of vertebra surfaces (see the module doc); ``require``: vertebrae (``"L4"``) or
-    units (``"L4-L5"``) that must be present. Returns the meshes in metres, in the input's axes, with the repair
-    log."""
-    import trimesh  # noqa: PLC0415 - mesh library where meshes are built (docs/design.md)
-    check_units_axes(units, axes)
-    files = find_level_files(path, pattern)
-    _, ignored = _scan(path, pattern)
-    present = list(files)
+def check_levels(files: dict, require, where) -> None:
+    """No vertebra missing between the highest and the lowest present, and every one of ``require`` (vertebrae
+    ``"L4"`` or units ``"L4-L5"``) present; ``files``: level -> file; ``where`` (the folder) starts the message."""
     need = set()
     for r in [require] if isinstance(require, str) else (require or []):
         if r in LEVEL_NAMES:
@@ -255,6 +249,7 @@ def read_specimen(path, units: str = "mm", axes: str = "LPS", pattern: str | Non
             need.add(r)
         else:
             raise SpecimenError(f"require={r!r}: expected vertebrae {list(VERTEBRA_NAMES)} or units {list(LEVEL_NAMES)}")
+    present = [v for v in VERTEBRA_NAMES if v in files]
     idx = [VERTEBRA_NAMES.index(v) for v in present]
     gaps = [VERTEBRA_NAMES[i] for i in range(min(idx), max(idx) + 1) if VERTEBRA_NAMES[i] not in files]
     missing = sorted(need - set(files), key=VERTEBRA_NAMES.index)
@@ -265,7 +260,28 @@ def read_specimen(path, units: str = "mm", axes: str = "LPS", pattern: str | Non
                        "the highest and the lowest present is needed)")
         if missing:
             why.append(f"{', '.join(missing)} required but missing")
-        raise SpecimenError(f"{Path(path)}: {'; '.join(why)}; found {', '.join(f'{k}: {v.name}' for k, v in files.items())}")
+        found = ", ".join(f"{k}: {Path(files[k]).name}" for k in present)
+        raise SpecimenError(f"{Path(where)}: {'; '.join(why)}; found {found}")
+
+
+def check_size(mesh, level: str, file, units: str) -> None:
+    """A vertebra (metres) spans ``MIN_EXTENT_M``..``MAX_EXTENT_M``; else the message says which unit fits."""
+    ext = float(np.max(mesh.extents))
+    if not MIN_EXTENT_M <= ext <= MAX_EXTENT_M:
+        raise SpecimenError(f"{file}: {level} is {ext:.3g} m across with units={units!r}; a lumbar vertebra or the "
+                            f"sacrum spans {MIN_EXTENT_M}-{MAX_EXTENT_M} m: {_units_hint(ext, units)}")
+
+
+def read_specimen(path, units: str = "mm", axes: str = "LPS", pattern: str | None = None,
+                  require=None, max_hole_m: float = MAX_HOLE_PERIMETER_M) -> SpecimenMeshes:
+    """Read and check a folder of vertebra surfaces (see the module doc); ``require``: vertebrae (``"L4"``) or
+    units (``"L4-L5"``) that must be present. Returns the meshes in metres, in the input's axes, with the repair
+    log."""
+    import trimesh  # noqa: PLC0415 - mesh library where meshes are built (docs/design.md)
+    check_units_axes(units, axes)
+    files = find_level_files(path, pattern)
+    _, ignored = _scan(path, pattern)
+    check_levels(files, require, path)
     scale = UNITS[units]
     meshes, repairs = {}, []
     for lv, f in files.items():
@@ -275,10 +291,7 @@ def read_specimen(path, units: str = "mm", axes: str = "LPS", pattern: str | Non
         mesh = trimesh.Trimesh(vertices * scale, faces, process=True)
         if len(mesh.faces) < 4:
             raise SpecimenError(f"{f}: {lv} mesh has {len(mesh.faces)} triangle(s); expected a closed vertebra surface")
-        ext = float(np.max(mesh.extents))
-        if not MIN_EXTENT_M <= ext <= MAX_EXTENT_M:
-            raise SpecimenError(f"{f}: {lv} is {ext:.3g} m across with units={units!r}; a lumbar vertebra or the "
-                                f"sacrum spans {MIN_EXTENT_M}-{MAX_EXTENT_M} m: {_units_hint(ext, units)}")
+        check_size(mesh, lv, f, units)
         mesh, rep = close_surface(mesh, lv, f, max_hole_m)
         repairs += rep
         meshes[lv] = mesh
@@ -297,8 +310,9 @@ def _dense_points(mesh) -> np.ndarray:
 
 
 def check_neighbours(meshes: dict, files: dict) -> None:
-    """Neighbouring vertebrae (L4 and L5, ...) stacked along +z, not overlapping (a surface point deeper than
-    ``MAX_OVERLAP_DEPTH_M`` inside the other) and not apart (nearest points more than ``MAX_NEIGHBOUR_GAP_M``)."""
+    """Neighbouring vertebrae (L4 and L5, ...) stacked along +z, not overlapping (:func:`overlap_radius` above
+    ``MAX_OVERLAP_M``) and not apart (nearest points more than ``MAX_NEIGHBOUR_GAP_M``); ``files``: level -> what
+    the message names (a file)."""
     from scipy.spatial import cKDTree  # noqa: PLC0415 - scipy.spatial where geometry is computed (docs/design.md)
     order = [v for v in VERTEBRA_NAMES if v in meshes]
     for up, lo in zip(order, order[1:]):
@@ -310,43 +324,62 @@ def check_neighbours(meshes: dict, files: dict) -> None:
             raise SpecimenError(f"{where}: neighbouring vertebrae {gap * 1e3:.0f} mm apart (nearest surface points); "
                                 f"expected within {MAX_NEIGHBOUR_GAP_M * 1e3:.0f} mm (a disc is 5-17 mm tall): a "
                                 "vertebra shifted, or one missing between them")
-        for X, Y, nx, ny in ((A, B, up, lo), (B, A, lo, up)):
-            depth = _overlap_depth(X, Y)
-            if depth > MAX_OVERLAP_DEPTH_M:
-                raise SpecimenError(f"{where}: the vertebrae overlap: a point of {nx} lies {depth * 1e3:.1f} mm "
-                                    f"inside {ny} (allowed {MAX_OVERLAP_DEPTH_M * 1e3:.0f} mm); expected separate "
-                                    "bones (a shifted or mislabelled file?)")
+        r = overlap_radius(A, B)
+        if r > MAX_OVERLAP_M:
+            raise SpecimenError(f"{where}: the vertebrae overlap: their common volume holds a ball of radius "
+                                f"{r * 1e3:.1f} mm (allowed {MAX_OVERLAP_M * 1e3:.0f} mm); expected separate bones "
+                                "(a shifted, doubled or mislabelled file?)")
         ca, cb = A.center_mass, B.center_mass
         if not ca[2] > cb[2]:
             raise SpecimenError(f"{where}: {up} is not above {lo} along +z (volume centroids z = {ca[2]:.4f} m and "
                                 f"{cb[2]:.4f} m); expected +z superior (LPS, RAS and the project frame all have it)")
 
 
-def _overlap_depth(X, Y) -> float:
-    """Largest depth (m) of a vertex of X inside the closed surface Y (0 if none). Screened by the nearest face
-    centre of Y (inside when behind that face); the vertices screened deeper than ``MAX_OVERLAP_DEPTH_M`` are
-    confirmed by trimesh's ray test and measured to the surface exactly (trimesh's ray test on every vertex took
-    9 s per pair of Visible Human vertebrae)."""
-    import trimesh  # noqa: PLC0415 - mesh library where meshes are built (docs/design.md)
+def _inside_distance(mesh, pts):
+    """(distance to the nearest face centre, inside by that face's normal) of ``pts``: a screen, exact enough
+    away from the surface; the points that decide are confirmed by :func:`overlap_radius`."""
     from scipy.spatial import cKDTree  # noqa: PLC0415 - scipy.spatial where geometry is computed (docs/design.md)
-    v = np.asarray(X.vertices)
-    lo, hi = Y.bounds
-    cand = v[np.all((v >= lo) & (v <= hi), axis=1)]
-    if len(cand) == 0:
+    centres = np.asarray(mesh.triangles_center)
+    d, i = cKDTree(centres).query(pts)
+    inside = np.einsum("ij,ij->i", pts - centres[i], np.asarray(mesh.face_normals)[i]) < 0
+    return d, inside
+
+
+def overlap_radius(A, B, step_m: float = 0.001, max_points: int = 40_000) -> float:
+    """Radius (m) of the largest ball inside both closed surfaces A and B (0 when they do not overlap): half the
+    thickness of their common volume. Grid points (``step_m``, coarser when the boxes' overlap would need more
+    than ``max_points``) inside both, screened by the nearest face (:func:`_inside_distance`); the points screened
+    beyond ``MAX_OVERLAP_M`` are confirmed by trimesh's ray test and measured to both surfaces exactly (the ray
+    test on every point took seconds per pair of Visible Human vertebrae)."""
+    import trimesh  # noqa: PLC0415 - mesh library where meshes are built (docs/design.md)
+    lo = np.maximum(A.bounds[0], B.bounds[0])
+    hi = np.minimum(A.bounds[1], B.bounds[1])
+    if np.any(hi <= lo):
         return 0.0
-    centres = np.asarray(Y.triangles_center)
-    d, i = cKDTree(centres).query(cand)
-    behind = np.einsum("ij,ij->i", cand - centres[i], np.asarray(Y.face_normals)[i]) < 0
-    if not np.any(behind):
+    step = max(step_m, float(np.prod(hi - lo) / max_points) ** (1 / 3))
+    axes = [np.arange(a + step / 2, b, step) for a, b in zip(lo, hi)]
+    if any(len(x) == 0 for x in axes):
         return 0.0
-    deep = behind & (d > MAX_OVERLAP_DEPTH_M)
-    if not np.any(deep):
-        return float(d[behind].max())
-    pts = cand[deep][np.argsort(-d[deep])[:64]]
-    pts = pts[Y.contains(pts)]
+    pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    da, ina = _inside_distance(A, pts)
+    pts, da = pts[ina], da[ina]
     if len(pts) == 0:
-        return float(d[behind & ~deep].max()) if np.any(behind & ~deep) else 0.0
-    return float(trimesh.proximity.closest_point(Y, pts)[1].max())
+        return 0.0
+    db, inb = _inside_distance(B, pts)
+    if not np.any(inb):
+        return 0.0
+    r = np.minimum(da, db)[inb]
+    cand = pts[inb]
+    deep = r > MAX_OVERLAP_M
+    if not np.any(deep):
+        return float(r.max())
+    top = cand[deep][np.argsort(-r[deep])[:64]]
+    top = top[A.contains(top) & B.contains(top)]
+    if len(top) == 0:
+        return float(r[~deep].max()) if np.any(~deep) else 0.0
+    ra = trimesh.proximity.closest_point(A, top)[1]
+    rb = trimesh.proximity.closest_point(B, top)[1]
+    return float(np.minimum(ra, rb).max())
 
 
 # ------------------------------------------------------------------ what the levels present allow
@@ -391,6 +424,7 @@ def skipped_stages(levels, calibrated_level: str = "L4-L5", other_levels=None) -
 
 # ------------------------------------------------------------------ label volumes (CT segmentations) -> meshes
 ANATOMY_TABLE = "anatomy/l4l5_magnitudes_original_text.csv"
+NIFTI_UNITS_MM = {"unknown": 1.0, "mm": 1.0, "meter": 1000.0, "micron": 1e-3}   # xyzt_units -> mm
 
 
 def resolution_limits(voxel_mm) -> list[dict]:
@@ -433,6 +467,13 @@ def _read_nifti(path: Path):
     if not np.all(np.isfinite(aff)) or abs(np.linalg.det(aff[:3, :3])) < 1e-12:
         raise SpecimenError(f"{path}: the NIfTI affine is singular or not finite; expected the voxel-to-world map "
                             "(RAS, millimetres)")
+    # the header's spatial unit (NIfTI: millimetres unless it says otherwise); the meshes are written in millimetres
+    get_units = getattr(img.header, "get_xyzt_units", None)
+    unit = get_units()[0] if get_units else "unknown"
+    to_mm = NIFTI_UNITS_MM.get(unit)
+    if to_mm is None:
+        raise SpecimenError(f"{path}: NIfTI spatial unit {unit!r}; expected one of {sorted(NIFTI_UNITS_MM)}")
+    aff[:3, :] *= to_mm
     return data, aff
 
 
@@ -521,7 +562,7 @@ def _volume_inputs(path: Path, label_table) -> list[tuple[str, Path, int | None]
     return sorted(out, key=lambda r: VERTEBRA_NAMES.index(r[0]))
 
 
-def label_volume_to_meshes(path, out_dir, label_table=None, *, smooth_iterations: int = 10,
+def label_volume_to_meshes(path, out_dir, label_table=None, *, require=None, smooth_iterations: int = 10,
                            max_faces: int = 20000) -> dict[str, Path]:
     """Mesh a CT segmentation into the mesh-folder form: ``out_dir/<level>.stl`` in millimetres, RAS (NIfTI
     world), one closed surface per vertebra; read them with ``read_specimen(out_dir, units="mm", axes="RAS")``.
@@ -531,6 +572,8 @@ def label_volume_to_meshes(path, out_dir, label_table=None, *, smooth_iterations
     ``label,value``). Marching cubes (scikit-image) on each mask's largest connected part at the header's affine
     (voxel spacing, orientation), Taubin smoothing (``smooth_iterations``; keeps the volume, unlike plain Laplacian
     smoothing), quadric decimation to at most ``max_faces`` triangles (kept only where the result stays closed).
+    Before anything is written, the meshes pass the reader's checks (:func:`check_levels` with ``require``, size,
+    closed, neighbours), each error naming the NIfTI file (and the label value).
     Also writes ``out_dir/meshing_report.csv`` (per vertebra: source, voxel size, voxels, voxels of smaller parts
     dropped, what the decimation did, triangles) and ``out_dir/resolution_limits.csv`` (:func:`resolution_limits`: what the voxel size cannot
     support). Returns level -> STL path.
@@ -539,6 +582,7 @@ def label_volume_to_meshes(path, out_dir, label_table=None, *, smooth_iterations
     from ..inputs.io import write_table_atomic  # noqa: PLC0415 - atomic writes, only for the meshing report
     path = Path(path)
     items = _volume_inputs(path, label_table)
+    check_levels({lv: f for lv, f, _ in items}, require, path)
     cache: dict[Path, tuple] = {}
     masks = []
     for lv, f, val in items:            # every volume read and checked before any meshing
@@ -556,24 +600,32 @@ def label_volume_to_meshes(path, out_dir, label_table=None, *, smooth_iterations
                 raise SpecimenError(f"{f}: no voxel has the value {val} of {lv} (label table {label_table}); values "
                                     f"present: {present[:20].tolist()}{' ...' if len(present) > 20 else ''}")
         masks.append((lv, f, val, mask, aff))
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    written, rows = {}, []
+    built, rows, sources = {}, [], {}
     for lv, f, val, mask, aff in masks:
         spacing = np.linalg.norm(aff[:3, :3], axis=0)
         mesh, dropped, decimation = _mask_to_mesh(mask, aff, smooth_iterations, max_faces)
-        if not mesh.is_watertight:
-            raise SpecimenError(f"{f}: the {lv} surface meshed from the mask is not closed; expected a closed "
+        where = f if val is None else f"{f} (value {val})"
+        metres = mesh.copy()
+        metres.apply_scale(1e-3)
+        check_size(metres, lv, where, "mm")
+        if not (mesh.is_watertight and mesh.is_winding_consistent):
+            raise SpecimenError(f"{where}: the {lv} surface meshed from the mask is not closed; expected a closed "
                                 "surface (report this volume)")
+        built[lv], sources[lv] = (mesh, metres), where
+        rows.append({"level": lv, "source": f.name, "label_value": "" if val is None else val,
+                     "voxel_mm": "x".join(f"{s:g}" for s in spacing), "n_voxels": int(mask.sum()),
+                     "voxels_dropped": dropped, "decimation": decimation, "n_faces": len(mesh.faces),
+                     "units": "mm", "axes": "RAS"})
+    check_neighbours({lv: m for lv, (_, m) in built.items()}, sources)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written = {}
+    for lv, (mesh, _) in built.items():
         dest = out_dir / f"{lv}.stl"
         tmp = dest.with_name(f".{dest.name}.tmp")
         mesh.export(str(tmp), file_type="stl")
         tmp.replace(dest)
         written[lv] = dest
-        rows.append({"level": lv, "source": f.name, "label_value": "" if val is None else val,
-                     "voxel_mm": "x".join(f"{s:g}" for s in spacing), "n_voxels": int(mask.sum()),
-                     "voxels_dropped": dropped, "decimation": decimation, "n_faces": len(mesh.faces),
-                     "units": "mm", "axes": "RAS"})
     write_table_atomic(pd.DataFrame(rows), out_dir / "meshing_report.csv")
     spacing = np.max([np.linalg.norm(a[:3, :3], axis=0) for _, _, _, _, a in masks], axis=0)
     write_table_atomic(pd.DataFrame(resolution_limits(spacing)), out_dir / "resolution_limits.csv")
