@@ -370,6 +370,7 @@ OPS = st.one_of(
     st.tuples(st.just("translate"), st.sampled_from(LEVELS3),
               st.sampled_from([(100, 0, 0), (-100, 0, 0), (0, 100, 0), (0, -100, 0), (0, 0, 100), (0, 0, -100)])),
     st.tuples(st.just("overlap"), st.sampled_from(LEVELS3[:2])),
+    st.tuples(st.just("copy_onto_below"), st.sampled_from(LEVELS3[:2])),    # a vertebra saved under two names
 )
 
 
@@ -382,6 +383,8 @@ def corrupt(folder: Path, op) -> None:
         f.unlink()
     elif kind == "duplicate":
         shutil.copy(f, folder / f"copy_{lv}.stl")
+    elif kind == "copy_onto_below":
+        shutil.copy(f, folder / f"spec_{LEVELS3[LEVELS3.index(lv) + 1]}.stl")
     elif kind == "truncate":
         f.write_bytes(f.read_bytes()[: f.stat().st_size // 2])
     elif kind == "empty":
@@ -421,6 +424,9 @@ def expected_state(ops) -> dict:
             del files[name]
         elif kind == "duplicate":
             files[f"copy_{lv}.stl"] = dict(f)
+        elif kind == "copy_onto_below":
+            below = LEVELS3[LEVELS3.index(lv) + 1]
+            files[f"spec_{below}.stl"] = dict(f, level=below)
         elif kind in ("truncate", "empty", "large_hole"):
             f["broken"] = True
         elif f["broken"] and kind != "small_hole":
@@ -436,22 +442,32 @@ def expected_state(ops) -> dict:
             f["holed"] = True
     for f in files.values():
         f["broken"] = f["broken"] or not np.isclose(f["scale"], 1.0)
-        f["moved"] = not np.allclose(f["centre"], [0, 0, -PITCH_MM * LEVELS3.index(f["level"])], atol=1e-6)
     return files
 
 
 def must_fail(files) -> bool:
     """Whether a folder in this state must be refused: a level twice, a broken file, a level missing between two
-    present ones, a moved vertebra beside a present neighbour."""
+    present ones, or two neighbours (centre offset o) clearly wrong for any specimen: the upper not above
+    (o_z <= 0), surely more than MAX_NEIGHBOUR_GAP_M apart (the gap of these ellipsoids is at least |o| less twice
+    the largest semi-axis), or surely overlapping by more than MAX_OVERLAP_M (the ball of the smallest
+    semi-axis less |o| / 2 about the midpoint lies in both). Between these bounds either outcome is right (moving
+    both alike, or a few millimetres, keeps a valid specimen); an accepted folder must give the files' meshes."""
     levels = [f["level"] for f in files.values()]
     if len(set(levels)) < len(levels) or any(f["broken"] for f in files.values()):
         return True
     idx = sorted(LEVELS3.index(lv) for lv in levels)
     if idx and idx[-1] - idx[0] + 1 != len(idx):
         return True
-    moved = {f["level"] for f in files.values() if f["moved"]}
+    centre = {f["level"]: f["centre"] for f in files.values()}
     order = [LEVELS3[i] for i in idx]
-    return any(a in moved or b in moved for a, b in zip(order, order[1:]))
+    half = SIZE_MM / 2
+    for a, b in zip(order, order[1:]):
+        o = centre[a] - centre[b]
+        n = float(np.linalg.norm(o))
+        if o[2] <= 0 or n - 2 * half.max() > S.MAX_NEIGHBOUR_GAP_M * 1e3 + 2 or \
+                half.min() - n / 2 > S.MAX_OVERLAP_M * 1e3 + 1:
+            return True
+    return False
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -464,7 +480,7 @@ def test_corruptions_give_a_named_error_or_a_correct_result(ops):
             corrupt(folder, op)
         state = expected_state(ops)
         assert set(state) == {p.name for p in folder.iterdir()}          # the model of the corruptions holds
-        touched = {op[1] for op in ops}
+        touched = {op[1] for op in ops} | {LEVELS3[LEVELS3.index(op[1]) + 1] for op in ops if op[0] == "copy_onto_below"}
         try:
             r = S.read_specimen(folder)
         except GeometryError as exc:
