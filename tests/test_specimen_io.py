@@ -155,6 +155,23 @@ def test_large_hole_refused(tmp_path):
     assert S.read_specimen(tmp_path, max_hole_m=1.0).repairs[0].level == "L4"
 
 
+def test_orientation_and_repeated_faces_repaired_and_logged(tmp_path):
+    write_folder(tmp_path)
+    m = ellipsoid(0.0)
+    faces = m.faces.copy()
+    faces[:10] = faces[:10, ::-1]                           # ten triangles turned
+    trimesh.Trimesh(m.vertices, faces, process=False).export(tmp_path / "spec_L4.stl")
+    inv = ellipsoid(-PITCH_MM)
+    inv.invert()                                            # the whole surface inside-out
+    inv.export(tmp_path / "spec_L5.stl")
+    r = S.read_specimen(tmp_path)
+    log = {lv: " | ".join(x.what for x in r.repairs if x.level == lv) for lv in LEVELS3}
+    assert "orientation" in log["L4"] and "inside-out" in log["L5"] and log["S1"] == ""
+    for lv in ("L4", "L5"):
+        assert r.meshes[lv].is_winding_consistent and r.meshes[lv].volume > 0
+        np.testing.assert_allclose(r.meshes[lv].volume, m.volume * 1e-9, rtol=1e-6)
+
+
 def test_empty_and_unreadable_files(tmp_path):
     write_folder(tmp_path)
     (tmp_path / "spec_L5.stl").write_bytes(b"")
@@ -297,6 +314,17 @@ def test_empty_mask_and_no_masks(tmp_path):
     (tmp_path / "none").mkdir()
     with pytest.raises(GeometryError, match="no vertebra masks"):
         S.label_volume_to_meshes(tmp_path / "none", tmp_path / "out")
+
+
+def test_two_sacrum_masks_need_a_pattern(tmp_path):
+    # TotalSegmentator 2 writes sacrum.nii.gz beside vertebrae_S1.nii.gz: both name S1
+    shutil.copy(TS_MASKS / "vertebrae_L5.nii.gz", tmp_path / "vertebrae_L5.nii.gz")
+    shutil.copy(TS_MASKS / "sacrum.nii.gz", tmp_path / "sacrum.nii.gz")
+    shutil.copy(TS_MASKS / "sacrum.nii.gz", tmp_path / "vertebrae_S1.nii.gz")
+    with pytest.raises(GeometryError, match=r"S1: sacrum\.nii\.gz, vertebrae_S1\.nii\.gz.*pattern"):
+        S.label_volume_to_meshes(tmp_path, tmp_path / "out")
+    got = S.label_volume_to_meshes(tmp_path, tmp_path / "out", pattern="vertebrae_{level}.nii.gz")
+    assert set(got) == {"L5", "S1"}
 
 
 def test_mislabelled_mask_refused_before_writing(tmp_path):

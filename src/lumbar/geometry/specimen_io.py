@@ -106,12 +106,17 @@ def check_units_axes(units: str, axes: str) -> None:
                             "z superior)")
 
 
-def _scan(path, pattern: str | None) -> tuple[dict[str, list[Path]], list[tuple[Path, str]]]:
+def _is_volume(p: Path) -> bool:
+    return p.is_file() and p.name.lower().endswith((".nii.gz", ".nii"))
+
+
+def _scan(path, pattern: str | None, keep=_is_mesh) -> tuple[dict[str, list[Path]], list[tuple[Path, str]]]:
+    """Level -> the files of folder ``path`` (those ``keep`` accepts) naming it, and the files naming none."""
     folder = Path(path)
     if not folder.is_dir():
         raise SpecimenError(f"{folder}: specimen folder missing (expected a folder of vertebra surfaces, "
                             "e.g. L4.stl, L5.stl)")
-    files = sorted(p for p in folder.iterdir() if _is_mesh(p))
+    files = sorted(p for p in folder.iterdir() if keep(p))
     found: dict[str, list[Path]] = {}
     ignored: list[tuple[Path, str]] = []
     if pattern is None:
@@ -199,11 +204,17 @@ def _boundary_loops(faces: np.ndarray) -> list[list[int]] | None:
 
 
 def close_surface(mesh, level: str, file: Path, max_hole_m: float = MAX_HOLE_PERIMETER_M):
-    """The mesh closed: holes whose boundary is at most ``max_hole_m`` long filled (a fan from the hole's centre),
-    an inside-out surface turned; returns (mesh, list[Repair]). A larger hole, an edge shared by three faces or a
-    surface still open after filling is a :class:`SpecimenError` naming ``file``."""
+    """The mesh closed and oriented: repeated and degenerate triangles removed, holes whose boundary is at most
+    ``max_hole_m`` long filled (a fan from the hole's centre), inconsistently oriented triangles turned (trimesh),
+    an inside-out surface turned; returns (mesh, list[Repair]) naming each change. A larger hole, an edge shared
+    by three faces, or a surface still open or inconsistent afterwards is a :class:`SpecimenError` naming
+    ``file``."""
     import trimesh  # noqa: PLC0415 - mesh library where meshes are built (docs/design.md)
     repairs: list[Repair] = []
+    keep = mesh.unique_faces() & mesh.nondegenerate_faces()
+    if not keep.all():
+        mesh = trimesh.Trimesh(mesh.vertices, mesh.faces[keep], process=True)
+        repairs.append(Repair(level, file, f"removed {int((~keep).sum())} repeated or degenerate triangle(s)"))
     if not mesh.is_watertight:
         loops = _boundary_loops(np.asarray(mesh.faces))
         if loops is None:
@@ -229,6 +240,10 @@ def close_surface(mesh, level: str, file: Path, max_hole_m: float = MAX_HOLE_PER
         if not mesh.is_watertight:
             raise SpecimenError(f"{file}: {level} surface is not closed after filling its holes; expected one "
                                 "closed surface per vertebra")
+    if not mesh.is_winding_consistent:
+        trimesh.repair.fix_winding(mesh)
+        if mesh.is_winding_consistent:
+            repairs.append(Repair(level, file, "triangles turned to one consistent orientation"))
     if not mesh.is_winding_consistent:
         raise SpecimenError(f"{file}: {level} surface has inconsistent triangle orientation (some faces inside-out); "
                             "expected a consistently oriented closed surface")
@@ -512,23 +527,19 @@ def _mask_to_mesh(mask: np.ndarray, affine: np.ndarray, smooth_iterations: int, 
     return mesh, dropped, note
 
 
-def _volume_inputs(path: Path, label_table) -> list[tuple[str, Path, int | None]]:
+def _volume_inputs(path: Path, label_table, pattern=None) -> list[tuple[str, Path, int | None]]:
     """(level, file, voxel value or None for a binary mask) of a folder of masks or a multi-label file."""
     if path.is_dir():
         if label_table is not None:
             raise SpecimenError(f"{path}: a folder of per-structure masks takes no label_table (each file is one "
                                 "vertebra, named vertebrae_L4.nii.gz or sacrum.nii.gz); pass a multi-label file with it")
-        found: dict[str, list[Path]] = {}
-        for p in sorted(path.iterdir()):
-            if p.is_file() and p.name.lower().endswith((".nii.gz", ".nii")):
-                lv = level_of(p.name)
-                if len(lv) == 1:
-                    found.setdefault(lv[0], []).append(p)
+        found, _ = _scan(path, pattern, keep=_is_volume)
         clash = {lv: ps for lv, ps in found.items() if len(ps) > 1}
         if clash:
             raise SpecimenError(f"{path}: several masks for one level ("
                                 + "; ".join(f"{lv}: {', '.join(p.name for p in ps)}" for lv, ps in clash.items())
-                                + "); expected one file per vertebra")
+                                + "); pass pattern= (a glob with {level}, e.g. 'vertebrae_{level}.nii.gz') to "
+                                "choose one per level")
         if not found:
             raise SpecimenError(f"{path}: no vertebra masks found; expected TotalSegmentator's per-structure files "
                                 "vertebrae_L1.nii.gz .. vertebrae_L5.nii.gz, sacrum.nii.gz (or one multi-label "
@@ -562,14 +573,16 @@ def _volume_inputs(path: Path, label_table) -> list[tuple[str, Path, int | None]
     return sorted(out, key=lambda r: VERTEBRA_NAMES.index(r[0]))
 
 
-def label_volume_to_meshes(path, out_dir, label_table=None, *, require=None, smooth_iterations: int = 10,
-                           max_faces: int = 20000) -> dict[str, Path]:
+def label_volume_to_meshes(path, out_dir, label_table=None, *, pattern: str | None = None, require=None,
+                           smooth_iterations: int = 10, max_faces: int = 20000) -> dict[str, Path]:
     """Mesh a CT segmentation into the mesh-folder form: ``out_dir/<level>.stl`` in millimetres, RAS (NIfTI
     world), one closed surface per vertebra; read them with ``read_specimen(out_dir, units="mm", axes="RAS")``.
 
     ``path``: TotalSegmentator's per-structure masks (a folder with ``vertebrae_L1.nii.gz`` ..
     ``vertebrae_L5.nii.gz``, ``sacrum.nii.gz``) or one multi-label NIfTI file with ``label_table`` (CSV
-    ``label,value``). Marching cubes (scikit-image) on each mask's largest connected part at the header's affine
+    ``label,value``); ``pattern`` picks one mask per level where a folder holds several (TotalSegmentator 2 writes
+    ``sacrum.nii.gz`` and ``vertebrae_S1.nii.gz``: ``pattern="vertebrae_{level}.nii.gz"`` takes the latter).
+    Marching cubes (scikit-image) on each mask's largest connected part at the header's affine
     (voxel spacing, orientation), Taubin smoothing (``smooth_iterations``; keeps the volume, unlike plain Laplacian
     smoothing), quadric decimation to at most ``max_faces`` triangles (kept only where the result stays closed).
     Before anything is written, the meshes pass the reader's checks (:func:`check_levels` with ``require``, size,
@@ -581,7 +594,7 @@ def label_volume_to_meshes(path, out_dir, label_table=None, *, require=None, smo
     import pandas as pd  # noqa: PLC0415 - only the meshing report writes tables
     from ..inputs.io import write_table_atomic  # noqa: PLC0415 - atomic writes, only for the meshing report
     path = Path(path)
-    items = _volume_inputs(path, label_table)
+    items = _volume_inputs(path, label_table, pattern)
     check_levels({lv: f for lv, f, _ in items}, require, path)
     cache: dict[Path, tuple] = {}
     masks = []
