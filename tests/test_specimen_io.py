@@ -498,7 +498,7 @@ def must_fail(files) -> bool:
     return False
 
 
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(ops=st.lists(OPS, min_size=1, max_size=3))
 def test_corruptions_give_a_named_error_or_a_correct_result(ops):
     folder = Path(tempfile.mkdtemp(prefix="lumbar_spec_"))
