@@ -507,7 +507,7 @@ def _mask_to_mesh(mask: np.ndarray, affine: np.ndarray, smooth_iterations: int, 
         mask = lab == keep
     idx = np.argwhere(mask)
     lo, hi = idx.min(axis=0), idx.max(axis=0) + 1
-    crop = np.pad(mask[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]], 1).astype(np.float32)
+    crop = np.pad(mask[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]], 1).astype(np.float32)   # closed at the border
     verts, faces, _, _ = marching_cubes(crop, level=0.5)
     ijk = verts + lo - 1
     world = ijk @ affine[:3, :3].T + affine[:3, 3]
@@ -597,11 +597,15 @@ def label_volume_to_meshes(path, out_dir, label_table=None, *, pattern: str | No
     items = _volume_inputs(path, label_table, pattern)
     check_levels({lv: f for lv, f, _ in items}, require, path)
     cache: dict[Path, tuple] = {}
+    uses = {f: sum(g == f for _, g, _ in items) for _, f, _ in items}
     masks = []
     for lv, f, val in items:            # every volume read and checked before any meshing
         if f not in cache:
             cache[f] = _read_nifti(f)
         data, aff = cache[f]
+        uses[f] -= 1
+        if uses[f] == 0:                # the last label of this file: its volume is not kept
+            del cache[f]
         if val is None:
             mask = data > 0.5
             if not mask.any():
@@ -612,7 +616,14 @@ def label_volume_to_meshes(path, out_dir, label_table=None, *, pattern: str | No
                 present = np.unique(data[data != 0]).astype(float)
                 raise SpecimenError(f"{f}: no voxel has the value {val} of {lv} (label table {label_table}); values "
                                     f"present: {present[:20].tolist()}{' ...' if len(present) > 20 else ''}")
-        masks.append((lv, f, val, mask, aff))
+        # kept as the mask's bounding box and the affine of its first voxel: six full-size masks of a 512^3 CT
+        # would hold 0.8 GB
+        nz = [np.flatnonzero(mask.any(axis=tuple(a for a in range(3) if a != k))) for k in range(3)]
+        lo = np.array([n[0] for n in nz])
+        hi = np.array([n[-1] + 1 for n in nz])
+        shift = np.eye(4)
+        shift[:3, 3] = lo
+        masks.append((lv, f, val, mask[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]].copy(), aff @ shift))
     built, rows, sources = {}, [], {}
     for lv, f, val, mask, aff in masks:
         spacing = np.linalg.norm(aff[:3, :3], axis=0)
