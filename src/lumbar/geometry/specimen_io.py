@@ -38,13 +38,14 @@ AXES = ("LPS", "RAS", "project")
 # a hole whose boundary loop is at most this long (about 5 mm across) is filled; a longer one is refused: a surface
 # with such a hole is not a segmented bone surface, and no fill can say what was there
 MAX_HOLE_PERIMETER_M = 0.015
-# neighbouring vertebrae: the disc between two bodies is 5-17 mm tall and the facet joint space 1-2 mm, so the
-# nearest points of two neighbours are far closer than this; 30 mm apart is a missing vertebra or a shifted file
+# neighbouring vertebrae touch at their facet joints: the nearest surface points of the neighbours of the embedded
+# Visible Human set and of TotalSegmentator's example (meshed here) are less than 0.3 mm apart; 30 mm apart is a
+# vertebra missing between them or a shifted file (a design limit, far from both)
 MAX_NEIGHBOUR_GAP_M = 0.030
 # neighbours overlapping: the radius of the largest ball inside both (half the thickness of their common volume).
 # Segmented facet processes interpenetrate a little: 1.0-1.8 mm for the neighbours of the embedded Visible Human set
 # (L*_vertebra.obj) and 0.9-1.5 mm for TotalSegmentator's 3 mm example meshed here (overlap_radius on a 1 mm grid);
-# a shifted, doubled or mislabelled vertebra shares half a body height (12-17 mm) or more
+# a shifted, doubled or mislabelled vertebra shares far more (a doubled one: the whole bone)
 MAX_OVERLAP_M = 0.004
 
 _TOKEN = {f"l{i}": f"L{i}" for i in range(1, 6)} | {"s1": "S1", "sacrum": "S1"}
@@ -283,8 +284,9 @@ def check_size(mesh, level: str, file, units: str) -> None:
     """A vertebra (metres) spans ``MIN_EXTENT_M``..``MAX_EXTENT_M``; else the message says which unit fits."""
     ext = float(np.max(mesh.extents))
     if not MIN_EXTENT_M <= ext <= MAX_EXTENT_M:
-        raise SpecimenError(f"{file}: {level} is {ext:.3g} m across with units={units!r}; a lumbar vertebra or the "
-                            f"sacrum spans {MIN_EXTENT_M}-{MAX_EXTENT_M} m: {_units_hint(ext, units)}")
+        raise SpecimenError(f"{file}: {level} is {ext:.3g} m across with units={units!r}; expected "
+                            f"{MIN_EXTENT_M}-{MAX_EXTENT_M} m for a lumbar vertebra or the sacrum "
+                            f"(lumbar.geometry.checks): {_units_hint(ext, units)}")
 
 
 def read_specimen(path, units: str = "mm", axes: str = "LPS", pattern: str | None = None,
@@ -337,8 +339,8 @@ def check_neighbours(meshes: dict, files: dict) -> None:
         gap = float(cKDTree(pb).query(pa)[0].min())
         if gap > MAX_NEIGHBOUR_GAP_M:
             raise SpecimenError(f"{where}: neighbouring vertebrae {gap * 1e3:.0f} mm apart (nearest surface points); "
-                                f"expected within {MAX_NEIGHBOUR_GAP_M * 1e3:.0f} mm (a disc is 5-17 mm tall): a "
-                                "vertebra shifted, or one missing between them")
+                                f"expected within {MAX_NEIGHBOUR_GAP_M * 1e3:.0f} mm (neighbours touch at their facet "
+                                "joints): a vertebra shifted, or one missing between them")
         r = overlap_radius(A, B)
         if r > MAX_OVERLAP_M:
             raise SpecimenError(f"{where}: the vertebrae overlap: their common volume holds a ball of radius "
