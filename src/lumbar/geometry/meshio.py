@@ -18,18 +18,44 @@ from .core import GeometryError
 MAX_EXTENT_M = 0.3
 
 
+VTK_SUFFIXES = (".vtk", ".vtp")
+
+
 def _parse_mesh(path: str) -> dict:
-    """Vertices and faces of a mesh file as trimesh loads and processes it (merged vertices)."""
+    """Vertices and faces of a mesh file as trimesh loads and processes it (merged vertices); STL, OBJ, PLY through
+    trimesh, VTK/VTP polydata through pyvista (the VTK reader; trimesh has none)."""
     import trimesh  # noqa: PLC0415 - see lumbar/__init__.py, lazy imports
+    expected = "expected an STL/OBJ/PLY/VTK/VTP triangle mesh"
+    if Path(path).stat().st_size == 0:
+        raise GeometryError(f"{path}: mesh file is empty (0 bytes); {expected}")
     try:
-        mesh = trimesh.load(path, force="mesh", process=True)
-    except Exception as exc:  # trimesh raises many types
-        raise GeometryError(f"{path}: mesh not readable ({type(exc).__name__}: {exc}); "
-                            "expected an STL/OBJ triangle mesh in metres") from exc
+        if Path(path).suffix.lower() in VTK_SUFFIXES:
+            import pyvista  # noqa: PLC0415 - VTK's reader (pyvista, vtk) only for the VTK formats, 1 s to import
+            data = pyvista.read(path)
+            if not isinstance(data, pyvista.PolyData):
+                data = data.extract_surface()
+            data = data.triangulate()
+            faces = np.asarray(data.faces).reshape(-1, 4)[:, 1:] if data.n_cells else np.zeros((0, 3), int)
+            mesh = trimesh.Trimesh(vertices=np.asarray(data.points, float), faces=faces, process=True)
+        else:
+            mesh = trimesh.load(path, force="mesh", process=True)
+    except Exception as exc:  # noqa: BLE001 - trimesh and VTK raise many types; all mean "not readable"
+        raise GeometryError(f"{path}: mesh not readable ({type(exc).__name__}: {exc}); {expected}") from exc
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0 or len(mesh.vertices) < 4:
-        raise GeometryError(f"{path}: mesh not readable or empty (no triangles); "
-                            "expected an STL/OBJ triangle mesh in metres")
+        raise GeometryError(f"{path}: mesh not readable or empty (no triangles); {expected}")
     return {"vertices": np.asarray(mesh.vertices, dtype=np.float64), "faces": np.asarray(mesh.faces, dtype=np.int64)}
+
+
+def read_mesh_arrays(path) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices, faces) of a mesh file in the file's own units, cached across processes by content
+    (:mod:`lumbar.geometry.diskcache`); no unit check (the caller knows the declared units)."""
+    import trimesh  # noqa: PLC0415
+    p = Path(path)
+    if not p.is_file():
+        raise GeometryError(f"{p}: mesh file missing (expected a triangle mesh file)")
+    arr = diskcache.load_or_parse(str(p), "mesh", f"trimesh {trimesh.__version__} process",
+                                  lambda: _parse_mesh(str(p)))
+    return arr["vertices"], arr["faces"]
 
 
 @functools.lru_cache(maxsize=64)
@@ -37,8 +63,8 @@ def _read_mesh_cached(path: str, mtime_ns: int) -> trimesh.Trimesh:
     # parsed once per file content across processes (lumbar.geometry.diskcache); every process builds the mesh from
     # the same two arrays, whether parsed here or read from the cache
     import trimesh  # noqa: PLC0415
-    arr = diskcache.load_or_parse(path, "mesh", f"trimesh {trimesh.__version__} process", lambda: _parse_mesh(path))
-    mesh = trimesh.Trimesh(vertices=arr["vertices"], faces=arr["faces"], process=False)
+    vertices, faces = read_mesh_arrays(path)
+    mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=False)
     if len(mesh.faces) == 0 or len(mesh.vertices) < 4:
         raise GeometryError(f"{path}: mesh not readable or empty (no triangles); "
                             "expected an STL/OBJ triangle mesh in metres")
