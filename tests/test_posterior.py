@@ -286,3 +286,13 @@ def test_table_bands_merge_only_into_the_calibrated_rows():
     b5 = pd.DataFrame({"muscle_setup": ["all"], "load_case": ["neutral"], "low90": [0.3], "high90": [0.4]})
     o5 = idp_bands(syn5, b5)
     assert o5.loc[0, "idp_band_high_mpa"] == 0.4 and np.isnan(o5.loc[1, "idp_band_low_mpa"])
+
+
+def test_discovery_model_band_joins_the_row_spread_in_quadrature(tmp_path):
+    from lumbar.discovery.problems import model_band_sd
+    keys = pd.DataFrame({"stage": ["intact", "intact"], "direction": ["flexion", "extension"], "moment_nm": [10, 10]})
+    p = tmp_path / "bands.csv"
+    pd.DataFrame({"stage": ["intact"], "direction": ["flexion"], "moment_nm": [10.0], "map": [7.0], "sd": [0.3],
+                  "low90": [6.5], "high90": [7.5]}).to_csv(p, index=False)
+    np.testing.assert_allclose(model_band_sd(keys, p), [0.3, 0.0])     # a scenario without a band adds nothing
+    np.testing.assert_allclose(model_band_sd(keys, None), [0.0, 0.0])

@@ -153,6 +153,14 @@ def discovery_calibrated_tables():
     )
 
 
+def discovery_model_bands():
+    """The calibrated unit's posterior band of every stepwise-reduction scenario, part of the model's spread in the
+    real-data discovery of the intact ROM (when discovery.characteristic_set is "calibrated")."""
+    if config["discovery"]["characteristic_set"] != "calibrated":
+        return []
+    return ["results/stepwise_reduction/bands_calibrated.csv"]
+
+
 def muscle_passive_tables():
     """The tables of the muscle model's passive set (muscle_model.passive_set): the calibration output
     (characteristics.calibrated_dir; rule calibrate's files, so the DAG chains) for workflow_calibrated, the

@@ -138,6 +138,7 @@ rule discovery_intact_rom:
         ),
         calibrated=discovery_calibrated_tables(),
         bank=discovery_specimen_bank("stepwise_rom"),
+        model_bands=discovery_model_bands(),
     output:
         **discovery_case_outputs("intact_rom"),
     log:

@@ -40,6 +40,10 @@ for p in inputs:
         if Path(p).name == f"specimen_bank_{name}.csv":
             cfg["discovery"][f"specimen_bank_{name}"] = p
 fixture_idp = sorted(p for p in inputs if Path(p).name.startswith("fixture_specimens_idp_"))
+# the calibrated unit's posterior band, part of the model's spread on real data (rule discovery_intact_rom)
+model_bands = _common.first(snakemake.input.get("model_bands", []))
+if model_bands:
+    cfg["discovery"]["model_bands"] = str(model_bands)
 t0 = time.perf_counter()
 
 if rule == "discovery_idp_model":

@@ -134,15 +134,34 @@ def rom_problem(df, config, solver_kw=None, bank=None) -> Problem:
     with np.errstate(invalid="ignore"):
         spec_sd = np.where(has_range, (d0["rom_max_deg"].to_numpy(float) - d0["rom_min_deg"].to_numpy(float))
                            / d2(np.maximum(n, 2)), np.nan)
-    return Problem("stepwise_rom", keys, d0["rom_mean_deg"].to_numpy(float), _rom_sigma(d0, s),
+    model_sd = model_band_sd(keys, s.get("model_bands"))
+    sigma = np.hypot(_rom_sigma(d0, s), np.nan_to_num(model_sd))
+    return Problem("stepwise_rom", keys, d0["rom_mean_deg"].to_numpy(float), sigma,
                    "deg", forward, _candidates(s, "stepwise_rom"), "stage", ["direction", "moment_nm"],
                    _grouped_folds(cells, s["cv_folds"]),
                    meta={"quantity": "range of motion at the row's moment [deg]",
                          "nominal_model": nominal_model_label(config),
                          "n_per_row": n, "has_range": has_range, "spec_sd": spec_sd,
                          "sigma_floor": float(s["sigma_floor_deg"]), "groups": keys["direction"].to_numpy(str),
+                         "model_sd": model_sd,
                          "bank": _bank("stepwise_rom", keys, config, s, bank),
                          "design_keys": design, "design_forward": design_forward})
+
+
+def model_band_sd(keys: pd.DataFrame, path) -> np.ndarray:
+    """The nominal model's own posterior spread [deg] at each scenario of ``keys`` (stage, direction, moment_nm), from
+    the calibration's band table (results/stepwise_reduction/bands_calibrated.csv, column ``sd``; setting
+    ``discovery.model_bands``, set by the workflow for the calibrated set): part of a row's spread, added in quadrature
+    to the measurement's. Zeros without a table (a set without a posterior); NaN-free."""
+    if not path:
+        return np.zeros(len(keys))
+    b = pd.read_csv(path)
+    if b.empty:
+        return np.zeros(len(keys))
+    k = keys.assign(moment_nm=keys["moment_nm"].astype(float))
+    b = b.assign(moment_nm=b["moment_nm"].astype(float))[["stage", "direction", "moment_nm", "sd"]]
+    sd = k.merge(b, on=["stage", "direction", "moment_nm"], how="left")["sd"].to_numpy(float)
+    return np.nan_to_num(sd)
 
 
 def _bank(experiment, keys, config, s, bank=None):
