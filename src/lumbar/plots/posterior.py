@@ -17,13 +17,21 @@ def plot_prior_posterior(table: pd.DataFrame, path) -> None:
     centre, so that a shift and a narrowing read alike for every unit; a parameter at a bound is marked red."""
     t = table.reset_index(drop=True)
     n = len(t)
-    fig, ax = subplots(1, 1, figsize=(8.0, 0.32 * n + 1.4))
+    fig, ax = subplots(1, 1, figsize=(8.0, 0.32 * n + 2.0))
     y = np.arange(n)[::-1]
     s = t["prior_spread_fit"].to_numpy(float)
-    shift = (t["map_fit"].to_numpy(float) - t["prior_centre_fit"].to_numpy(float)) / s
-    half = Z90 * t["posterior_spread_fit"].to_numpy(float) / s
-    ax.barh(y, 2 * Z90, left=-Z90, height=0.7, color="0.85", label="prior, 90 %")
-    ax.barh(y, 2 * half, left=shift - half, height=0.38, color="C0", alpha=0.75, label="posterior, 90 % (Laplace)")
+    c = t["prior_centre_fit"].to_numpy(float)
+    shift = (t["map_fit"].to_numpy(float) - c) / s
+    log_unit = (t["fit_unit"] == "log10").to_numpy()
+
+    def fit_units(col):                       # the table's intervals are in natural units, clipped to the bounds
+        v = t[col].to_numpy(float)
+        return (np.where(log_unit, np.log10(np.where(v > 0, v, np.nan)), v) - c) / s
+
+    lo, hi = fit_units("posterior_90_low"), fit_units("posterior_90_high")
+    plo, phi = fit_units("prior_90_low"), fit_units("prior_90_high")
+    ax.barh(y, phi - plo, left=plo, height=0.7, color="0.85", label="prior, 90 % (within the bounds)")
+    ax.barh(y, hi - lo, left=lo, height=0.38, color="C0", alpha=0.75, label="posterior, 90 % (Laplace, within the bounds)")
     at_b = t["at_bound"].astype(bool).to_numpy()
     ax.plot(shift[~at_b], y[~at_b], "o", color="C0", ms=4, label="MAP")
     if at_b.any():
@@ -33,7 +41,7 @@ def plot_prior_posterior(table: pd.DataFrame, path) -> None:
     ax.set_yticklabels([p.replace("_", " ") for p in t["parameter"]], fontsize=8)
     ax.set_xlabel("(value - prior centre) / prior spread  [fit units: log10 scale, mm, log10 N/m]")
     ax.set_title("What the data told us: prior and posterior of every calibrated parameter", fontsize=10)
-    ax.legend(fontsize=7, loc="lower right")
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, frameon=False)
     ax.grid(axis="x", alpha=0.3)
     fig.tight_layout()
     save_figure_atomic(fig, path, dpi=110)
