@@ -328,3 +328,18 @@ def test_share_figure_stacks_every_structure_so_that_the_stacks_balance_the_mome
             y = verts[np.isclose(verts[:, 0], M), 1]
             # skipped slivers (< 0.02 N*m each, at most one per structure) are all the difference may hold
             assert abs((y.max() + min(y.min(), 0.0)) - M) < 0.02 * sh["structure"].nunique(), (d, M)
+
+
+def test_reduction_flexion_reads_both_ways_and_flags_a_step_that_lowers_the_rom():
+    import pandas as pd
+    from lumbar.experiments.load_sharing import reduction_flexion
+    rows = []
+    # wo_fl: the ROM from its own rest falls (its rest moved into flexion) while the rotation from the intact rest rises
+    for st, own, first in (("intact", 7.0, 7.0), ("wo_ssl", 7.1, 7.1), ("wo_isl", 7.3, 8.0), ("wo_fl", 7.2, 8.1),
+                           ("wo_cl", 7.6, 8.6)):
+        rows.append({"set": "calibrated", "stage": st, "direction": "flexion", "moment_nm": 10.0, "converged": True,
+                     "rotation_deg": own, "rotation_from_first_rest_deg": first})
+    r = reduction_flexion(pd.DataFrame(rows)).set_index("stage")
+    assert list(r["increases_from_intact_rest"].iloc[1:]) == [True, True, True, True]
+    assert list(r["increases_from_stage_rest"].iloc[1:]) == [True, True, False, True]
+    assert r.loc["intact", "increases_from_stage_rest"] is None

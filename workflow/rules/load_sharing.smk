@@ -71,6 +71,11 @@ rule load_sharing_summary:
             caption="../report/load_sharing_summary.rst",
             category="Load sharing",
         ),
+        reduction=report(
+            "results/load_sharing/reduction_flexion.csv",
+            caption="../report/load_sharing_reduction.rst",
+            category="Load sharing",
+        ),
         compression=report(
             "results/load_sharing/compression_summary.csv",
             caption="../report/load_sharing_compression.rst",

@@ -66,6 +66,8 @@ elif snakemake.rule == "load_sharing_summary":
         first = next(iter(curves))
         LS.plot_shares(curves[first], snakemake.output.shares_figure)
     write_table_atomic(summary, snakemake.output.summary)
+    reduction = LS.reduction_flexion(pd.concat(list(curves.values()), ignore_index=True))
+    write_table_atomic(reduction, snakemake.output.reduction)
     write_table_atomic(comp_summary, snakemake.output.compression)
     write_table_atomic(cables, snakemake.output.cables)
     neutral = cables[cables["load_case"] == "neutral"]

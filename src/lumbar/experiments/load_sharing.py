@@ -178,7 +178,9 @@ def moment_rotation_curves(fsu: FSU, moments_nm=None, directions=CURVE_DIRECTION
     ``moments_nm`` default 0, 0.25, ..., 10 N*m. Every (stage, direction) is one scenario of one batch; step k
     starts from the equilibrium of step k-1 (the first from the stage's 0 N*m equilibrium). Columns: stage,
     direction, moment_nm, rotation_deg (about the loading axis, from the stage's 0 N*m state), rot_x/y/z_deg,
-    converged, jump (rotation change from the previous step above :data:`JUMP_DEG`), and the internal loads of
+    converged, jump (rotation change from the previous step above :data:`JUMP_DEG`), rotation_from_first_rest_deg
+    (the same rotation from the first stage's 0 N*m state, e.g. the intact unit's neutral position), and the
+    internal loads of
     :func:`structure_loads` (tensions, facet contact forces, disc axial force and shear, moments about the disc
     centre per structure) with ``moment_balance_residual_nm`` (|sum of the structures' moments + the applied
     moment|, 0 at an equilibrium).
@@ -209,6 +211,7 @@ def moment_rotation_curves(fsu: FSU, moments_nm=None, directions=CURVE_DIRECTION
                            tol_moment=tol)
     st = level_structures(m, fsu.level.name, dict(enumerate(fsu.surface_side)))
     R0 = steps[0].R[:, 0]
+    R_first = np.repeat(R0[[0]], len(grid), axis=0)      # the rest state of stages[0] (same for every direction)
     rows = []
     prev = None
     for k, (M, res) in enumerate(zip(moments_nm, steps)):
@@ -223,6 +226,9 @@ def moment_rotation_curves(fsu: FSU, moments_nm=None, directions=CURVE_DIRECTION
         tab.insert(6, "rot_z_deg", rvec[:, 2])
         tab.insert(7, "converged", res.converged)
         tab.insert(8, "jump", np.zeros(len(grid), bool) if prev is None else np.abs(rot - prev) >= JUMP_DEG)
+        # the same rotation measured from the first stage's rest state (the intact unit's neutral position): a
+        # removed pre-tensioned structure moves the stage's own rest state, from which rotation_deg is measured
+        tab.insert(9, "rotation_from_first_rest_deg", _rotation_deg(res.R[:, 0], R_first, [d for _, d in grid])[0])
         prev = rot
         rows.append(tab)
     df = pd.concat(rows, ignore_index=True)
@@ -320,6 +326,34 @@ def summary_at(curves: pd.DataFrame, set_name: str, moment_nm=10.0) -> pd.DataFr
     out.insert(0, "set", set_name)
     out.insert(3, "moment_nm", moment_nm)
     return out
+
+
+#: the posterior structures of the stepwise reduction, in the order the experiment removes them
+POSTERIOR_REMOVAL = ("intact", "wo_ssl", "wo_isl", "wo_fl", "wo_cl")
+
+
+def reduction_flexion(curves: pd.DataFrame, moment_nm=10.0, stages=POSTERIOR_REMOVAL) -> pd.DataFrame:
+    """Flexion at ``moment_nm`` of every characteristic set along the removal of the posterior ligaments (SSL to
+    CL): the rotation from each stage's own rest state (the ROM of the stepwise-reduction tables) and from the
+    first stage's (the intact unit's neutral position), and whether each step increases it. The two differ where a
+    removed pre-tensioned ligament moves the rest state: what removing a ligament does, read both ways."""
+    rows = []
+    for name, cv in curves.groupby("set", sort=False):
+        f = cv[(cv["direction"] == "flexion") & np.isclose(cv["moment_nm"].astype(float), moment_nm)]
+        prev = None
+        for st in stages:
+            g = f[f["stage"] == st]
+            if g.empty:
+                continue
+            r = g.iloc[0]
+            own = float(r["rotation_deg"]) if bool(r["converged"]) else np.nan
+            first = float(r.get("rotation_from_first_rest_deg", np.nan)) if bool(r["converged"]) else np.nan
+            rows.append({"set": name, "stage": st, "moment_nm": moment_nm, "rom_from_stage_rest_deg": own,
+                         "rotation_from_intact_rest_deg": first,
+                         "increases_from_stage_rest": None if prev is None else bool(own > prev[0]),
+                         "increases_from_intact_rest": None if prev is None else bool(first > prev[1])})
+            prev = (own, first)
+    return pd.DataFrame(rows)
 
 
 def cable_load_paths(idp: pd.DataFrame) -> pd.DataFrame:

@@ -14,6 +14,7 @@ from .sections import ReportBuilder, fmt, report_section
 ADM = "results/calibration/admissibility.csv"
 SUMMARY = "results/load_sharing/load_sharing_summary.csv"
 COMPRESSION = "results/load_sharing/compression_summary.csv"
+REDUCTION = "results/load_sharing/reduction_flexion.csv"
 CABLES = "results/load_sharing/l2s1_cables_l4l5.csv"
 REMUS = "results/calibration/remus2021_comparison.csv"
 MULTI = "results/tables/multilevel_rom.csv"
@@ -90,6 +91,22 @@ def load_sharing_section(b: ReportBuilder):
                             fmt(r[c])] for c in forces], source=SUMMARY)
     else:
         b.missing(f"Load-sharing summary ({Path(SUMMARY).name})")
+    if b.has(REDUCTION):
+        r = pd.read_csv(b.path(REDUCTION))
+        c = r[r["set"] == "calibrated"]
+        if len(c):
+            b.table_block("What removing the posterior ligaments does to flexion at 10 N*m (calibrated unit)",
+                          ["stage", "ROM from the stage's rest [deg]", "rotation from the intact rest [deg]",
+                           "larger than the stage before (own rest / intact rest)"],
+                          [[st, fmt(a), fmt(f), "" if pd.isna(i1) else
+                            f"{'yes' if bool(i1) else 'no'} / {'yes' if bool(i2) else 'no'}"]
+                           for st, a, f, i1, i2 in zip(c["stage"], c["rom_from_stage_rest_deg"],
+                                                       c["rotation_from_intact_rest_deg"],
+                                                       c["increases_from_stage_rest"], c["increases_from_intact_rest"])],
+                          source=REDUCTION, note="A removed pre-tensioned ligament moves the stage's rest state, "
+                                                 "from which the stepwise-reduction tables measure the ROM; the "
+                                                 "rotation from the intact unit's rest shows the structure's own "
+                                                 "share.")
     b.csv_table(COMPRESSION, "Pure axial (follower) load: shares of disc and facets per characteristic set", False,
                 columns=None)
     if b.has(CABLES):
