@@ -1,9 +1,9 @@
 """Physiology of the default L4-L5 unit (issue: real-world validity).
 
-Fixture: the default geometry (embedded Visible Human L4-L5) with the calibration's prior (the paper's laws on
-elongation, ``lumbar.experiments.calibration.elongation_prior``) fitted on the real intact ROM of Yamamoto et al.
-1989 and the physical-admissibility criteria (``fit_admissible``, the same step that anchors the surrogate generator
-and ends the workflow's calibration). Every threshold below is a
+Fixture: the default geometry (embedded Visible Human L4-L5) with the calibration's prior (the Remus et al. 2021
+laws of the same fibres on elongation with their sourced spreads, ``lumbar.experiments.calibration.calibration_prior``)
+fitted on the real intact ROM of Yamamoto et al. 1989, the derived disc-only rows and the physical-admissibility
+criteria (``fit_admissible``, the MAP fit that ends the workflow's calibration). Every threshold below is a
 physiological statement with its source; a failing one is an xfail with the measured numbers, never a skip.
 """
 from pathlib import Path
@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lumbar.experiments.calibration import elongation_prior, fit_admissible
+from lumbar.experiments.calibration import calibration_prior, fit_admissible
 from lumbar.inputs import resources
 from lumbar.inputs.characteristics import load_characteristic_set
 from lumbar.experiments.fsu import STAGES, build_fsu, range_of_motion
@@ -33,10 +33,16 @@ def geo():
     return load_geometry("visible_human", levels=["L4-L5"])
 
 
+DISC_ONLY = ROOT / "data" / "experiments" / "heuer2007_disc_only_derived_from_published_fit.csv"
+
+
 @pytest.fixture(scope="module")
 def fitted(geo):
-    return fit_admissible(geo, elongation_prior(load_characteristic_set("calibrated"))[0], pd.read_csv(YAMAMOTO),
-                          geometry_path=resources.data_dir() / "geometry" / "visible_human_lss")
+    path = resources.data_dir() / "geometry" / "visible_human_lss"
+    paper = load_characteristic_set("calibrated")
+    prior, _, spreads = calibration_prior(paper, geo, "L4-L5", path, "remus2021")
+    return fit_admissible(geo, prior, pd.read_csv(YAMAMOTO), published=paper, geometry_path=path,
+                          prior_spread=spreads, disc_rows=pd.read_csv(DISC_ONLY))
 
 
 @pytest.fixture(scope="module")
