@@ -175,6 +175,31 @@ def test_admissible_fit_targets_prefer_the_measured_tables_own_intact_rows():
     assert cal.admissible_fit_targets(rows("measured", moment=7.5), None) == (None, "none")
 
 
+@pytest.mark.slow
+def test_admissible_fit_reaches_its_yamamoto_targets():
+    """A fit target, checked as one (not as physiology): the admissible fit on Yamamoto et al. (1989) intact L4-L5
+    ROM at 10 N*m ends within the validation's 25 % band of every row, by an independent solve of the fitted set
+    (range_of_motion), and the fit's own target table reports that solve's ROM."""
+    from lumbar.experiments.fsu import range_of_motion
+    from lumbar.geometry import load_geometry
+    from lumbar.inputs import resources
+    geo = load_geometry("visible_human", levels=["L4-L5"])
+    yam = pd.read_csv(ROOT / "data" / "experiments" / "yamamoto1989_intact_rom_original_text.csv")
+    fit = cal.fit_admissible(geo, cal.elongation_prior(load_characteristic_set("calibrated"))[0], yam,
+                             geometry_path=resources.data_dir() / "geometry" / "visible_human_lss")
+    dirs = list(yam["direction"])
+    # "one side" (Yamamoto): the mean of the right and the left side where the unit is not symmetric in itself
+    sides = {d: [f"{d}_right", f"{d}_left"] if d in ("lateral_bending", "axial_rotation") else [d] for d in dirs}
+    solved = range_of_motion(build_fsu(geo, fit.charset), [10.0], sum(sides.values(), []), tol=1e-8)
+    solved = solved.set_index("direction")["rom_deg"]
+    rom = pd.Series({d: solved[s].mean() for d, s in sides.items()})
+    ref = yam.set_index("direction")["rom_mean_deg"]
+    for d in dirs:
+        assert abs(rom[d] - ref[d]) <= 0.25 * ref[d], (d, rom[d], ref[d])
+    reported = fit.targets.set_index("direction")["rom_sim_deg"]
+    np.testing.assert_allclose(reported[dirs], rom[dirs], atol=0.005)
+
+
 def test_reject_reference_without_disc_stage(geometry):
     derived = read_experiment_table(DERIVED)
     with pytest.raises(ValueError, match="wo_pll"):

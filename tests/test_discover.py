@@ -184,7 +184,26 @@ def test_idp_null_p_values_are_not_small(idp_model_fixture, seed):
     r = D.discover(D.build_problem("idp_invitro", df, cfg, idp_model=idp_model_fixture),
                    D.discovery_settings(cfg))["result"]
     assert r["named_effect"] is None and r["confidence"] is None
-    assert 0 < r["p_value"] <= 1
+    assert_bootstrap_p_value(r)
+
+
+def assert_bootstrap_p_value(r):
+    """The reported p-value is the max-T bootstrap count (1 + #{T_null >= T_obs}) / (1 + B), checked against what the
+    result returns beside it: a count k in 0..B; on the side of each returned null quantile that the observed
+    statistic (the largest LR statistic over the candidates) falls on; at least the unadjusted p of the candidate."""
+    B, p = r["null_distribution_size"], r["p_value"]
+    assert B == D.default_settings()["n_bootstrap"] and B > 0
+    k = p * (B + 1) - 1
+    assert abs(k - round(k)) < 1e-6 and 0 <= round(k) <= B, (p, B)
+    T = max(r["lr_statistic"].values())
+    for q, t_q in r["null_lr_quantiles"].items():
+        tail = 1 - float(q)
+        if T < t_q:      # at least the share 1 - q of the null tables reach T
+            assert p >= tail * B / (B + 1), (p, q, T, t_q)
+        elif T > t_q:    # at most that share (and the quantile's own table) reach it
+            assert p <= (tail * B + 2) / (B + 1), (p, q, T, t_q)
+    best = max(r["lr_statistic"], key=r["lr_statistic"].get)
+    assert r["p_values_unadjusted"][best] <= p + 1e-12
 
 
 def test_idp_null_p_values_spread_like_a_uniform(idp_model_fixture):

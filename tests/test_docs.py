@@ -6,9 +6,13 @@ Links are Markdown links ``[text](target)`` and reference definitions ``[label]:
 exist inside the repository; a ``#fragment`` on a Markdown target must name one of its headings (GitHub's anchor
 rule: lower case, punctuation dropped, spaces to hyphens, ``-1``, ``-2`` ... for repeated headings).
 """
+import json
+import math
 import re
 from pathlib import Path
 
+import numpy as np
+import pandas as pd
 import pytest
 
 from conftest import ROOT
@@ -195,10 +199,90 @@ def test_template_renderer_reads_values_and_says_what_is_missing(tmp_path):
 def test_rendered_findings_of_the_test_run_are_current(dag_workdir):
     """results/report/<name>.md of the test-config run equals its template rendered now from that run's results:
     the workflow re-renders it whenever a template or a result it reads changes (the rule's inputs)."""
+    from lumbar.inputs.templates import PLACEHOLDER
     from lumbar.report.docs import render
 
     for t in TEMPLATES:
         out = dag_workdir / "results" / "report" / t.name
         text = out.read_text()
         assert "{{" not in text
-        assert text.split("\n", 1)[1] == render(t.read_text(), dag_workdir)
+        body = text.split("\n", 1)[1]
+        template = t.read_text()
+        assert body == render(template, dag_workdir)
+        # independent of the renderer: every placeholder's text in the rendered file is the value read from the
+        # result file here with pandas (the template's literal text around it locates it)
+        exprs = [m.group(1) for m in PLACEHOLDER.finditer(template)]
+        literal = PLACEHOLDER.split(template)[::2]
+        pattern = "(.*?)".join(re.escape(part) for part in literal)
+        m = re.fullmatch(pattern, body, re.S)
+        assert m, f"{out}: the literal text of {t.name} is not where the template has it"
+        wrong = [f"{{{{ {e} }}}} rendered {got!r}, the result file says {want}"
+                 for e, got in zip(exprs, m.groups()) if not (want := _placeholder_expectation(e, dag_workdir))(got)]
+        assert not wrong, "\n".join(wrong)
+
+
+def _placeholder_expectation(expr: str, root: Path):
+    """A predicate on the rendered text of placeholder ``expr``, from the result file read here (pandas, not the
+    renderer): counts and text exactly, numbers to the 3 significant digits the renderer prints, rows that do not
+    exist in this run as the renderer's stated '(not in this run)'."""
+    from lumbar.report.docs import MISSING
+
+    path, *filters, what = [s.strip() for s in expr.split("|")]
+    if path.endswith(".json"):
+        value = json.loads((root / path).read_text())
+        for k in what.split("."):
+            if not isinstance(value, dict) or k not in value:
+                return _Expect(MISSING, lambda got: got == MISSING)
+            value = value[k]
+        rows = [value]
+        what = None
+    else:
+        df = pd.read_csv(root / path, sep="\t" if path.endswith(".tsv") else ",")
+        for f in filters:
+            for cond in (c for c in f.split(";") if c.strip()):
+                col, val = (x.strip() for x in cond.split("=", 1))
+                df = df[df[col].astype(str) == val]
+        if what == "count":
+            return _Expect(len(df), lambda got: got == str(len(df)))
+        if not len(df):
+            return _Expect(MISSING, lambda got: got == MISSING)
+        if what.startswith("list:"):
+            values = list(dict.fromkeys(df[what[5:]].dropna()))
+            return _Expect(values, lambda got: len(got.split(", ")) == len(values) and all(
+                _cell_ok(p, v) for p, v in zip(got.split(", "), values)))
+        rows = list(df[what]) if ":" not in what else None
+        if rows is None:
+            agg, col = what.split(":", 1)
+            num = pd.to_numeric(df[col])
+            rows = [float(num.min()), float(num.max())] if agg == "range" else [float(getattr(num, agg)())]
+
+    def same(got):
+        parts = got.split(" to ") if what and what.startswith("range:") else got.split(", ")
+        if len(parts) != len(rows):
+            return False
+        return all(_cell_ok(part, v) for part, v in zip(parts, rows))
+    return _Expect(rows, same)
+
+
+def _cell_ok(part: str, v) -> bool:
+    """``part`` shows value ``v``: yes/no for a flag, a number to 3 significant digits, empty for NaN/None."""
+    if v is None:
+        return part == ""
+    if isinstance(v, (bool, np.bool_)):
+        return part == ("yes" if v else "no")
+    if isinstance(v, (int, float, np.integer, np.floating)):
+        if np.isnan(v):
+            return part == ""
+        return part != "" and math.isclose(float(part), float(v), rel_tol=5e-3, abs_tol=1e-12)
+    return part == str(v)
+
+
+class _Expect:
+    def __init__(self, value, check):
+        self.value, self.check = value, check
+
+    def __call__(self, got):
+        return self.check(got)
+
+    def __str__(self):
+        return repr(self.value)

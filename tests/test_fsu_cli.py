@@ -37,9 +37,25 @@ def test_entry_point_lists_commands_and_rejects_unknown_ones(capsys):
 
 
 def test_cli_prints_rom_and_exits_zero_when_all_converge():
+    """The printed ROM is the library's own ROM in degrees (range_of_motion in this process, same inputs), to the
+    printed three decimals: a ROM printed in radians (2.358 deg as 0.041) or from another row fails."""
     r = run("--moment", "5", "--direction", "flexion,axial_rotation", "--geometry", "synthetic")
     assert r.returncode == 0, r.stderr
-    assert "flexion" in r.stdout and "axial_rotation" in r.stdout and "True" in r.stdout
+    lines = r.stdout.splitlines()
+    head = lines[1].split()
+    printed = {(row[head.index("direction")]): row for row in (ln.split() for ln in lines[2:])}
+    assert set(printed) == {"flexion", "axial_rotation"}, r.stdout
+    from lumbar.experiments.fsu import build_fsu, range_of_motion
+    from lumbar.geometry import load_geometry
+    from lumbar.inputs.characteristics import resolve_characteristic_set
+    fsu = build_fsu(load_geometry("synthetic"), resolve_characteristic_set(
+        "calibrated", calibrated_dir="results/calibration/characteristics"), "L4-L5")
+    lib = range_of_motion(fsu, [5.0], ("flexion", "axial_rotation")).set_index("direction")
+    for d, row in printed.items():
+        assert row[head.index("converged")] == "True", r.stdout
+        rom = float(row[head.index("rom_deg")])
+        assert abs(rom - lib.loc[d, "rom_deg"]) <= 0.0005 + 1e-9, (d, rom, lib.loc[d, "rom_deg"])
+        assert lib.loc[d, "rom_deg"] > 1.0          # degrees: 5 N*m moves the unit by more than a degree
 
 
 def test_cli_exits_one_and_says_so_when_a_solve_does_not_converge():

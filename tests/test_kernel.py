@@ -255,13 +255,41 @@ def test_reference_mode_runs_the_numpy_path(charset, monkeypatch):
         kernel.set_mode("fast")
 
 
-def test_without_numba_the_reference_path_runs_and_says_so(monkeypatch, caplog):
+def test_without_numba_the_reference_path_runs_and_says_so(charset, monkeypatch, caplog):
+    """Without numba, the default (compiled) mode solves on the numpy reference path: a loaded unit is solved by
+    evaluate_reference and newton_reference only (the compiled core is never entered), to the same equilibrium as
+    the reference mode gives, and one warning says so."""
+    from lumbar.mechanics import solve as solve_module
+    m = build_fsu(symmetric_fsu(), charset).model
+    loads = np.zeros((2, m.nb, 6))
+    loads[0, 0, 4], loads[1, 0, 5] = 5.0, 3.0                  # 5 N*m flexion, 3 N*m axial rotation
+    with kernel.use("reference"):
+        ref = solve(m, loads)
+    assert ref.converged.all()
+
+    def compiled_entered(*a, **k):
+        raise AssertionError("the compiled core ran without numba")
+
     monkeypatch.setattr(kernel, "HAVE_NUMBA", False)
     monkeypatch.setitem(kernel._state, "warned", False)
+    monkeypatch.setattr(kernel, "newton", compiled_entered)
+    monkeypatch.setattr(kernel, "evaluate", compiled_entered)
+    calls = {"evaluate": 0, "newton": 0}
+    real_eval, real_newton = type(m).evaluate_reference, solve_module.newton_reference
+    monkeypatch.setattr(type(m), "evaluate_reference",
+                        lambda self, *a, **k: calls.__setitem__("evaluate", calls["evaluate"] + 1) or real_eval(self, *a, **k))
+    monkeypatch.setattr(solve_module, "newton_reference",
+                        lambda *a, **k: calls.__setitem__("newton", calls["newton"] + 1) or real_newton(*a, **k))
     with kernel.use("compiled"):
         assert not kernel.active()
+        r = solve(m, loads)
         assert not kernel.active()
     assert caplog.text.count("numba is not installed") == 1
+    assert calls["evaluate"] > 0 and calls["newton"] > 0, calls
+    assert r.converged.all()
+    np.testing.assert_array_equal(r.x, ref.x)                  # the same path: the same numbers
+    np.testing.assert_array_equal(r.R, ref.R)
+    assert np.abs(so3.log(r.R[:, 0])).max() > np.radians(0.5)  # a loaded equilibrium, not the start
 
 
 @needs_numba

@@ -45,3 +45,32 @@ def test_ruff_uses_the_project_config():
     assert proc.returncode == 1, proc.stdout + proc.stderr
     for rule in ("PLC0415", "BLE001"):
         assert rule in proc.stdout, f"{rule} not reported; ruff output:\n{proc.stdout}{proc.stderr}"
+
+
+# ---- snakemake --lint: every rule of the workflow passes Snakemake's own linter (a hard-coded path prefix in params,
+# a missing log or conda directive, ...): on a cluster without a shared file system a job reads only its declared
+# inputs, so a folder passed as a parameter beside them breaks there (the jobs of workflow/profiles/).
+def _snakemake_lint(cwd: Path, *args) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "snakemake", "--lint", *args], cwd=cwd, capture_output=True,
+                          text=True, timeout=300)
+
+
+@pytest.mark.workflow
+@pytest.mark.parametrize("config", [(), ("--configfile", "config/test/config.yaml")], ids=["default", "test"])
+def test_snakemake_lint_is_clean(config):
+    proc = _snakemake_lint(ROOT, *config)
+    assert proc.returncode == 0, f"snakemake --lint {' '.join(config)}:\n{proc.stdout[-6000:]}{proc.stderr[-3000:]}"
+    assert "Lints for rule" not in proc.stdout + proc.stderr
+
+
+@pytest.mark.workflow
+def test_snakemake_lint_flags_a_hard_coded_prefix(tmp_path):
+    """The control: a rule that passes the folder of its input as a parameter is flagged (exit 1)."""
+    (tmp_path / "data").mkdir()
+    (tmp_path / "data" / "a.csv").write_text("x\n1\n")
+    (tmp_path / "Snakefile").write_text(
+        'rule r:\n    input:\n        "data/a.csv",\n    output:\n        "out.csv",\n    log:\n        "r.log",\n'
+        '    params:\n        data_dir="data",\n    shell:\n        "cp {input} {output} 2> {log}"\n')
+    proc = _snakemake_lint(tmp_path)
+    assert proc.returncode == 1 and "Param data_dir is a prefix of input or output file but hardcoded" in \
+        proc.stdout + proc.stderr, proc.stdout + proc.stderr

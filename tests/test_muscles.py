@@ -70,9 +70,18 @@ def test_passive_force_length_defining_points():
     # end of the toe segment: x = 1 + min(0.1/kiso, 0.07) = 1.035, y = 0.2 * 0.035 / 2, slope klow = 0.2
     yl, dl = PASSIVE_FL.value_and_slope(np.array([1.035]))
     assert yl[0] == pytest.approx(0.2 * 0.035 / 2, rel=1e-9) and dl[0] == pytest.approx(0.2, rel=1e-9)
-    # paper Sect. 2.5: baseline tangent moduli 0.26 / 1.01 / 2.45 / 2.86 MPa at 10 / 30 / 50 / 70 % strain (K = 1 MPa)
+    # paper Sect. 2.5: baseline tangent moduli 0.26 / 1.01 / 2.45 / 2.86 MPa at 10 / 30 / 50 / 70 % strain (K = 1 MPa),
+    # quoted to 0.01 MPa (precision +-0.005). At 70 % the curve is on its linear segment (slope kiso = 2/0.7 = 2.857):
+    # there OpenSim's default and the paper's curve agree to the quoted precision, and that is checked at it.
+    # The toe (10-50 %) of OpenSim's default (pinned to OpenSim 4.6 itself at 1e-6 in test_curves_match_opensim_4_6)
+    # departs from the paper's quoted moduli by -0.033, +0.061, -0.148 MPa (the paper's Bezier control points are not
+    # given, so the departure cannot be removed): each point is held to its departure plus the quoted precision, on
+    # its side, so a change of the toe that moves it further from the paper than today fails.
     _, slope = PASSIVE_FL.value_and_slope(1 + np.array([0.1, 0.3, 0.5, 0.7]))
-    assert np.allclose(slope, [0.26, 1.01, 2.45, 2.86], atol=0.16)
+    paper = np.array([0.26, 1.01, 2.45, 2.86])
+    assert abs(slope[3] - paper[3]) <= 0.005, slope[3]
+    departure = np.array([-0.033, 0.061, -0.148])
+    assert np.all(np.abs(slope[:3] - paper[:3] - departure) <= 0.005), slope[:3] - paper[:3]
 
 
 def test_force_velocity_defining_points():
@@ -106,12 +115,18 @@ def muscle_set():
 
 
 def test_muscle_set_groups_and_symmetry(muscle_set):
+    """The paper's model: 210 fascicles (Sect. 2.1), with the muscle groups its scenarios vary (Sect. 2.5:
+    multifidus, the extensors longissimus, iliocostalis and quadratus lumborum, and psoas), bilaterally symmetric:
+    every right fascicle has a left partner that is its mirror image about the sagittal plane with the same maximum
+    force. (How many fascicles each group has, and which of the installed package's fascicles were mirrored to get
+    there, are properties of the installed myo-sim release, not of the physics: not asserted.)"""
     ms = muscle_set
-    assert sorted(ms.symmetrized) == ["LTpT_T12_l", "QL_mid_L2-12.1_l"]      # myo-sim 0.2.4 defects
     assert ms.n == 210
-    counts = pd.Series(ms.groups).value_counts().to_dict()
-    assert counts == {"LT": 52, "MF": 50, "QL": 36, "IL": 24, "Ps": 22, "EO": 12, "IO": 12, "RA": 2}
+    assert {"MF", "LT", "IL", "QL", "Ps"} <= set(ms.groups)
     names = list(ms.names)
+    assert sum(n.endswith("_r") for n in names) == sum(n.endswith("_l") for n in names)
+    for g in set(ms.groups):
+        assert (ms.sides[ms.groups == g] == "left").sum() == (ms.sides[ms.groups == g] == "right").sum(), g
     for i, n in enumerate(names):
         if n.endswith("_r"):
             j = names.index(n[:-2] + "_l")

@@ -5,6 +5,8 @@ laws of the same fibres on elongation with their sourced spreads, ``lumbar.exper
 fitted on the real intact ROM of Yamamoto et al. 1989, the derived disc-only rows and the physical-admissibility
 criteria (``fit_admissible``, the MAP fit that ends the workflow's calibration). Every threshold below is a
 physiological statement with its source; a failing one is an xfail with the measured numbers, never a skip.
+The intact ROM at 10 N*m against Yamamoto et al. is the fit's target, not a physiological finding: it is checked
+where the fit's targets are (tests/test_calibration.py, test_admissible_fit_reaches_its_yamamoto_targets).
 """
 from pathlib import Path
 
@@ -12,7 +14,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lumbar.experiments.calibration import calibration_prior, fit_admissible
+from lumbar.experiments.calibration import FACET_STIFFNESS_RANGE, calibration_prior, elongation_prior, fit_admissible
 from lumbar.inputs import resources
 from lumbar.inputs.characteristics import load_characteristic_set
 from lumbar.experiments.fsu import STAGES, build_fsu, range_of_motion
@@ -49,12 +51,6 @@ def fitted(geo):
 def rom(geo, fitted):
     fsu = build_fsu(geo, fitted.charset)
     return range_of_motion(fsu, [10.0], DIRS, STAGES, tol=1e-7).set_index(["stage", "direction"])["rom_deg"]
-
-
-def test_intact_rom_within_25_percent_of_yamamoto(rom):
-    ref = pd.read_csv(YAMAMOTO).set_index("direction")["rom_mean_deg"]
-    for d in DIRS:
-        assert abs(rom[("intact", d)] - ref[d]) <= 0.25 * ref[d], (d, rom[("intact", d)], ref[d])
 
 
 def test_intact_flexion_exceeds_extension(rom):
@@ -137,7 +133,18 @@ def test_facet_joint_space_within_sourced_range(geo):
         assert lo <= width <= hi, (side, width)
 
 
-def test_fit_flags_bounds_with_their_reasons(fitted):
+def test_fit_flags_bounds_with_their_reasons(geo, fitted):
     p = fitted.parameters
     assert {"at_bound", "bound_reason"} <= set(p.columns)
     assert (p.loc[p["at_bound"], "bound_reason"].str.len() > 20).all()      # a bound is a finding, with its reason
+    assert (p.loc[~p["at_bound"], "bound_reason"] == "").all()
+    # a case with a bound whatever the fixture's fit does: the fit started with the facet stiffness on the upper end
+    # of its range and stopped after one evaluation (the ROM does not move the facet stiffness off it)
+    start = dict(zip(p["parameter"], p["fit_value"]))
+    start["facet_stiffness"] = np.log10(FACET_STIFFNESS_RANGE[1])
+    q = fit_admissible(geo, elongation_prior(load_characteristic_set("calibrated"))[0], pd.read_csv(YAMAMOTO),
+                       geometry_path=resources.data_dir() / "geometry" / "visible_human_lss", start=start,
+                       max_nfev=1).parameters.set_index("parameter")
+    assert q.loc["facet_stiffness", "at_bound"], q.loc["facet_stiffness"]
+    assert len(q.loc["facet_stiffness", "bound_reason"]) > 20, q.loc["facet_stiffness"]
+    assert (q.loc[~q["at_bound"], "bound_reason"] == "").all()

@@ -41,13 +41,7 @@ def test_dry_run_rejects_invalid_config(tmp_path):
     assert "facet_stiffness_n_per_m" in r.stdout + r.stderr
 
 
-@pytest.mark.workflow
-def test_lint_clean_for_geometry_rules():
-    r = _smk("--lint", "--configfile", TEST_CONFIG)
-    out = r.stdout + r.stderr
-    flagged = re.findall(r"Lints for rule (\S+)", out)
-    assert not [f for f in flagged if f in MY_RULES], out
-    assert "Lints for snakefile" not in out or "geometry.smk" not in out.split("Lints for snakefile", 1)[1], out
+# snakemake --lint of every rule (not only the geometry rules): tests/test_lint.py, test_snakemake_lint_is_clean
 
 
 def test_conda_env_matches_environment_txt():

@@ -5,8 +5,12 @@ for the numeric comparison that tests/test_results_identity.py makes where a dig
 round-off differs between CPUs and BLAS builds, so a machine other than the one that wrote the manifest may
 not reproduce every byte).
 
-Usage, after `snakemake --cores 2 --configfile config/test/config.yaml` in a checkout (or a copy):
-    python tests/data/results_manifest.py <repo>/results
+Usage, one line from the repository root: run the test-config DAG in a fresh copy of the checkout, exactly as the
+test session does (tests/conftest.py: copy_repo, no results/, .snakemake/ or logs/ carried over, 2 cores), and
+write both files from that run:
+    python tests/data/results_manifest.py --run
+or, after `snakemake --cores 2 --configfile config/test/config.yaml` in a fresh copy:
+    python tests/data/results_manifest.py <copy>/results
 Re-write it only when a change is meant to change results (or on moving the reference machine), and say which
 in the commit.
 """
@@ -65,5 +69,21 @@ def main(results):
     print(f"{MANIFEST}, {SNAPSHOT}: {len(out)} tables")
 
 
+def run_and_write():
+    """The test session's DAG run (tests/conftest.py: copy_repo, TEST_CONFIG) in a temporary copy, then main()."""
+    import subprocess  # noqa: PLC0415
+    import tempfile  # noqa: PLC0415
+    sys.path.insert(0, str(HERE.parent))
+    import conftest  # noqa: PLC0415 - the session's copy rule and configuration, not a mirror of them
+    with tempfile.TemporaryDirectory(prefix="lumbar_reference_") as tmp:
+        work = conftest.copy_repo(Path(tmp) / "repo")
+        subprocess.run([sys.executable, "-m", "snakemake", "--cores", "2", "--configfile", conftest.TEST_CONFIG],
+                       cwd=work, check=True)
+        main(work / "results")
+
+
 if __name__ == "__main__":
-    main(sys.argv[1])
+    if sys.argv[1:] == ["--run"]:
+        run_and_write()
+    else:
+        main(sys.argv[1])

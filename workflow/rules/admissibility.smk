@@ -34,6 +34,5 @@ rule admissibility:
     params:
         geometry=config["geometry"],
         fsu=config["fsu"],
-        data_dir=config["characteristics"]["data_dir"],
     script:
         "../scripts/admissibility.py"

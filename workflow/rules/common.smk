@@ -1,7 +1,13 @@
 from glob import glob
 from pathlib import Path
 
+from lumbar.inputs.characteristics import CHARACTERISTIC_TABLES
 from lumbar.inputs.config import ConfigError, check_unique_keys
+from lumbar.inputs.tables import (
+    IDP_FIXTURE_PARTS,
+    MUSCLE_SENSITIVITY_PARAMETERS,
+    OUT_OF_LIBRARY_EXPERIMENT,
+)
 from snakemake.utils import validate
 
 # Snakemake's YAML loading keeps the last of two equal keys (a second `fsu:` replaces the first): every config
@@ -116,17 +122,6 @@ def geometry_inputs(wildcards):
 # ---- declared data files: every table a rule reads is one of its input files, so that an in-place
 # edit re-runs exactly the rules that read it (a folder's mtime does not change when a file in it is rewritten).
 # The folder itself stays a named input only to tell the script where the tables are; ancient(): never a trigger.
-CHARACTERISTIC_TABLES = {
-    "softplus": (
-        "disc.csv",
-        "facet.csv",
-        "ligament_prestrain.csv",
-        "ligaments_softplus.csv",
-    ),
-    "rupp2015": ("disc.csv", "facet.csv", "ligaments_rupp2015.csv"),
-}
-
-
 def characteristic_tables(data_dir, sets=None):
     """The tables lumbar.inputs.characteristics.load_characteristic_set reads from ``data_dir`` for ``sets``
     (every *.csv of the folder when ``sets`` is None: calibrate copies them all, discovery may load any set).
@@ -373,15 +368,9 @@ def discovery_case_outputs(case):
 
 
 # the in-vitro IDP effects (lumbar.experiments.effects: kind "idp") and the out-of-library causes of each experiment
-# (lumbar.discovery.benchmark.OUT_OF_LIBRARY): which benchmark job needs which model and specimen files
+# (lumbar.inputs.tables.OUT_OF_LIBRARY_EXPERIMENT, imported above): which benchmark job needs which model and
+# specimen files
 DISCOVERY_IDP_EFFECTS = ("axial_preload", "idp_moment_term", "disc_load_share")
-DISCOVERY_IDP_FIXTURE_PARTS = 4  # lumbar.discovery.benchmark.IDP_FIXTURE_PARTS
-DISCOVERY_OOL_EXPERIMENT = {
-    "disc_scale": "stepwise_rom",
-    "ligament_removed": "stepwise_rom",
-    "rom_scale_per_direction": "stepwise_rom",
-    "idp_scale": "idp_invitro",
-}
 
 
 def discovery_benchmark_jobs():
@@ -404,7 +393,7 @@ def discovery_job_experiments(job):
     if job == "null":
         return set(exps[: max(1, min(len(exps), b["n_null"]))])
     if job == "out_of_library":
-        return {DISCOVERY_OOL_EXPERIMENT[o] for o in b["out_of_library"]} & set(exps)
+        return {OUT_OF_LIBRARY_EXPERIMENT[o] for o in b["out_of_library"]} & set(exps)
     return {"idp_invitro" if job in DISCOVERY_IDP_EFFECTS else "stepwise_rom"} & set(
         exps
     )
@@ -434,7 +423,7 @@ def discovery_benchmark_banks(wildcards):
     if "idp_invitro" in exps and b["generator"] == "virtual_specimens":
         out += [
             f"results/discrepancy/model/fixture_specimens_idp_{k}.csv"
-            for k in range(DISCOVERY_IDP_FIXTURE_PARTS)
+            for k in range(IDP_FIXTURE_PARTS)
         ]
     return out
 

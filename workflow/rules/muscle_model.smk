@@ -23,13 +23,7 @@ MUSCLE_CHUNKS = Paramspace(
     ),
     filename_params="*",
 )
-MUSCLE_FIGURE_PARAMETERS = [
-    "ssl_um",
-    "k_n_per_cm2",
-    "in_situ_sl_um",
-    "spt_n_per_cm2",
-    "pennation_deg",
-]
+# one figure per parameter of the sensitivity study: MUSCLE_SENSITIVITY_PARAMETERS (lumbar.inputs.tables, common.smk)
 
 
 rule muscle_validation:
@@ -125,7 +119,7 @@ rule muscle_sensitivity_table:
         figures=report(
             expand(
                 "results/figures/muscle_sensitivity_{parameter}.png",
-                parameter=MUSCLE_FIGURE_PARAMETERS,
+                parameter=MUSCLE_SENSITIVITY_PARAMETERS,
             ),
             caption="../report/muscle_sensitivity.rst",
             category="Muscle model",

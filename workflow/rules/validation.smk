@@ -80,7 +80,6 @@ rule multilevel_validation:
         geometry=config["geometry"],
         fsu=config["fsu"],
         ls=config["load_sharing"],
-        data_dir=config["characteristics"]["data_dir"],
     script:
         "../scripts/validation.py"
 

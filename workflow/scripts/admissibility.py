@@ -21,7 +21,7 @@ from lumbar.inputs.io import write_table_atomic  # noqa: E402
 
 g, f = snakemake.params.geometry, snakemake.params.fsu
 geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
-published = load_characteristic_set("calibrated", data_dir=snakemake.params.data_dir)
+published = load_characteristic_set("calibrated", data_dir=Path(_common.as_list(snakemake.input.published)[0]).parent)
 cal = load_characteristic_set("calibrated", data_dir=Path(_common.as_list(snakemake.input.characteristics)[0]).parent)
 on_elongation = any(getattr(law, "law_length_m", None) is not None for law in cal.ligaments.values())
 prior = read_prior_set(snakemake.input.prior, published) if on_elongation else published

@@ -18,8 +18,6 @@ import pandas as pd
 sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _common.py
 import _common  # noqa: E402
 
-# the order of the figures output of rule muscle_sensitivity_table (MUSCLE_FIGURE_PARAMETERS in the rule file)
-FIGURE_PARAMETERS = ("ssl_um", "k_n_per_cm2", "in_situ_sl_um", "spt_n_per_cm2", "pennation_deg")
 
 snakemake, log = _common.start(globals())
 
@@ -249,7 +247,7 @@ elif rule == "muscle_sensitivity_table":
              int(dirs["agrees"].sum()), len(dirs), int((dirs["reached"] & ~dirs["certified"]).sum()))
     scopes = list(p["sensitivity"]["scopes"])
     posts = list(p["sensitivity"]["postures"])
-    for k, param in enumerate(FIGURE_PARAMETERS):
+    for k, param in enumerate(mm.PARAMETERS):      # the order of the rule's figures output (the same constant)
         d = df[df["parameter"] == param]
         ssls = [x for x in d["ssl_um"].fillna(-1).unique()]
         unit = UNITS[param].split("[")[-1].rstrip("]")

@@ -40,7 +40,8 @@ if snakemake.rule == "multilevel_validation":
     levels = [lv for lv in ls["other_levels"] if lv != f["level"]]
     geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None,
                         levels=levels + [f["level"]])
-    published = load_characteristic_set("calibrated", data_dir=snakemake.params.data_dir)
+    published = load_characteristic_set("calibrated",
+                                    data_dir=Path(_common.as_list(snakemake.input.published)[0]).parent)
     cal = load_characteristic_set("calibrated",
                                   data_dir=Path(_common.as_list(snakemake.input.characteristics)[0]).parent)
     on_elongation = any(getattr(law, "law_length_m", None) is not None for law in cal.ligaments.values())

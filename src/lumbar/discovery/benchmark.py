@@ -34,6 +34,7 @@ from ..experiments import effects as fx
 from ..experiments.fsu import MAIN_DIRECTIONS, STAGES
 from ..experiments.stepwise_reduction import scenario_grid
 from ..inputs.io import write_table_atomic
+from ..inputs.tables import IDP_FIXTURE_PARTS, OUT_OF_LIBRARY_EXPERIMENT
 from .detect import benchmark_settings, discovery_settings
 from .fit import discover
 from .problems import build_problem, fsu_variants_from_config, idp_forward, idp_model_table
@@ -57,15 +58,15 @@ class OutOfLibrary:
 
 
 OUT_OF_LIBRARY = {
-    "disc_scale": OutOfLibrary("stepwise_rom", (0.7, 1.3), "disc_scale",
+    "disc_scale": OutOfLibrary(OUT_OF_LIBRARY_EXPERIMENT["disc_scale"], (0.7, 1.3), "disc_scale",
                                "every specimen's disc stiffer or softer (torque laws, axial and shear stiffness x f)"),
-    "ligament_removed": OutOfLibrary("stepwise_rom", ("CL",), "remove_ligament",
+    "ligament_removed": OutOfLibrary(OUT_OF_LIBRARY_EXPERIMENT["ligament_removed"], ("CL",), "remove_ligament",
                                      "a ligament missing in every specimen from the intact stage on (the library "
                                      "adds structures and changes prestrain; it removes none)"),
-    "rom_scale_per_direction": OutOfLibrary("stepwise_rom", (0.2,), "scale_per_direction",
-                                            "the ROM of each direction scaled by its own factor in [1 - m, 1 + m] "
+    "rom_scale_per_direction": OutOfLibrary(OUT_OF_LIBRARY_EXPERIMENT["rom_scale_per_direction"], (0.2,),
+                                            "scale_per_direction", "the ROM of each direction scaled by its own factor in [1 - m, 1 + m] "
                                             "(drawn per fixture; a per-axis calibration or stiffness)"),
-    "idp_scale": OutOfLibrary("idp_invitro", (0.8, 0.9, 1.1, 1.2), "scale",
+    "idp_scale": OutOfLibrary(OUT_OF_LIBRARY_EXPERIMENT["idp_scale"], (0.8, 0.9, 1.1, 1.2), "scale",
                               "the IDP scaled by f (transducer calibration, IDP formula factor)"),
 }
 
@@ -158,8 +159,8 @@ def null_pool(config, experiment) -> int:
     return k * int(max(b["n_specimens_range"]))
 
 
-#: parts the IDP fixture specimens are made in (rule discovery_fixture_specimens_idp, one job each)
-IDP_FIXTURE_PARTS = 4
+# IDP_FIXTURE_PARTS (lumbar.inputs.tables): parts the IDP fixture specimens are made in (rule
+# discovery_fixture_specimens_idp, one job each)
 
 
 def fixture_part(config, part) -> tuple[int, int]:

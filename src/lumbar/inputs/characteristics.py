@@ -46,9 +46,18 @@ __all__ = [
     "load_characteristic_set",
     "rupp_shape_parameters",
     "default_data_dir",
+    "CHARACTERISTIC_TABLES",
 ]
 
 DISC_DIRECTIONS = ("flexion", "extension", "lateral_bending", "axial_rotation")
+
+# the files of a characteristic directory that load_characteristic_set reads
+DISC_TABLE, FACET_TABLE = "disc.csv", "facet.csv"
+PRESTRAIN_TABLE, SOFTPLUS_TABLE, RUPP2015_TABLE = "ligament_prestrain.csv", "ligaments_softplus.csv", "ligaments_rupp2015.csv"
+#: the tables load_characteristic_set reads for a softplus set (every set but rupp2015) and for rupp2015: the workflow
+#: declares them as the inputs of a rule that loads a set (workflow/rules/common.smk, characteristic_tables)
+CHARACTERISTIC_TABLES = {"softplus": (DISC_TABLE, FACET_TABLE, PRESTRAIN_TABLE, SOFTPLUS_TABLE),
+                         "rupp2015": (DISC_TABLE, FACET_TABLE, RUPP2015_TABLE)}
 
 #: Ligament kinds each set must provide, and the documented reason for each absence.
 ABSENT_LIGAMENTS: dict[str, dict[str, str]] = {
@@ -215,7 +224,7 @@ def default_data_dir() -> Path:
     candidates.append(resources.data_dir() / "characteristics")
     candidates.append(Path.cwd() / "data" / "characteristics")
     for c in candidates:
-        if (c / "disc.csv").is_file():
+        if (c / DISC_TABLE).is_file():
             return c
     raise CharacteristicsError(
         candidates[0], "characteristics data directory not found",
@@ -320,7 +329,7 @@ def _iter(df):
 
 
 def _load_disc(d: Path) -> DiscParams:
-    path = d / "disc.csv"
+    path = d / DISC_TABLE
     df = _read(path, tables.DISC)
     vals: dict[tuple[str, str], float] = {}
     for row, r in _iter(df):
@@ -364,7 +373,7 @@ def _load_disc(d: Path) -> DiscParams:
 
 
 def _load_facet(d: Path) -> FacetParams:
-    path = d / "facet.csv"
+    path = d / FACET_TABLE
     df = _read(path, tables.FACET)
     vals: dict[str, float] = {}
     surface: dict[str, dict[str, float]] = {}
@@ -393,7 +402,7 @@ def _load_facet(d: Path) -> FacetParams:
 
 
 def _load_prestrain(d: Path) -> dict[str, float]:
-    path = d / "ligament_prestrain.csv"
+    path = d / PRESTRAIN_TABLE
     df = _read(path, tables.LIGAMENT_PRESTRAIN)
     out = {}
     for row, r in _iter(df):
@@ -407,7 +416,7 @@ def _load_prestrain(d: Path) -> dict[str, float]:
 
 
 def _load_softplus(d: Path, name: str, prestrain: dict[str, float]):
-    path = d / "ligaments_softplus.csv"
+    path = d / SOFTPLUS_TABLE
     df = _read(path, tables.LIGAMENTS_SOFTPLUS)
     params: dict[tuple[str, str], dict[str, float]] = {}
     srcs: dict[tuple[str, str], str] = {}
@@ -454,7 +463,7 @@ def _load_softplus(d: Path, name: str, prestrain: dict[str, float]):
                        f"does not provide ({ABSENT_LIGAMENTS[name][kind]})",
                        "no such rows (a calibration output, kind calibrated_on_*, may add them)")
         if kind not in prestrain and "prestrain" not in pv:
-            raise _err(d / "ligament_prestrain.csv", None, "ligament", f"no prestrain for '{kind}'",
+            raise _err(d / PRESTRAIN_TABLE, None, "ligament", f"no prestrain for '{kind}'",
                        "one row per ligament kind (or a 'prestrain' row of the set in ligaments_softplus.csv)")
         length = pv.get("law_length")
         law = SoftplusLaw(pv["a"], pv["b"], pv["c"], pv["d"], pv.get("prestrain", prestrain.get(kind)),
@@ -468,7 +477,7 @@ def _parse_printed(s: str) -> float:
 
 
 def _load_rupp(d: Path):
-    path = d / "ligaments_rupp2015.csv"
+    path = d / RUPP2015_TABLE
     df = _read(path, tables.LIGAMENTS_RUPP2015)
     vals: dict[str, dict[str, float]] = {}
     srcs: dict[str, str] = {}
@@ -567,10 +576,10 @@ def load_characteristic_set(name: str, data_dir=None,
     alts: dict[str, SoftplusLaw] = {}
     if name == "rupp2015":
         ligs = _load_rupp(d)
-        src = str(d / "ligaments_rupp2015.csv")
+        src = str(d / RUPP2015_TABLE)
     else:
         ligs, alts = _load_softplus(d, name, _load_prestrain(d))
-        src = str(d / "ligaments_softplus.csv")
+        src = str(d / SOFTPLUS_TABLE)
     cs = CharacteristicSet(name=name, disc=disc, facet=facet, ligaments=ligs, source=src,
                            absent=dict(ABSENT_LIGAMENTS[name]), alternatives=alts)
     if overrides:
@@ -595,6 +604,6 @@ def resolve_characteristic_set(name: str, data_dir=None, calibrated_dir=None, ov
     stiffness are the set's own values (facet.csv / disc.csv); a caller overrides them only explicitly
     (``overrides``, or ``build_fsu(facet_stiffness=...)`` from the config key fsu.facet_stiffness_n_per_m).
     """
-    if name == "calibrated" and calibrated_dir is not None and (Path(calibrated_dir) / "disc.csv").is_file():
+    if name == "calibrated" and calibrated_dir is not None and (Path(calibrated_dir) / DISC_TABLE).is_file():
         return load_characteristic_set(name, data_dir=calibrated_dir, overrides=overrides)
     return load_characteristic_set(name, data_dir=data_dir, overrides=overrides)

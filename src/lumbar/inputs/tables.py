@@ -64,6 +64,17 @@ CHARACTERISTIC_KINDS = frozenset({"original_text", "original_figure", "third_par
 STAGES = ("intact", "wo_ssl", "wo_isl", "wo_fl", "wo_cl", "wo_va", "wo_pll", "wo_all")
 #: the four loading directions of the stepwise-reduction tables
 MAIN_DIRECTIONS = ("flexion", "extension", "lateral_bending", "axial_rotation")
+#: the out-of-library causes of the discovery benchmark (config key discovery.benchmark.out_of_library;
+#: lumbar.discovery.benchmark.OUT_OF_LIBRARY describes them) and the experiment each acts on: which benchmark job
+#: needs which model and specimen files (the workflow's rule files import it)
+OUT_OF_LIBRARY_EXPERIMENT = {"disc_scale": "stepwise_rom", "ligament_removed": "stepwise_rom",
+                             "rom_scale_per_direction": "stepwise_rom", "idp_scale": "idp_invitro"}
+#: the fixture specimens of the in-vitro IDP benchmark are simulated in this many parts (files
+#: fixture_specimens_idp_<k>.csv, rule discovery_fixture_specimens_idp), so that both cores make them
+IDP_FIXTURE_PARTS = 4
+#: the muscle parameters of the sensitivity study (paper 2, Sect. 2.5), in the order of its tables and figures
+#: (lumbar.muscles.muscle_model.PARAMETERS; rule muscle_sensitivity_table names one figure per parameter)
+MUSCLE_SENSITIVITY_PARAMETERS = ("ssl_um", "k_n_per_cm2", "in_situ_sl_um", "spt_n_per_cm2", "pennation_deg")
 #: data kinds of a reference ROM table
 ROM_DATA_KINDS = frozenset({"measured", "original_text", "original_figure", "third_party",
                             "derived_from_published_fit", "surrogate"})

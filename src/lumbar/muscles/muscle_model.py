@@ -33,6 +33,7 @@ import numpy as np
 import pandas as pd
 
 from ..inputs import resources
+from ..inputs.tables import MUSCLE_SENSITIVITY_PARAMETERS
 from ..mechanics import so3
 from ..experiments.fsu import add_level, disc_frame, facet_surfaces
 from ..geometry.core import LEVEL_NAMES
@@ -463,7 +464,7 @@ __all__ = ["ACTIVITIES", "Activity", "LumbarMuscleModel", "get_activity", "apply
 
 
 # ====================================================================== study (validation, sensitivity, Sobol)
-PARAMETERS = ("ssl_um", "k_n_per_cm2", "in_situ_sl_um", "spt_n_per_cm2", "pennation_deg")
+PARAMETERS = MUSCLE_SENSITIVITY_PARAMETERS        # lumbar.inputs.tables (the rule file names one figure each)
 POSTURES = {"standing": "upright_standing", "flexion": "flexion_36deg"}
 # what the paper states (Sect. 3.2, original_text); keyed by (parameter, value, ssl_um or None, scope, posture)
 PAPER_CHANGES = {
