@@ -150,7 +150,8 @@ def discovery_calibrated_tables():
 
 def discovery_model_bands():
     """The calibrated unit's posterior band of every stepwise-reduction scenario, part of the model's spread in the
-    real-data discovery of the intact ROM (when discovery.characteristic_set is "calibrated")."""
+    real-data discovery of the intact ROM (when discovery.characteristic_set is "calibrated").
+    """
     if config["discovery"]["characteristic_set"] != "calibrated":
         return []
     return ["results/stepwise_reduction/bands_calibrated.csv"]

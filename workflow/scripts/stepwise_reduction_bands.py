@@ -45,5 +45,5 @@ def main(snakemake, log):
 
 
 if __name__ == "__main__":
-    smk, logger = _common.start(globals())
-    main(smk, logger)
+    snakemake, log = _common.start(globals())
+    main(snakemake, log)
