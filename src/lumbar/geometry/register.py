@@ -16,7 +16,7 @@ import numpy as np
 #: (RBF width [m], regularisation, iterations) of the non-rigid stages, coarse to fine
 NONRIGID_STAGES = ((0.016, 1e-2, 8), (0.010, 1e-2, 8), (0.006, 3e-2, 8))
 N_CONTROL = 150
-TRIM = 0.9          # pairs beyond this quantile of the distance are left out (parts the other surface lacks)
+TRIM = 1.0          # pairs beyond this quantile of the distance are left out
 
 
 @dataclass
@@ -75,12 +75,22 @@ def farthest_points(X, k):
     return X[idx]
 
 
-def register(X, Y, iterations=(25, 15)) -> Warp:
-    """Warp the template points X (n,3) onto the target points Y (m,3); both roughly in the same frame."""
+METHODS = ("full", "translation")
+
+
+def register(X, Y, iterations=(25, 15), method: str = "full") -> Warp:
+    """Warp the template points X (n,3) onto the target points Y (m,3); both roughly in the same frame.
+
+    ``method``: "full" (similarity, affine, non-rigid) or "translation" (the centroids made to coincide, nothing
+    else: the control of the accuracy measurement, an atlas without registration)."""
     from scipy.spatial import cKDTree  # noqa: PLC0415
+    if method not in METHODS:
+        raise ValueError(f"registration method {method!r}; expected one of {METHODS}")
     tree = cKDTree(Y)
     A, t = np.eye(3), Y.mean(0) - X.mean(0)
     scale = 1.0
+    if method == "translation":
+        return Warp(A=A, t=t, stages=[], scale=scale, rms_m=_pairs(X + t, Y, tree)[2])
     for _ in range(iterations[0]):                      # similarity ICP
         Xc = X @ A.T + t
         src, tgt, _ = _pairs(Xc, Y, tree)

@@ -126,12 +126,14 @@ def centroids_of(meshes: dict):
 
 
 def build_specimen(meshes: dict, axes: str = "LPS", sources: dict | None = None, atlas: dict | None = None,
-                   leave_one_out: bool = False, name: str = "specimen", units: str = "m") -> Specimen:
+                   leave_one_out: bool = False, name: str = "specimen", units: str = "m",
+                   method: str = "full") -> Specimen:
     """Align, place the landmarks of every level present and assemble the geometry (module doc).
 
     ``meshes``: {token: Trimesh} in metres in the input's axes (``lumbar.geometry.specimen_io.read_specimen_meshes``);
     ``axes``: the declared axes (:func:`lumbar.geometry.specimen.declared_matrix`); ``atlas``: default the embedded
-    Visible Human set's; ``leave_one_out``: no vertebra of the atlas is used for itself (accuracy measurement)."""
+    Visible Human set's; ``leave_one_out``: no vertebra of the atlas is used for itself (accuracy measurement);
+    ``method``: the registration (:func:`lumbar.geometry.register.register`; "translation" only as a control)."""
     sources = dict(sources or {})
     al = align_to_project(meshes, axes=axes, sources=sources)
     proj = {v: m.copy().apply_transform(al.transform) for v, m in meshes.items()}
@@ -140,7 +142,7 @@ def build_specimen(meshes: dict, axes: str = "LPS", sources: dict | None = None,
     levels, lms, gaps = {}, {}, {}
     warps: dict = {}
     for lv in levels_present(proj):
-        lms[lv] = level_landmarks(proj, lv, atlas, leave_one_out=leave_one_out, warps=warps)
+        lms[lv] = level_landmarks(proj, lv, atlas, leave_one_out=leave_one_out, warps=warps, method=method)
         levels[lv], _ = assemble_level(lv, proj, lms[lv], cents, x_post, gaps)
     verts = {v: Vertebra(v, proj[v], np.asarray(cents[v], float)) for v in proj}
     src = ", ".join(f"{v}: {sources.get(v, 'mesh')}" for v in proj)

@@ -28,6 +28,7 @@ from .register import register
 ON_SURFACE_M = 1e-3
 REG_SAMPLES = 1500           # template/target vertices used by the registration (deterministic stride)
 FACET_KEYS = {"upper": "facet_inferior", "lower": "facet_superior"}
+SEGMENTS = "_segments"        # atlas key: per ligament and level the fibre vectors upper - lower (canonical order)
 
 
 def _stride(v, n=REG_SAMPLES):
@@ -48,8 +49,8 @@ def _canonical_order(up, lo):
 
 
 def _surface_distance(mesh, P):
-    from scipy.spatial import cKDTree  # noqa: PLC0415 - see lumbar/__init__.py, lazy imports
-    return cKDTree(np.asarray(mesh.vertices)).query(P)[0]
+    import trimesh  # noqa: PLC0415 - mesh library, imported where used (docs/design.md)
+    return np.asarray(trimesh.proximity.closest_point(mesh, np.asarray(P, float))[1], float)
 
 
 @functools.lru_cache(maxsize=2)
@@ -68,10 +69,12 @@ def build_atlas(geo) -> dict:
     points (k,3), on_surface (k,), extra (k,) or None)}}} from a geometry with insertion sites (Visible Human)."""
     atlas = {v: {"points": _stride(vt.mesh.vertices), "mesh": vt.mesh, "upper": {}, "lower": {}}
              for v, vt in geo.vertebrae.items()}
+    atlas[SEGMENTS] = {}
     for lv, lev in geo.levels.items():
         U, L = lev.upper, lev.lower
         for lig in lev.ligaments:
             o = _canonical_order(lig.upper, lig.lower)
+            atlas[SEGMENTS].setdefault(lig.name, {})[lv] = (lig.upper - lig.lower)[o]
             for role, body, pts in (("upper", U, lig.upper[o]), ("lower", L, lig.lower[o])):
                 on = _surface_distance(geo.vertebrae[body].mesh, pts) < ON_SURFACE_M
                 atlas[body][role][lig.name] = dict(points=pts, on_surface=on,
@@ -85,22 +88,25 @@ def build_atlas(geo) -> dict:
 
 def templates_for(target: str, role: str, atlas: dict, exclude=()) -> list[str]:
     """Template vertebrae of ``role`` for ``target``: the sacrum for the sacrum, else the lumbar vertebrae."""
-    pool = ["S1"] if target == "S1" else [v for v in ("L1", "L2", "L3", "L4", "L5")]
+    pool = ["S1"] if target == "S1" else ["L1", "L2", "L3", "L4", "L5"]
     return [v for v in pool if v in atlas and atlas[v][role] and v not in exclude]
 
 
-def transfer(target: str, mesh, role: str, atlas: dict, exclude=(), warps: dict | None = None) -> dict:
+def transfer(target: str, mesh, role: str, atlas: dict, exclude=(), warps: dict | None = None,
+             method: str = "full") -> dict:
     """Landmarks of ``role`` on the target vertebra ``mesh`` (project frame): {structure: dict(points (k,3),
     extra (k,) or None, spread_m (k,): largest distance of a template's point from the median, templates)}."""
     import trimesh  # noqa: PLC0415 - mesh library, imported where used (docs/design.md)
     temps = templates_for(target, role, atlas, exclude)
+    if not temps and target == "S1":      # the atlas's only sacrum: kept under leave-one-out (S1 ends not scored)
+        temps = templates_for(target, role, atlas)
     if not temps:
         raise ValueError(f"no atlas template for the {role} role of {target} (excluded: {list(exclude)})")
     Y = _stride(mesh.vertices)
     warps = {} if warps is None else warps
     for t in temps:
         if t not in warps:
-            warps[t] = register(atlas[t]["points"], Y)
+            warps[t] = register(atlas[t]["points"], Y, method=method)
     out = {}
     names = sorted(set.intersection(*[set(atlas[t][role]) for t in temps]))
     for s in names:
@@ -120,20 +126,25 @@ def transfer(target: str, mesh, role: str, atlas: dict, exclude=(), warps: dict 
     return out
 
 
-def level_landmarks(meshes: dict, level: str, atlas: dict, leave_one_out: bool = False, warps=None) -> dict:
+def level_landmarks(meshes: dict, level: str, atlas: dict, leave_one_out: bool = False, warps=None,
+                    method: str = "full") -> dict:
     """{"ligaments": {name: (upper (n,3), lower (n,3), extra (n,))}, "facets": {side: (superior (9,3),
     inferior (9,3))}, "spread": {...}} for one level from the transfers of its two vertebrae; ``leave_one_out``:
     no vertebra is its own template (the accuracy measurement on the atlas's own specimen)."""
     U, L = level_vertebrae(level)
     warps = {} if warps is None else warps
-    up = transfer(U, meshes[U], "upper", atlas, exclude=(U,) if leave_one_out else (), warps=warps.setdefault(U, {}))
-    lo = transfer(L, meshes[L], "lower", atlas, exclude=(L,) if leave_one_out else (), warps=warps.setdefault(L, {}))
+    up = transfer(U, meshes[U], "upper", atlas, exclude=(U,) if leave_one_out else (), warps=warps.setdefault(U, {}),
+                  method=method)
+    lo = transfer(L, meshes[L], "lower", atlas, exclude=(L,) if leave_one_out else (), warps=warps.setdefault(L, {}),
+                  method=method)
     ligs, facets, spread = {}, {}, {}
     for name in LIGAMENT_NAMES:
         if name in up and name in lo and len(up[name]["points"]) == len(lo[name]["points"]):
             ex = [e for e in (up[name]["extra"], lo[name]["extra"]) if e is not None]
             extra = np.mean(ex, axis=0) if ex else np.zeros(len(up[name]["points"]))
-            ligs[name] = (up[name]["points"], lo[name]["points"], extra)
+            u, lo_ = _fibre_rule(name, up[name]["points"], lo[name]["points"], extra, meshes[U], meshes[L],
+                                 atlas, exclude=(U, L) if leave_one_out else ())
+            ligs[name] = (u, lo_, extra)
             spread[name] = (up[name]["spread_m"], lo[name]["spread_m"])
     for side in ("left", "right"):
         ki, ks = f"facet_inferior:{side}", f"facet_superior:{side}"
@@ -142,6 +153,34 @@ def level_landmarks(meshes: dict, level: str, atlas: dict, leave_one_out: bool =
             spread[f"facet_{side}"] = (lo[ks]["spread_m"], up[ki]["spread_m"])
     templates = {"upper": next(iter(up.values()))["templates"], "lower": next(iter(lo.values()))["templates"]}
     return dict(ligaments=ligs, facets=facets, spread=spread, templates=templates)
+
+
+def _closest(mesh, P):
+    import trimesh  # noqa: PLC0415 - mesh library, imported where used (docs/design.md)
+    return np.asarray(trimesh.proximity.closest_point(mesh, np.asarray(P, float))[0], float)
+
+
+def _fibre_rule(name, up, lo, extra, mesh_u, mesh_l, atlas, exclude=()):
+    """Fibres that span a narrow gap keep their own geometry instead of two independently carried ends:
+
+    * capsule fibres (CL): they cross the facet joint at its rim; the fibre's midpoint is carried (the mean of the
+      two carried ends) and its ends are the closest points of the two vertebrae to it;
+    * via-point fibres (ALL, PLL with ``extra`` > 0): their straight part is a short segment at the disc, off the
+      bone; the segment is centred on the carried midpoint with the atlas's own fibre vector (median over the
+      atlas levels not involving ``exclude``).
+
+    Other fibres keep their two carried ends."""
+    mid = 0.5 * (up + lo)
+    if name.startswith("CL"):
+        return _closest(mesh_u, mid), _closest(mesh_l, mid)
+    vecs = [v for lv, v in atlas.get(SEGMENTS, {}).get(name, {}).items()
+            if not set(level_vertebrae(lv)) & set(exclude) and v.shape == up.shape]
+    if not vecs:
+        return up, lo
+    vec = np.median(np.stack(vecs), axis=0)
+    if np.any(extra > 0):
+        return mid + 0.5 * vec, mid - 0.5 * vec
+    return up, lo
 
 
 def levels_present(meshes: dict) -> list[str]:
