@@ -43,9 +43,11 @@ def _pairs(X, Y, tree_y):
     """Symmetric closest-point pairs (source points, target points), trimmed at ``TRIM`` per direction."""
     from scipy.spatial import cKDTree  # noqa: PLC0415 - see lumbar/__init__.py, lazy imports
     d1, j = tree_y.query(X)
-    k1 = d1 <= np.quantile(d1, TRIM)
     d2, i = cKDTree(X).query(Y)
-    k2 = d2 <= np.quantile(d2, TRIM)
+    if TRIM < 1.0:
+        k1, k2 = d1 <= np.quantile(d1, TRIM), d2 <= np.quantile(d2, TRIM)
+    else:
+        k1, k2 = np.ones(len(d1), bool), np.ones(len(d2), bool)
     src = np.r_[np.flatnonzero(k1), i[k2]]
     tgt = np.vstack([Y[j[k1]], Y[k2]])
     return src, tgt, float(np.sqrt(0.5 * (np.mean(d1[k1] ** 2) + np.mean(d2[k2] ** 2))))
@@ -78,7 +80,7 @@ def farthest_points(X, k):
 METHODS = ("full", "translation")
 
 
-def register(X, Y, iterations=(25, 15), method: str = "full") -> Warp:
+def register(X, Y, iterations=(15, 10), method: str = "full") -> Warp:
     """Warp the template points X (n,3) onto the target points Y (m,3); both roughly in the same frame.
 
     ``method``: "full" (similarity, affine, non-rigid) or "translation" (the centroids made to coincide, nothing

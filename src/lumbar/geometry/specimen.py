@@ -135,11 +135,11 @@ class Alignment:
     detected: dict = field(default_factory=dict)
 
     def apply(self, points) -> np.ndarray:
-        P = np.asarray(points, float)
+        P = np.atleast_2d(np.asarray(points, float))
         return P @ self.transform[:3, :3].T + self.transform[:3, 3]
 
     def inverse(self, points) -> np.ndarray:
-        P = np.asarray(points, float) - self.transform[:3, 3]
+        P = np.atleast_2d(np.asarray(points, float)) - self.transform[:3, 3]
         return P @ self.transform[:3, :3]
 
 
@@ -189,10 +189,12 @@ def align_to_project(meshes: dict, axes: str = "LPS", sources: dict | None = Non
         trial = [symmetry_plane(P, c, iterations=6) for c in starts]
         n0 = trial[int(np.argmin([t[2] for t in trial]))][0]
         n, d, r = symmetry_plane(P, n0)
+        m = P.mean(0)
+        p0 = m - (m @ n - d) * n            # a point of the plane (translation-equivariant, unlike d)
         n = _perp(n, s)
         a = np.cross(n, s)
         sg, wid = _anterior_sign(P, a, n)
-        normals[v], offsets[v], signs[v], widths[v], rms[v] = n, d, sg * a, wid, r
+        normals[v], offsets[v], signs[v], widths[v], rms[v] = n, p0, sg * a, wid, r
     # one left-right axis: the mean of the per-vertebra symmetry normals (signs made consistent)
     ref = normals[lumbar[0]]
     nbar = sum(normals[v] * np.sign(normals[v] @ ref) for v in lumbar)
@@ -204,7 +206,7 @@ def align_to_project(meshes: dict, axes: str = "LPS", sources: dict | None = Non
     R = np.vstack([x, y, z])
     # origin: the mean of the body centroids, each moved onto its vertebra's symmetry plane
     cents = [_body_centroid_input(pts[v], x) for v in lumbar]
-    o = np.mean([c - (c @ normals[v] - offsets[v]) * normals[v] for c, v in zip(cents, lumbar)], axis=0)
+    o = np.mean([c - ((c - offsets[v]) @ normals[v]) * normals[v] for c, v in zip(cents, lumbar)], axis=0)
     T = np.eye(4)
     T[:3, :3] = R
     T[:3, 3] = -R @ o

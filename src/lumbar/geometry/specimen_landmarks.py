@@ -26,6 +26,7 @@ from .core import LEVEL_NAMES, LIGAMENT_NAMES, level_vertebrae
 from .register import register
 
 ON_SURFACE_M = 1e-3
+N_TEMPLATES = 3              # atlas vertebrae registered per target vertebra and role
 REG_SAMPLES = 1500           # template/target vertices used by the registration (deterministic stride)
 FACET_KEYS = {"upper": "facet_inferior", "lower": "facet_superior"}
 SEGMENTS = "_segments"        # atlas key: per ligament and level the fibre vectors upper - lower (canonical order)
@@ -86,10 +87,16 @@ def build_atlas(geo) -> dict:
     return atlas
 
 
-def templates_for(target: str, role: str, atlas: dict, exclude=()) -> list[str]:
-    """Template vertebrae of ``role`` for ``target``: the sacrum for the sacrum, else the lumbar vertebrae."""
-    pool = ["S1"] if target == "S1" else ["L1", "L2", "L3", "L4", "L5"]
-    return [v for v in pool if v in atlas and atlas[v][role] and v not in exclude]
+def templates_for(target: str, role: str, atlas: dict, exclude=(), n: int = N_TEMPLATES) -> list[str]:
+    """Template vertebrae of ``role`` for ``target``: the sacrum for the sacrum, else the ``n`` lumbar vertebrae
+    nearest to it in the column (the same level first, then the nearer neighbours, the upper one first)."""
+    if target == "S1":
+        pool = ["S1"]
+    else:
+        lumbar = ["L1", "L2", "L3", "L4", "L5"]
+        k = lumbar.index(target) if target in lumbar else 2
+        pool = sorted(lumbar, key=lambda v: (abs(lumbar.index(v) - k), lumbar.index(v)))
+    return [v for v in pool if v in atlas and atlas[v][role] and v not in exclude][:n]
 
 
 def transfer(target: str, mesh, role: str, atlas: dict, exclude=(), warps: dict | None = None,
