@@ -202,8 +202,8 @@ def test_cli_writes_tables_and_figures(vh, tmp_path):
 
 
 #: what the leave-one-out measurement reaches (docs/specimen.md, "Accuracy"), with a small margin
-ACCURACY = dict(overall_median_mm=2.0, structure_median_mm=4.0, facet_bone_median_mm=2.0,
-                length_rel=0.15, length_exempt=("ALL", "CL_L", "CL_R"))
+ACCURACY = dict(overall_median_mm=2.0, structure_median_mm=3.5, facet_bone_median_mm=2.0,
+                length_rel=0.15, length_exempt=("ALL", "CL_L", "CL_R"), exempt_length_rel=0.3)
 
 
 @pytest.mark.slow
@@ -217,6 +217,8 @@ def test_accuracy_on_the_visible_human_set_leave_one_out():
     le = r["lengths"].set_index("structure")
     keep = [n for n in le.index if n not in ACCURACY["length_exempt"]]
     assert (le.loc[keep, "relative_error"].abs() <= ACCURACY["length_rel"]).all()
+    # known misses (docs/specimen.md): the ALL's via-point path and the capsule fibres' length are the atlas's
+    assert (le["relative_error"].abs() <= ACCURACY["exempt_length_rel"]).all()
     # control: the atlas without the registration step (templates only moved onto the target's centroid)
     c = visible_human_accuracy(seed=0, method="translation")["summary"].set_index("structure")
     assert c.loc["all ligament groups", "median_mm"] > ACCURACY["overall_median_mm"]

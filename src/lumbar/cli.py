@@ -16,13 +16,18 @@ import sys
 
 from .discovery import cli as discovery_cli
 from .experiments import fsu
-from .plots import specimen
+
+
+def _landmarks(argv, prog):
+    from .plots import specimen  # noqa: PLC0415 - matplotlib and the mesh code only for this command (fsu starts fast)
+    return specimen.main(argv, prog=prog)
+
 
 #: subcommand -> (main(argv, prog), one-line summary)
 COMMANDS = {
     "fsu": (fsu.main, "range of motion of one functional spinal unit under pure moments"),
     "discovery": (discovery_cli.main, "discrepancy discovery: which missing effect explains a measured table"),
-    "landmarks": (specimen.main, "a specimen's project frame, landmarks, tables and QA figures from its meshes"),
+    "landmarks": (_landmarks, "a specimen's project frame, landmarks, tables and QA figures from its meshes"),
 }
 
 

@@ -173,24 +173,20 @@ def _closest(mesh, P):
 def _fibre_rule(name, up, lo, extra, mesh_u, mesh_l, atlas, exclude=()):
     """Fibres that span a narrow gap keep their own geometry instead of two independently carried ends:
 
-    * capsule fibres (CL): they cross the facet joint at its rim; the fibre's midpoint is carried (the mean of the
-      two carried ends) and its ends are the closest points of the two vertebrae to it;
-    * via-point fibres (ALL, PLL with ``extra`` > 0): their straight part is a short segment at the disc, off the
-      bone; the segment is centred on the carried midpoint with the atlas's own fibre vector (median over the
-      atlas levels not involving ``exclude``).
+    * capsule fibres (CL, 2-2.6 mm across the joint's rim) and via-point fibres (ALL, PLL with ``extra`` > 0: a
+      short segment at the disc, off the bone): the fibre is centred on the carried midpoint (the mean of its two
+      carried ends) with the atlas's own fibre vector (median over the atlas levels not involving ``exclude``), not
+      snapped: its length is the atlas's, which the two independently carried and snapped ends do not keep (the
+      capsule fibres came out twice or half as long, and a unit with half-length capsule fibres was twice as stiff).
 
     Other fibres keep their two carried ends."""
     mid = 0.5 * (up + lo)
-    if name.startswith("CL"):
-        return _closest(mesh_u, mid), _closest(mesh_l, mid)
     vecs = [v for lv, v in atlas.get(SEGMENTS, {}).get(name, {}).items()
             if not set(level_vertebrae(lv)) & set(exclude) and v.shape == up.shape]
-    if not vecs:
+    if not vecs or not (name.startswith("CL") or np.any(extra > 0)):
         return up, lo
     vec = np.median(np.stack(vecs), axis=0)
-    if np.any(extra > 0):
-        return mid + 0.5 * vec, mid - 0.5 * vec
-    return up, lo
+    return mid + 0.5 * vec, mid - 0.5 * vec
 
 
 def levels_present(meshes: dict) -> list[str]:

@@ -33,6 +33,7 @@ SIDES = ("left", "medial", "right")
 UNIT_FACTORS = {"m": 1.0, "mm": 1e-3}
 ON_BONE_TOL_M = 1e-3          # an edited insertion on the bone: within 1 mm of its body's surface
 VIA_POINT_TOL_M = 0.010       # an ALL/PLL via point (extra_length > 0): within 10 mm (lumbar.geometry.checks)
+CAPSULE_TOL_M = 0.005         # a capsule fibre end (CL, placed across the joint's rim, not snapped): within 5 mm
 CONSISTENCY_TOL_M = 1e-5      # project and input columns of one row must describe the same point
 
 
@@ -45,7 +46,8 @@ def _side(name, p):
 
 
 def _rule(structure, body, templates, snapped):
-    how = "closest point on the surface" if snapped else "not snapped (a via point off the bone, as in the atlas)"
+    how = ("closest point on the surface" if snapped else
+           "fibre centred on the carried midpoint with the atlas's fibre vector, not snapped (docs/specimen.md)")
     return (f"{structure} on {body}: the Visible Human atlas point (Remus et al. 2021) carried by surface "
             f"registration (similarity ICP, affine ICP, smooth non-rigid field) from template(s) "
             f"{'+'.join(templates)}, median over templates, {how}")
@@ -78,7 +80,7 @@ def landmark_table(sp, units: str | None = None) -> pd.DataFrame:
             role = "upper" if body == U else "lower"
             rows.append(dict(level=lv, structure=name, side=side, point_index=k, x_m=p[0], y_m=p[1], z_m=p[2],
                              body=body, vertex_index=int(vi),
-                             rule=_rule(name, body, tmpl.get(role, []), extra == 0.0),
+                             rule=_rule(name, body, tmpl.get(role, []), extra == 0.0 and not name.startswith("CL")),
                              source=src[body], kind="derived_from_geometry", extra_length_m=extra))
     df = pd.DataFrame(rows, columns=COLUMNS + ["extra_length_m"])
     P_in = sp.alignment.inverse(df[["x_m", "y_m", "z_m"]].to_numpy(float)) / f if len(df) else np.zeros((0, 3))
@@ -152,7 +154,7 @@ def read_landmark_table(path, meshes: dict, alignment=None, units: str = "m") ->
     Checks: the columns ``TABLE_COLUMNS`` (``extra_length_m`` and the input columns may be left empty); level,
     structure, side and body from their vocabularies, the body one of the level's two vertebrae (the upper one
     for ``facet_inferior``, the lower one for ``facet_superior``); finite coordinates; every point within 1 mm of
-    its body's surface (10 mm for a via point, ``extra_length_m`` > 0); where both the project (``x_m``..) and the
+    its body's surface (5 mm for a capsule fibre end, 10 mm for a via point, ``extra_length_m`` > 0); where both the project (``x_m``..) and the
     input (``x_input``..) coordinates of a row are given and ``alignment`` is, they describe the same point (edit
     both, or empty one set: it is computed from the other); fibres pair up by point_index; 9 points per facet face.
     """
@@ -208,7 +210,8 @@ def read_landmark_table(path, meshes: dict, alignment=None, units: str = "m") ->
     df[["x_m", "y_m", "z_m"]] = df[["x_m", "y_m", "z_m"]].astype(float)
     for body, sub in df.groupby("body"):
         d = cKDTree(np.asarray(meshes[body].vertices)).query(sub[["x_m", "y_m", "z_m"]].to_numpy())[0]
-        tol = np.where(sub["extra_length_m"].to_numpy() > 0, VIA_POINT_TOL_M, ON_BONE_TOL_M)
+        tol = np.where(sub["extra_length_m"].to_numpy() > 0, VIA_POINT_TOL_M,
+                       np.where(sub["structure"].str.startswith("CL").to_numpy(), CAPSULE_TOL_M, ON_BONE_TOL_M))
         # the nearest vertex over-estimates the surface distance by up to half an edge: a 0.5 mm allowance
         bad = d > tol + 0.5e-3
         if bad.any():
