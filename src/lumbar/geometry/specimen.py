@@ -194,7 +194,8 @@ def align_to_project(meshes: dict, axes: str = "LPS", sources: dict | None = Non
         n = _perp(n, s)
         a = np.cross(n, s)
         sg, wid = _anterior_sign(P, a, n)
-        normals[v], offsets[v], signs[v], widths[v], rms[v] = n, p0, sg * a, wid, r
+        # widths: [the vertebra's own body end, its process end]
+        normals[v], offsets[v], signs[v], widths[v], rms[v] = n, p0, sg * a, wid if sg > 0 else wid[::-1], r
     # one left-right axis: the mean of the per-vertebra symmetry normals (signs made consistent)
     ref = normals[lumbar[0]]
     nbar = sum(normals[v] * np.sign(normals[v] @ ref) for v in lumbar)
