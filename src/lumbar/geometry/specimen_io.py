@@ -38,13 +38,15 @@ AXES = ("LPS", "RAS", "project")
 # a hole whose boundary loop is at most this long (about 5 mm across) is filled; a longer one is refused: a surface
 # with such a hole is not a segmented bone surface, and no fill can say what was there
 MAX_HOLE_PERIMETER_M = 0.015
-# neighbouring vertebrae: the disc between two bodies is 5-17 mm tall and the facet joint space 1-2 mm, so the
-# nearest points of two neighbours are far closer than this; 30 mm apart is a missing vertebra or a shifted file
+# neighbouring vertebrae touch at their facet joints: the nearest surface points of the neighbours of the embedded
+# Visible Human set and of TotalSegmentator's example (meshed here) are less than 0.3 mm apart; 30 mm apart is a
+# vertebra missing between them or a shifted file (a design limit, far from both)
 MAX_NEIGHBOUR_GAP_M = 0.030
-# neighbours overlapping: a surface point of one vertebra deeper than this inside its neighbour. Segmented facet
-# processes interpenetrate a little: the embedded Visible Human set (data/geometry/visible_human_lss, L*_vertebra.obj)
-# has up to 3.6 mm (L3 in L4); a shifted, doubled or mislabelled vertebra goes a body height (25-35 mm) deep
-MAX_OVERLAP_DEPTH_M = 0.006
+# neighbours overlapping: the radius of the largest ball inside both (half the thickness of their common volume).
+# Segmented facet processes interpenetrate a little: 1.0-1.8 mm for the neighbours of the embedded Visible Human set
+# (L*_vertebra.obj) and 0.9-1.5 mm for TotalSegmentator's 3 mm example meshed here (overlap_radius on a 1 mm grid);
+# a shifted, doubled or mislabelled vertebra shares far more (a doubled one: the whole bone)
+MAX_OVERLAP_M = 0.004
 
 _TOKEN = {f"l{i}": f"L{i}" for i in range(1, 6)} | {"s1": "S1", "sacrum": "S1"}
 
@@ -105,12 +107,17 @@ def check_units_axes(units: str, axes: str) -> None:
                             "z superior)")
 
 
-def _scan(path, pattern: str | None) -> tuple[dict[str, list[Path]], list[tuple[Path, str]]]:
+def _is_volume(p: Path) -> bool:
+    return p.is_file() and p.name.lower().endswith((".nii.gz", ".nii"))
+
+
+def _scan(path, pattern: str | None, keep=_is_mesh) -> tuple[dict[str, list[Path]], list[tuple[Path, str]]]:
+    """Level -> the files of folder ``path`` (those ``keep`` accepts) naming it, and the files naming none."""
     folder = Path(path)
     if not folder.is_dir():
         raise SpecimenError(f"{folder}: specimen folder missing (expected a folder of vertebra surfaces, "
                             "e.g. L4.stl, L5.stl)")
-    files = sorted(p for p in folder.iterdir() if _is_mesh(p))
+    files = sorted(p for p in folder.iterdir() if keep(p))
     found: dict[str, list[Path]] = {}
     ignored: list[tuple[Path, str]] = []
     if pattern is None:
@@ -198,11 +205,17 @@ def _boundary_loops(faces: np.ndarray) -> list[list[int]] | None:
 
 
 def close_surface(mesh, level: str, file: Path, max_hole_m: float = MAX_HOLE_PERIMETER_M):
-    """The mesh closed: holes whose boundary is at most ``max_hole_m`` long filled (a fan from the hole's centre),
-    an inside-out surface turned; returns (mesh, list[Repair]). A larger hole, an edge shared by three faces or a
-    surface still open after filling is a :class:`SpecimenError` naming ``file``."""
+    """The mesh closed and oriented: repeated and degenerate triangles removed, holes whose boundary is at most
+    ``max_hole_m`` long filled (a fan from the hole's centre), inconsistently oriented triangles turned (trimesh),
+    an inside-out surface turned; returns (mesh, list[Repair]) naming each change. A larger hole, an edge shared
+    by three faces, or a surface still open or inconsistent afterwards is a :class:`SpecimenError` naming
+    ``file``."""
     import trimesh  # noqa: PLC0415 - mesh library where meshes are built (docs/design.md)
     repairs: list[Repair] = []
+    keep = mesh.unique_faces() & mesh.nondegenerate_faces()
+    if not keep.all():
+        mesh = trimesh.Trimesh(mesh.vertices, mesh.faces[keep], process=True)
+        repairs.append(Repair(level, file, f"removed {int((~keep).sum())} repeated or degenerate triangle(s)"))
     if not mesh.is_watertight:
         loops = _boundary_loops(np.asarray(mesh.faces))
         if loops is None:
@@ -229,12 +242,51 @@ def close_surface(mesh, level: str, file: Path, max_hole_m: float = MAX_HOLE_PER
             raise SpecimenError(f"{file}: {level} surface is not closed after filling its holes; expected one "
                                 "closed surface per vertebra")
     if not mesh.is_winding_consistent:
+        trimesh.repair.fix_winding(mesh)
+        if mesh.is_winding_consistent:
+            repairs.append(Repair(level, file, "triangles turned to one consistent orientation"))
+    if not mesh.is_winding_consistent:
         raise SpecimenError(f"{file}: {level} surface has inconsistent triangle orientation (some faces inside-out); "
                             "expected a consistently oriented closed surface")
     if mesh.volume < 0:
         mesh.invert()
         repairs.append(Repair(level, file, "surface was inside-out (negative volume): normals turned"))
     return mesh, repairs
+
+
+def check_levels(files: dict, require, where) -> None:
+    """No vertebra missing between the highest and the lowest present, and every one of ``require`` (vertebrae
+    ``"L4"`` or units ``"L4-L5"``) present; ``files``: level -> file; ``where`` (the folder) starts the message."""
+    need = set()
+    for r in [require] if isinstance(require, str) else (require or []):
+        if r in LEVEL_NAMES:
+            need.update(level_vertebrae(r))
+        elif r in VERTEBRA_NAMES:
+            need.add(r)
+        else:
+            raise SpecimenError(f"require={r!r}: expected vertebrae {list(VERTEBRA_NAMES)} or units {list(LEVEL_NAMES)}")
+    present = [v for v in VERTEBRA_NAMES if v in files]
+    idx = [VERTEBRA_NAMES.index(v) for v in present]
+    gaps = [VERTEBRA_NAMES[i] for i in range(min(idx), max(idx) + 1) if VERTEBRA_NAMES[i] not in files]
+    missing = sorted(need - set(files), key=VERTEBRA_NAMES.index)
+    if gaps or missing:
+        why = []
+        if gaps:
+            why.append(f"{', '.join(gaps)} missing between {present[0]} and {present[-1]} (every vertebra between "
+                       "the highest and the lowest present is needed)")
+        if missing:
+            why.append(f"{', '.join(missing)} required but missing")
+        found = ", ".join(f"{k}: {Path(files[k]).name}" for k in present)
+        raise SpecimenError(f"{Path(where)}: {'; '.join(why)}; found {found}")
+
+
+def check_size(mesh, level: str, file, units: str) -> None:
+    """A vertebra (metres) spans ``MIN_EXTENT_M``..``MAX_EXTENT_M``; else the message says which unit fits."""
+    ext = float(np.max(mesh.extents))
+    if not MIN_EXTENT_M <= ext <= MAX_EXTENT_M:
+        raise SpecimenError(f"{file}: {level} is {ext:.3g} m across with units={units!r}; expected "
+                            f"{MIN_EXTENT_M}-{MAX_EXTENT_M} m for a lumbar vertebra or the sacrum "
+                            f"(lumbar.geometry.checks): {_units_hint(ext, units)}")
 
 
 def read_specimen(path, units: str = "mm", axes: str = "LPS", pattern: str | None = None,
@@ -246,26 +298,7 @@ def read_specimen(path, units: str = "mm", axes: str = "LPS", pattern: str | Non
     check_units_axes(units, axes)
     files = find_level_files(path, pattern)
     _, ignored = _scan(path, pattern)
-    present = list(files)
-    need = set()
-    for r in [require] if isinstance(require, str) else (require or []):
-        if r in LEVEL_NAMES:
-            need.update(level_vertebrae(r))
-        elif r in VERTEBRA_NAMES:
-            need.add(r)
-        else:
-            raise SpecimenError(f"require={r!r}: expected vertebrae {list(VERTEBRA_NAMES)} or units {list(LEVEL_NAMES)}")
-    idx = [VERTEBRA_NAMES.index(v) for v in present]
-    gaps = [VERTEBRA_NAMES[i] for i in range(min(idx), max(idx) + 1) if VERTEBRA_NAMES[i] not in files]
-    missing = sorted(need - set(files), key=VERTEBRA_NAMES.index)
-    if gaps or missing:
-        why = []
-        if gaps:
-            why.append(f"{', '.join(gaps)} missing between {present[0]} and {present[-1]} (every vertebra between "
-                       "the highest and the lowest present is needed)")
-        if missing:
-            why.append(f"{', '.join(missing)} required but missing")
-        raise SpecimenError(f"{Path(path)}: {'; '.join(why)}; found {', '.join(f'{k}: {v.name}' for k, v in files.items())}")
+    check_levels(files, require, path)
     scale = UNITS[units]
     meshes, repairs = {}, []
     for lv, f in files.items():
@@ -275,10 +308,7 @@ def read_specimen(path, units: str = "mm", axes: str = "LPS", pattern: str | Non
         mesh = trimesh.Trimesh(vertices * scale, faces, process=True)
         if len(mesh.faces) < 4:
             raise SpecimenError(f"{f}: {lv} mesh has {len(mesh.faces)} triangle(s); expected a closed vertebra surface")
-        ext = float(np.max(mesh.extents))
-        if not MIN_EXTENT_M <= ext <= MAX_EXTENT_M:
-            raise SpecimenError(f"{f}: {lv} is {ext:.3g} m across with units={units!r}; a lumbar vertebra or the "
-                                f"sacrum spans {MIN_EXTENT_M}-{MAX_EXTENT_M} m: {_units_hint(ext, units)}")
+        check_size(mesh, lv, f, units)
         mesh, rep = close_surface(mesh, lv, f, max_hole_m)
         repairs += rep
         meshes[lv] = mesh
@@ -297,8 +327,9 @@ def _dense_points(mesh) -> np.ndarray:
 
 
 def check_neighbours(meshes: dict, files: dict) -> None:
-    """Neighbouring vertebrae (L4 and L5, ...) stacked along +z, not overlapping (a surface point deeper than
-    ``MAX_OVERLAP_DEPTH_M`` inside the other) and not apart (nearest points more than ``MAX_NEIGHBOUR_GAP_M``)."""
+    """Neighbouring vertebrae (L4 and L5, ...) stacked along +z, not overlapping (:func:`overlap_radius` above
+    ``MAX_OVERLAP_M``) and not apart (nearest points more than ``MAX_NEIGHBOUR_GAP_M``); ``files``: level -> what
+    the message names (a file)."""
     from scipy.spatial import cKDTree  # noqa: PLC0415 - scipy.spatial where geometry is computed (docs/design.md)
     order = [v for v in VERTEBRA_NAMES if v in meshes]
     for up, lo in zip(order, order[1:]):
@@ -308,31 +339,320 @@ def check_neighbours(meshes: dict, files: dict) -> None:
         gap = float(cKDTree(pb).query(pa)[0].min())
         if gap > MAX_NEIGHBOUR_GAP_M:
             raise SpecimenError(f"{where}: neighbouring vertebrae {gap * 1e3:.0f} mm apart (nearest surface points); "
-                                f"expected within {MAX_NEIGHBOUR_GAP_M * 1e3:.0f} mm (a disc is 5-17 mm tall): a "
-                                "vertebra shifted, or one missing between them")
-        for X, Y, nx, ny in ((A, B, up, lo), (B, A, lo, up)):
-            depth = _overlap_depth(X, Y)
-            if depth > MAX_OVERLAP_DEPTH_M:
-                raise SpecimenError(f"{where}: the vertebrae overlap: a point of {nx} lies {depth * 1e3:.1f} mm "
-                                    f"inside {ny} (allowed {MAX_OVERLAP_DEPTH_M * 1e3:.0f} mm); expected separate "
-                                    "bones (a shifted or mislabelled file?)")
+                                f"expected within {MAX_NEIGHBOUR_GAP_M * 1e3:.0f} mm (neighbours touch at their facet "
+                                "joints): a vertebra shifted, or one missing between them")
+        r = overlap_radius(A, B)
+        if r > MAX_OVERLAP_M:
+            raise SpecimenError(f"{where}: the vertebrae overlap: their common volume holds a ball of radius "
+                                f"{r * 1e3:.1f} mm (allowed {MAX_OVERLAP_M * 1e3:.0f} mm); expected separate bones "
+                                "(a shifted, doubled or mislabelled file?)")
         ca, cb = A.center_mass, B.center_mass
         if not ca[2] > cb[2]:
             raise SpecimenError(f"{where}: {up} is not above {lo} along +z (volume centroids z = {ca[2]:.4f} m and "
                                 f"{cb[2]:.4f} m); expected +z superior (LPS, RAS and the project frame all have it)")
 
 
-def _overlap_depth(X, Y) -> float:
-    """Largest depth (m) of a vertex of X inside the closed surface Y (0 if none)."""
+def _inside_distance(mesh, pts):
+    """(distance to the nearest face centre, inside by that face's normal) of ``pts``: a screen, exact enough
+    away from the surface; the points that decide are confirmed by :func:`overlap_radius`."""
+    from scipy.spatial import cKDTree  # noqa: PLC0415 - scipy.spatial where geometry is computed (docs/design.md)
+    centres = np.asarray(mesh.triangles_center)
+    d, i = cKDTree(centres).query(pts)
+    inside = np.einsum("ij,ij->i", pts - centres[i], np.asarray(mesh.face_normals)[i]) < 0
+    return d, inside
+
+
+def overlap_radius(A, B, step_m: float = 0.001, max_points: int = 40_000) -> float:
+    """Radius (m) of the largest ball inside both closed surfaces A and B (0 when they do not overlap): half the
+    thickness of their common volume. Grid points (``step_m``, coarser when the boxes' overlap would need more
+    than ``max_points``) inside both, screened by the nearest face (:func:`_inside_distance`); the points screened
+    beyond ``MAX_OVERLAP_M`` are confirmed by trimesh's ray test and measured to both surfaces exactly (the ray
+    test on every point took seconds per pair of Visible Human vertebrae)."""
     import trimesh  # noqa: PLC0415 - mesh library where meshes are built (docs/design.md)
-    v = np.asarray(X.vertices)
-    lo, hi = Y.bounds
-    cand = v[np.all((v >= lo) & (v <= hi), axis=1)]
-    if len(cand) == 0:
+    lo = np.maximum(A.bounds[0], B.bounds[0])
+    hi = np.minimum(A.bounds[1], B.bounds[1])
+    if np.any(hi <= lo):
         return 0.0
-    if len(cand) > 2000:
-        cand = cand[np.random.default_rng(0).choice(len(cand), 2000, replace=False)]
-    inside = cand[Y.contains(cand)]
-    if len(inside) == 0:
+    step = max(step_m, float(np.prod(hi - lo) / max_points) ** (1 / 3))
+    axes = [np.arange(a + step / 2, b, step) for a, b in zip(lo, hi)]
+    if any(len(x) == 0 for x in axes):
         return 0.0
-    return float(trimesh.proximity.closest_point(Y, inside)[1].max())
+    pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    da, ina = _inside_distance(A, pts)
+    pts, da = pts[ina], da[ina]
+    if len(pts) == 0:
+        return 0.0
+    db, inb = _inside_distance(B, pts)
+    if not np.any(inb):
+        return 0.0
+    r = np.minimum(da, db)[inb]
+    cand = pts[inb]
+    deep = r > MAX_OVERLAP_M
+    if not np.any(deep):
+        return float(r.max())
+    top = cand[deep][np.argsort(-r[deep])[:64]]
+    top = top[A.contains(top) & B.contains(top)]
+    if len(top) == 0:
+        return float(r[~deep].max()) if np.any(~deep) else 0.0
+    ra = trimesh.proximity.closest_point(A, top)[1]
+    rb = trimesh.proximity.closest_point(B, top)[1]
+    return float(np.minimum(ra, rb).max())
+
+
+# ------------------------------------------------------------------ what the levels present allow
+def buildable_units(levels) -> list[str]:
+    """The units (``"L1-L2"`` .. ``"L5-S1"``) whose two vertebrae are among ``levels``."""
+    have = set(levels)
+    return [u for u in LEVEL_NAMES if set(level_vertebrae(u)) <= have]
+
+
+def skipped_stages(levels, calibrated_level: str = "L4-L5", other_levels=None) -> list[tuple[str, str]]:
+    """(stage, reason) for every workflow stage the vertebrae ``levels`` cannot feed; empty when all can run.
+
+    Stages by their configuration section: ``fsu``, ``stepwise_reduction`` and ``calibration`` on the calibrated
+    unit (``fsu.level``), ``l2s1`` (the L2-S1 model with cables and the L4-L5 IDP; discovery on IDP data uses it),
+    ``load_sharing.other_levels <unit>`` (the calibrated characteristics on the other units; default all four)."""
+    have = set(levels)
+    units = buildable_units(have)
+    out = []
+
+    def missing(vs):
+        return ", ".join(v for v in vs if v not in have)
+    if calibrated_level not in LEVEL_NAMES:
+        raise SpecimenError(f"calibrated level {calibrated_level!r}: expected one of {list(LEVEL_NAMES)}")
+    if calibrated_level not in units:
+        why = (f"no {calibrated_level} unit ({missing(level_vertebrae(calibrated_level))} missing): the calibrated "
+               f"level must be named in the config (fsu.level), one of {units}" if units
+               else f"no unit at all (vertebrae present: {sorted(have, key=VERTEBRA_NAMES.index)})")
+        out += [(st, why) for st in ("fsu", "stepwise_reduction", "calibration")]
+    l2s1 = ("L2", "L3", "L4", "L5", "S1")
+    if not set(l2s1) <= have:
+        why = ("no sacrum (S1): no L5-S1 unit and no L2-S1 model" if "S1" not in have
+               else f"{missing(l2s1)} missing: the L2-S1 model needs L2, L3, L4, L5 and S1")
+        out.append(("l2s1", why))
+    others = [u for u in LEVEL_NAMES if u != calibrated_level] if other_levels is None else list(other_levels)
+    for u in others:
+        if u not in units:
+            why = ("no sacrum (S1): no L5-S1 unit" if u == "L5-S1" and "S1" not in have
+                   else f"no {u} unit ({missing(level_vertebrae(u))} missing)")
+            out.append((f"load_sharing.other_levels {u}", why))
+    return out
+
+
+# ------------------------------------------------------------------ label volumes (CT segmentations) -> meshes
+ANATOMY_TABLE = "anatomy/l4l5_magnitudes_original_text.csv"
+NIFTI_UNITS_MM = {"unknown": 1.0, "mm": 1.0, "meter": 1000.0, "micron": 1e-3}   # xyzt_units -> mm
+
+
+def resolution_limits(voxel_mm) -> list[dict]:
+    """What a label volume with voxel edges ``voxel_mm`` (mm) can and cannot support, one dict per feature
+    (``feature``, ``supported``, ``reason``). Facet articular surfaces: the two faces of a joint are separated by
+    the joint space (sourced in data/anatomy/l4l5_magnitudes_original_text.csv, its low end mean - 1 SD); a gap of
+    width w always contains a whole voxel only if the voxel edge is at most w / 2, so larger voxels can merge the
+    two faces and cannot place them."""
+    import pandas as pd  # noqa: PLC0415 - only the meshing report reads the anatomy table
+    from ..inputs import resources  # noqa: PLC0415 - data location, only for the meshing report
+    a = pd.read_csv(resources.data_dir() / ANATOMY_TABLE).set_index("quantity").loc["facet_joint_space_width"]
+    low, high = float(a["low"]), float(a["high"])
+    vmax = float(np.max(voxel_mm))
+    ok = vmax <= low / 2
+    return [
+        {"feature": "facet articular surfaces (facet landmarks, joint gap, contact surface)", "supported": ok,
+         "reason": (f"largest voxel edge {vmax:g} mm {'<=' if ok else '>'} half the facet joint space "
+                    f"(mean -+ 1 SD {low:g}-{high:g} mm, {a['source'].split(';')[0]}): "
+                    + ("the joint space is resolved" if ok else "the two articular faces can fall into the same or "
+                       "touching voxels; facet landmarks from these meshes are not measurements"))},
+        {"feature": "vertebral body and disc dimensions (disc height, endplate area)", "supported": True,
+         "reason": f"each surface is placed to within about half a voxel ({vmax / 2:g} mm); a disc height or "
+                   "endplate width from these meshes carries that uncertainty on both of its sides"},
+    ]
+
+
+def _read_nifti(path: Path):
+    import nibabel  # noqa: PLC0415 - NIfTI reader, only for label volumes
+    try:
+        img = nibabel.load(str(path))
+        data = np.asarray(img.dataobj)
+    except Exception as exc:  # noqa: BLE001 - nibabel and gzip raise many types; all mean "not readable"
+        raise SpecimenError(f"{path}: label volume not readable ({type(exc).__name__}: {exc}); expected a NIfTI "
+                            "file (.nii or .nii.gz)") from exc
+    if data.ndim == 4 and data.shape[3] == 1:
+        data = data[..., 0]
+    if data.ndim != 3:
+        raise SpecimenError(f"{path}: label volume has shape {data.shape}; expected a 3-D volume")
+    aff = np.asarray(img.affine, float)
+    if not np.all(np.isfinite(aff)) or abs(np.linalg.det(aff[:3, :3])) < 1e-12:
+        raise SpecimenError(f"{path}: the NIfTI affine is singular or not finite; expected the voxel-to-world map "
+                            "(RAS, millimetres)")
+    # the header's spatial unit (NIfTI: millimetres unless it says otherwise); the meshes are written in millimetres
+    get_units = getattr(img.header, "get_xyzt_units", None)
+    unit = get_units()[0] if get_units else "unknown"
+    to_mm = NIFTI_UNITS_MM.get(unit)
+    if to_mm is None:
+        raise SpecimenError(f"{path}: NIfTI spatial unit {unit!r}; expected one of {sorted(NIFTI_UNITS_MM)}")
+    aff[:3, :] *= to_mm
+    return data, aff
+
+
+def _mask_to_mesh(mask: np.ndarray, affine: np.ndarray, smooth_iterations: int, max_faces: int):
+    """Closed surface (world millimetres) of the largest connected part of ``mask``; (mesh, voxels dropped, what
+    the decimation did: a decimation that opens the surface is not kept)."""
+    import trimesh  # noqa: PLC0415 - mesh library where meshes are built (docs/design.md)
+    from scipy import ndimage  # noqa: PLC0415 - connected parts of the mask, only for label volumes
+    from skimage.measure import marching_cubes  # noqa: PLC0415 - scikit-image (1 s import), only for label volumes
+    lab, n = ndimage.label(mask)
+    dropped = 0
+    if n > 1:
+        sizes = np.bincount(lab.ravel())[1:]
+        keep = int(np.argmax(sizes)) + 1
+        dropped = int(sizes.sum() - sizes[keep - 1])
+        mask = lab == keep
+    idx = np.argwhere(mask)
+    lo, hi = idx.min(axis=0), idx.max(axis=0) + 1
+    crop = np.pad(mask[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]], 1).astype(np.float32)   # closed at the border
+    verts, faces, _, _ = marching_cubes(crop, level=0.5)
+    ijk = verts + lo - 1
+    world = ijk @ affine[:3, :3].T + affine[:3, 3]
+    mesh = trimesh.Trimesh(world, faces, process=True)
+    if mesh.volume < 0:
+        mesh.invert()
+    if smooth_iterations:
+        trimesh.smoothing.filter_taubin(mesh, lamb=0.5, nu=0.53, iterations=smooth_iterations)
+    note = "none"
+    if len(mesh.faces) > max_faces:
+        dec = mesh.simplify_quadric_decimation(face_count=max_faces)
+        if dec.is_watertight and dec.is_winding_consistent and dec.volume > 0:
+            note = f"{len(mesh.faces)} -> {len(dec.faces)} triangles"
+            mesh = dec
+        else:
+            note = f"skipped: decimating {len(mesh.faces)} to {max_faces} triangles opened the surface"
+    return mesh, dropped, note
+
+
+def _volume_inputs(path: Path, label_table, pattern=None) -> list[tuple[str, Path, int | None]]:
+    """(level, file, voxel value or None for a binary mask) of a folder of masks or a multi-label file."""
+    if path.is_dir():
+        if label_table is not None:
+            raise SpecimenError(f"{path}: a folder of per-structure masks takes no label_table (each file is one "
+                                "vertebra, named vertebrae_L4.nii.gz or sacrum.nii.gz); pass a multi-label file with it")
+        found, _ = _scan(path, pattern, keep=_is_volume)
+        clash = {lv: ps for lv, ps in found.items() if len(ps) > 1}
+        if clash:
+            raise SpecimenError(f"{path}: several masks for one level ("
+                                + "; ".join(f"{lv}: {', '.join(p.name for p in ps)}" for lv, ps in clash.items())
+                                + "); pass pattern= (a glob with {level}, e.g. 'vertebrae_{level}.nii.gz') to "
+                                "choose one per level")
+        if not found:
+            raise SpecimenError(f"{path}: no vertebra masks found; expected TotalSegmentator's per-structure files "
+                                "vertebrae_L1.nii.gz .. vertebrae_L5.nii.gz, sacrum.nii.gz (or one multi-label "
+                                "NIfTI file with a label_table)")
+        return [(lv, found[lv][0], None) for lv in VERTEBRA_NAMES if lv in found]
+    if not path.is_file():
+        raise SpecimenError(f"{path}: label volume missing (expected a folder of masks or a NIfTI file)")
+    if label_table is None:
+        raise SpecimenError(f"{path}: a multi-label volume needs label_table= (a CSV with columns label,value, e.g. "
+                            "'L4,24'); the voxel values of a segmentation are not guessed")
+    from ..inputs.io import TableError  # noqa: PLC0415 - table reading only for multi-label volumes
+    from ..inputs.tables import read_kind  # noqa: PLC0415
+    try:
+        t = read_kind(label_table, "label_table")
+    except TableError as exc:
+        raise SpecimenError(str(exc)) from exc
+    out, seen = [], {}
+    for row, (lab, val) in enumerate(zip(t["label"], t["value"]), 1):
+        lv = level_of(lab)
+        if len(lv) != 1:
+            raise SpecimenError(f"{label_table}: row {row}, column label: {lab!r} names "
+                                f"{'no level' if not lv else f'several levels {lv}'}; expected one of L1..L5, S1, sacrum")
+        if lv[0] in seen:
+            raise SpecimenError(f"{label_table}: rows {seen[lv[0]]} and {row} both name {lv[0]}; expected one row per "
+                                "vertebra")
+        seen[lv[0]] = row
+        out.append((lv[0], path, int(val)))
+    vals = [v for _, _, v in out]
+    if len(set(vals)) != len(vals):
+        raise SpecimenError(f"{label_table}: one voxel value for two vertebrae ({vals}); expected distinct values")
+    return sorted(out, key=lambda r: VERTEBRA_NAMES.index(r[0]))
+
+
+def label_volume_to_meshes(path, out_dir, label_table=None, *, pattern: str | None = None, require=None,
+                           smooth_iterations: int = 10, max_faces: int = 20000) -> dict[str, Path]:
+    """Mesh a CT segmentation into the mesh-folder form: ``out_dir/<level>.stl`` in millimetres, RAS (NIfTI
+    world), one closed surface per vertebra; read them with ``read_specimen(out_dir, units="mm", axes="RAS")``.
+
+    ``path``: TotalSegmentator's per-structure masks (a folder with ``vertebrae_L1.nii.gz`` ..
+    ``vertebrae_L5.nii.gz``, ``sacrum.nii.gz``) or one multi-label NIfTI file with ``label_table`` (CSV
+    ``label,value``); ``pattern`` picks one mask per level where a folder holds several (TotalSegmentator 2 writes
+    ``sacrum.nii.gz`` and ``vertebrae_S1.nii.gz``: ``pattern="vertebrae_{level}.nii.gz"`` takes the latter).
+    Marching cubes (scikit-image) on each mask's largest connected part at the header's affine
+    (voxel spacing, orientation), Taubin smoothing (``smooth_iterations``; keeps the volume, unlike plain Laplacian
+    smoothing), quadric decimation to at most ``max_faces`` triangles (kept only where the result stays closed).
+    Before anything is written, the meshes pass the reader's checks (:func:`check_levels` with ``require``, size,
+    closed, neighbours), each error naming the NIfTI file (and the label value).
+    Also writes ``out_dir/meshing_report.csv`` (per vertebra: source, voxel size, voxels, voxels of smaller parts
+    dropped, what the decimation did, triangles) and ``out_dir/resolution_limits.csv`` (:func:`resolution_limits`: what the voxel size cannot
+    support). Returns level -> STL path.
+    """
+    import pandas as pd  # noqa: PLC0415 - only the meshing report writes tables
+    from ..inputs.io import write_table_atomic  # noqa: PLC0415 - atomic writes, only for the meshing report
+    path = Path(path)
+    items = _volume_inputs(path, label_table, pattern)
+    check_levels({lv: f for lv, f, _ in items}, require, path)
+    cache: dict[Path, tuple] = {}
+    uses = {f: sum(g == f for _, g, _ in items) for _, f, _ in items}
+    masks = []
+    for lv, f, val in items:            # every volume read and checked before any meshing
+        if f not in cache:
+            cache[f] = _read_nifti(f)
+        data, aff = cache[f]
+        uses[f] -= 1
+        if uses[f] == 0:                # the last label of this file: its volume is not kept
+            del cache[f]
+        if val is None:
+            mask = data > 0.5
+            if not mask.any():
+                raise SpecimenError(f"{f}: the {lv} mask is empty (no voxel above 0.5); expected the vertebra's voxels")
+        else:
+            mask = data == val
+            if not mask.any():
+                present = np.unique(data[data != 0]).astype(float)
+                raise SpecimenError(f"{f}: no voxel has the value {val} of {lv} (label table {label_table}); values "
+                                    f"present: {present[:20].tolist()}{' ...' if len(present) > 20 else ''}")
+        # kept as the mask's bounding box and the affine of its first voxel: six full-size masks of a 512^3 CT
+        # would hold 0.8 GB
+        nz = [np.flatnonzero(mask.any(axis=tuple(a for a in range(3) if a != k))) for k in range(3)]
+        lo = np.array([n[0] for n in nz])
+        hi = np.array([n[-1] + 1 for n in nz])
+        shift = np.eye(4)
+        shift[:3, 3] = lo
+        masks.append((lv, f, val, mask[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]].copy(), aff @ shift))
+    built, rows, sources = {}, [], {}
+    for lv, f, val, mask, aff in masks:
+        spacing = np.linalg.norm(aff[:3, :3], axis=0)
+        mesh, dropped, decimation = _mask_to_mesh(mask, aff, smooth_iterations, max_faces)
+        where = f if val is None else f"{f} (value {val})"
+        metres = mesh.copy()
+        metres.apply_scale(1e-3)
+        check_size(metres, lv, where, "mm")
+        if not (mesh.is_watertight and mesh.is_winding_consistent):
+            raise SpecimenError(f"{where}: the {lv} surface meshed from the mask is not closed; expected a closed "
+                                "surface (report this volume)")
+        built[lv], sources[lv] = (mesh, metres), where
+        rows.append({"level": lv, "source": f.name, "label_value": "" if val is None else val,
+                     "voxel_mm": "x".join(f"{s:g}" for s in spacing), "n_voxels": int(mask.sum()),
+                     "voxels_dropped": dropped, "decimation": decimation, "n_faces": len(mesh.faces),
+                     "units": "mm", "axes": "RAS"})
+    check_neighbours({lv: m for lv, (_, m) in built.items()}, sources)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written = {}
+    for lv, (mesh, _) in built.items():
+        dest = out_dir / f"{lv}.stl"
+        tmp = dest.with_name(f".{dest.name}.tmp")
+        mesh.export(str(tmp), file_type="stl")
+        tmp.replace(dest)
+        written[lv] = dest
+    write_table_atomic(pd.DataFrame(rows), out_dir / "meshing_report.csv")
+    spacing = np.max([np.linalg.norm(a[:3, :3], axis=0) for _, _, _, _, a in masks], axis=0)
+    write_table_atomic(pd.DataFrame(resolution_limits(spacing)), out_dir / "resolution_limits.csv")
+    return written

@@ -44,7 +44,7 @@ __all__ = ["LANDMARKS", "MUSCLE_GROUPS", "ANTHROPOMETRY", "IN_VIVO_IDP", "DISC",
            "CABLES", "NEUTRAL_ANGLE", "IN_VIVO", "TABLE_KINDS", "schema_of", "read_kind", "DATA_FILES", "MEASURED",
            "MeasuredKind", "VS_PAPER_COLUMNS", "OUTLIER_COUNT_NAMES", "versus_paper", "PLAUSIBILITY_FACTOR",
            "UNIT_CONFUSIONS", "PLAUSIBILITY_SOURCES", "SourcedRange", "sourced_ranges", "PlausibleRange",
-           "plausible_ranges", "check_measured"]
+           "plausible_ranges", "check_measured", "LABEL_TABLE"]
 
 log = logging.getLogger(__name__)
 
@@ -453,6 +453,13 @@ def _check_spread(kind, df, path):
                                  + (f"; the SD looks like it is in {hint[0]}, not MPa" if hint else ""),
                                  row=i + 1, column="idp_sd_mpa", expected="the SD over the specimens in MPa")
 
+#: a user's multi-label CT volume (lumbar.geometry.specimen_io.label_volume_to_meshes): which voxel value is which
+#: vertebra; ``label`` names the level (a token L1..L5, S1 or sacrum, e.g. "L4", "vertebrae_L4", "sacrum")
+LABEL_TABLE = TableSchema("label_table", {
+    "label": Column("str", description="a vertebra: L1..L5, S1 or sacrum (e.g. 'L4' or 'vertebrae_L4')"),
+    "value": Column("int", min=1, description="the voxel value of that vertebra in the label volume"),
+}, unique=UniqueKey(("label",), "label", "label", "one row per vertebra"))
+
 # ------------------------------------------------------------------ registry
 #: kind -> schema
 TABLE_KINDS = {
@@ -471,6 +478,7 @@ TABLE_KINDS = {
     "in_vivo_idp": IN_VIVO_IDP,
     "neutral_angle": NEUTRAL_ANGLE,
     "in_vivo": IN_VIVO,
+    "label_table": LABEL_TABLE,
 }
 
 #: the repository's data tables (relative to the repository root) and their kinds
