@@ -4,6 +4,7 @@
 
     lumbar fsu --moment 10 --direction all          # range of motion of one motion segment (lumbar.experiments.fsu)
     lumbar discovery --config CONFIG --measured FILE.csv --out DIR   # discrepancy discovery (lumbar.discovery.cli)
+    lumbar landmarks MESH_DIR --units mm --axes LPS --out DIR        # a specimen's landmarks (lumbar.plots.specimen)
 
 ``python -m lumbar.cli ...`` is the same without the installed script. Each subcommand delegates its arguments
 unchanged to the ``main()`` of its module (``lumbar <command> --help`` shows them), and its exit status is the
@@ -16,10 +17,17 @@ import sys
 from .discovery import cli as discovery_cli
 from .experiments import fsu
 
+
+def _landmarks(argv, prog):
+    from .plots import specimen  # noqa: PLC0415 - matplotlib and the mesh code only for this command (fsu starts fast)
+    return specimen.main(argv, prog=prog)
+
+
 #: subcommand -> (main(argv, prog), one-line summary)
 COMMANDS = {
     "fsu": (fsu.main, "range of motion of one functional spinal unit under pure moments"),
     "discovery": (discovery_cli.main, "discrepancy discovery: which missing effect explains a measured table"),
+    "landmarks": (_landmarks, "a specimen's project frame, landmarks, tables and QA figures from its meshes"),
 }
 
 

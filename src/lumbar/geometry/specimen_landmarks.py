@@ -1,0 +1,193 @@
+"""Landmarks of a user's specimen from an atlas: the Visible Human set's own insertion sites (Remus et al. 2021) and
+facet articular faces, carried onto each target vertebra by surface registration (:mod:`lumbar.geometry.register`).
+
+Atlas (:func:`build_atlas`): per Visible Human vertebra, its two roles -- "upper" (the vertebra is the upper body
+of the level below it: the upper fibre ends of that level's ligaments and the 3x3 grid of its inferior articular
+face per side) and "lower" (the lower fibre ends of the level above and the grid of its superior articular face).
+The fibres of each ligament are put in one canonical order in every level (by their midpoints' position along the
+ligament's principal spread axis), so that fibre k means the same fibre at every level.
+
+Transfer (:func:`transfer`): each template vertebra that has the role (all five lumbar vertebrae, the sacrum only
+for the sacrum; minus ``exclude``, the leave-one-out of :mod:`lumbar.geometry.specimen_accuracy`) is registered
+onto the target vertebra (similarity ICP, affine ICP, smooth non-rigid field); its landmarks are carried by the
+warp; the landmark is the coordinate-wise median over the templates, snapped to the target surface (closest
+point) when the template point lay on its own surface (within ``ON_SURFACE_M``). ALL and PLL fibre ends of the
+Visible Human model are via points off the bone (their path along the body is the fibre's ``extra_length``): they
+are carried without snapping, and their extra length is the templates' median scaled by the registration's size
+ratio.
+"""
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from .core import LEVEL_NAMES, LIGAMENT_NAMES, level_vertebrae
+from .register import register
+
+ON_SURFACE_M = 1e-3
+N_TEMPLATES = 3              # atlas vertebrae registered per target vertebra and role
+REG_SAMPLES = 1500           # template/target vertices used by the registration (deterministic stride)
+FACET_KEYS = {"upper": "facet_inferior", "lower": "facet_superior"}
+SEGMENTS = "_segments"        # atlas key: per ligament and level the fibre vectors upper - lower (canonical order)
+
+
+def _stride(v, n=REG_SAMPLES):
+    v = np.asarray(v, float)
+    return v[::max(1, int(np.ceil(len(v) / n)))]
+
+
+def _canonical_order(up, lo):
+    """Fibre order by the midpoints' position along their principal spread axis (sign: +y, else +z, else +x)."""
+    mid = 0.5 * (up + lo)
+    if len(mid) < 2:
+        return np.arange(len(mid))
+    _, _, vt = np.linalg.svd(mid - mid.mean(0), full_matrices=False)
+    a = vt[0]
+    k = 1 if abs(a[1]) > 0.5 else (2 if abs(a[2]) > 0.5 else 0)
+    a = a * np.sign(a[k] or 1.0)
+    return np.argsort(mid @ a, kind="stable")
+
+
+def _surface_distance(mesh, P):
+    import trimesh  # noqa: PLC0415 - mesh library, imported where used (docs/design.md)
+    return np.asarray(trimesh.proximity.closest_point(mesh, np.asarray(P, float))[1], float)
+
+
+@functools.lru_cache(maxsize=2)
+def _atlas_cached(path):
+    from .loader import load_geometry  # noqa: PLC0415 - the atlas source is read once, on first use
+    return build_atlas(load_geometry("visible_human", path=path))
+
+
+def default_atlas(path=None) -> dict:
+    """The atlas of the embedded Visible Human set (cached per process)."""
+    return _atlas_cached(None if path is None else str(path))
+
+
+def build_atlas(geo) -> dict:
+    """{vertebra: {"points": (n,3) registration samples, "mesh": Trimesh, "upper"/"lower": {structure: dict(
+    points (k,3), on_surface (k,), extra (k,) or None)}}} from a geometry with insertion sites (Visible Human)."""
+    atlas = {v: {"points": _stride(vt.mesh.vertices), "mesh": vt.mesh, "upper": {}, "lower": {}}
+             for v, vt in geo.vertebrae.items()}
+    atlas[SEGMENTS] = {}
+    for lv, lev in geo.levels.items():
+        U, L = lev.upper, lev.lower
+        for lig in lev.ligaments:
+            o = _canonical_order(lig.upper, lig.lower)
+            atlas[SEGMENTS].setdefault(lig.name, {})[lv] = (lig.upper - lig.lower)[o]
+            for role, body, pts in (("upper", U, lig.upper[o]), ("lower", L, lig.lower[o])):
+                on = _surface_distance(geo.vertebrae[body].mesh, pts) < ON_SURFACE_M
+                atlas[body][role][lig.name] = dict(points=pts, on_surface=on,
+                                                   extra=np.asarray(lig.extra_length, float)[o], level=lv)
+        for side, f in lev.facets.items():
+            for role, body, pts in (("upper", U, f.inferior), ("lower", L, f.superior)):
+                atlas[body][role][f"{FACET_KEYS[role]}:{side}"] = dict(
+                    points=np.asarray(pts, float), on_surface=np.ones(len(pts), bool), extra=None, level=lv)
+    return atlas
+
+
+def templates_for(target: str, role: str, atlas: dict, exclude=(), n: int = N_TEMPLATES) -> list[str]:
+    """Template vertebrae of ``role`` for ``target``: the sacrum for the sacrum, else the ``n`` lumbar vertebrae
+    nearest to it in the column (the same level first, then the nearer neighbours, the upper one first)."""
+    if target == "S1":
+        pool = ["S1"]
+    else:
+        lumbar = ["L1", "L2", "L3", "L4", "L5"]
+        k = lumbar.index(target) if target in lumbar else 2
+        pool = sorted(lumbar, key=lambda v: (abs(lumbar.index(v) - k), lumbar.index(v)))
+    return [v for v in pool if v in atlas and atlas[v][role] and v not in exclude][:n]
+
+
+def transfer(target: str, mesh, role: str, atlas: dict, exclude=(), warps: dict | None = None,
+             method: str = "full") -> dict:
+    """Landmarks of ``role`` on the target vertebra ``mesh`` (project frame): {structure: dict(points (k,3),
+    extra (k,) or None, spread_m (k,): largest distance of a template's point from the median, templates)}."""
+    import trimesh  # noqa: PLC0415 - mesh library, imported where used (docs/design.md)
+    temps = templates_for(target, role, atlas, exclude)
+    if not temps and target == "S1":      # the atlas's only sacrum: kept under leave-one-out (S1 ends not scored)
+        temps = templates_for(target, role, atlas)
+    if not temps:
+        raise ValueError(f"no atlas template for the {role} role of {target} (excluded: {list(exclude)})")
+    Y = _stride(mesh.vertices)
+    warps = {} if warps is None else warps
+    for t in temps:
+        if t not in warps:
+            warps[t] = register(atlas[t]["points"], Y, method=method)
+    out = {}
+    names = sorted(set.intersection(*[set(atlas[t][role]) for t in temps]))
+    for s in names:
+        cand = [warps[t](atlas[t][role][s]["points"]) for t in temps]
+        if len({c.shape for c in cand}) != 1:
+            continue
+        P = np.median(np.stack(cand), axis=0)
+        spread = np.max(np.linalg.norm(np.stack(cand) - P, axis=-1), axis=0)
+        on = np.all([atlas[t][role][s]["on_surface"] for t in temps], axis=0)
+        if on.any():
+            snapped, _, _ = trimesh.proximity.closest_point(mesh, P[on])
+            P[on] = snapped
+        extra = None
+        if atlas[temps[0]][role][s]["extra"] is not None:
+            extra = np.median([atlas[t][role][s]["extra"] * warps[t].scale for t in temps], axis=0)
+        out[s] = dict(points=P, extra=extra, spread_m=spread, on_surface=on, templates=list(temps))
+    return out
+
+
+def level_landmarks(meshes: dict, level: str, atlas: dict, leave_one_out: bool = False, warps=None,
+                    method: str = "full") -> dict:
+    """{"ligaments": {name: (upper (n,3), lower (n,3), extra (n,))}, "facets": {side: (superior (9,3),
+    inferior (9,3))}, "spread": {...}} for one level from the transfers of its two vertebrae; ``leave_one_out``:
+    no vertebra is its own template (the accuracy measurement on the atlas's own specimen)."""
+    U, L = level_vertebrae(level)
+    warps = {} if warps is None else warps
+    up = transfer(U, meshes[U], "upper", atlas, exclude=(U,) if leave_one_out else (), warps=warps.setdefault(U, {}),
+                  method=method)
+    lo = transfer(L, meshes[L], "lower", atlas, exclude=(L,) if leave_one_out else (), warps=warps.setdefault(L, {}),
+                  method=method)
+    ligs, facets, spread = {}, {}, {}
+    for name in LIGAMENT_NAMES:
+        if name in up and name in lo and len(up[name]["points"]) == len(lo[name]["points"]):
+            ex = [e for e in (up[name]["extra"], lo[name]["extra"]) if e is not None]
+            extra = np.mean(ex, axis=0) if ex else np.zeros(len(up[name]["points"]))
+            u, lo_ = _fibre_rule(name, up[name]["points"], lo[name]["points"], extra, meshes[U], meshes[L],
+                                 atlas, exclude=(U, L) if leave_one_out else ())
+            ligs[name] = (u, lo_, extra)
+            spread[name] = (up[name]["spread_m"], lo[name]["spread_m"])
+    for side in ("left", "right"):
+        ki, ks = f"facet_inferior:{side}", f"facet_superior:{side}"
+        if ki in up and ks in lo:
+            # the upper face is the upper vertebra's bone facing the carried lower face across the joint (closest
+            # points): the inferior articular processes vary more between levels than the superior ones, and the
+            # carried upper face missed its own bone points by 3 mm (median, Visible Human, leave one out)
+            facets[side] = (lo[ks]["points"], _closest(meshes[U], lo[ks]["points"]))
+            spread[f"facet_{side}"] = (lo[ks]["spread_m"], up[ki]["spread_m"])
+    templates = {"upper": next(iter(up.values()))["templates"], "lower": next(iter(lo.values()))["templates"]}
+    return dict(ligaments=ligs, facets=facets, spread=spread, templates=templates)
+
+
+def _closest(mesh, P):
+    import trimesh  # noqa: PLC0415 - mesh library, imported where used (docs/design.md)
+    return np.asarray(trimesh.proximity.closest_point(mesh, np.asarray(P, float))[0], float)
+
+
+def _fibre_rule(name, up, lo, extra, mesh_u, mesh_l, atlas, exclude=()):
+    """Fibres that span a narrow gap keep their own geometry instead of two independently carried ends:
+
+    * capsule fibres (CL, 2-2.6 mm across the joint's rim) and via-point fibres (ALL, PLL with ``extra`` > 0: a
+      short segment at the disc, off the bone): the fibre is centred on the carried midpoint (the mean of its two
+      carried ends) with the atlas's own fibre vector (median over the atlas levels not involving ``exclude``), not
+      snapped: its length is the atlas's, which the two independently carried and snapped ends do not keep (the
+      capsule fibres came out twice or half as long, and a unit with half-length capsule fibres was twice as stiff).
+
+    Other fibres keep their two carried ends."""
+    mid = 0.5 * (up + lo)
+    vecs = [v for lv, v in atlas.get(SEGMENTS, {}).get(name, {}).items()
+            if not set(level_vertebrae(lv)) & set(exclude) and v.shape == up.shape]
+    if not vecs or not (name.startswith("CL") or np.any(extra > 0)):
+        return up, lo
+    vec = np.median(np.stack(vecs), axis=0)
+    return mid + 0.5 * vec, mid - 0.5 * vec
+
+
+def levels_present(meshes: dict) -> list[str]:
+    return [lv for lv in LEVEL_NAMES if all(v in meshes for v in level_vertebrae(lv))]

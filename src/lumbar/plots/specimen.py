@@ -1,0 +1,159 @@
+"""A user's specimen: the QA figure of each level's landmarks, and the command ``lumbar landmarks``.
+
+``render_landmarks(geometry, level, path)`` draws both vertebrae of one level (semi-transparent) with every landmark
+coloured by structure (ALL, PLL, FL, ISL, SSL, ITL, CL fibre ends joined by their fibres; the two facet faces; the
+disc centre), in a sagittal and an oblique view: pyvista off-screen, matplotlib fallback, as
+:mod:`lumbar.plots.render` (fixed cameras, millimetres, PNG without time metadata).
+
+``lumbar landmarks MESH_DIR --units mm --axes LPS --out OUT_DIR`` reads a folder of vertebra surfaces
+(``lumbar.geometry.specimen_io.read_specimen``), aligns them to the project frame from the anatomy, places the
+landmarks of every level present (any subset of L1-L5, S1) and writes ``landmarks.csv``, ``levels.csv``,
+``transform.json`` and one ``qa_<level>.png`` per level (docs/specimen.md).
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+
+import numpy as np
+from matplotlib.figure import Figure
+from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+from ..geometry.core import GeometryError
+from .render import MM, WINDOW_SIZE, check_backend, mpl_view, pyvista_views, render_with, save_png_closing
+
+__all__ = ["render_landmarks", "main", "STRUCTURE_COLOURS"]
+
+STRUCTURE_COLOURS = {"ALL": "#1f77b4", "PLL": "#17becf", "FL": "#2ca02c", "ISL": "#9467bd", "SSL": "#8c564b",
+                     "ITL": "#e377c2", "CL": "#ff7f0e", "facet_superior": "#d62728", "facet_inferior": "#0a3d91"}
+BONE = ("#d9c7a3", "#bfb8ad")
+
+
+def _items(geometry, level):
+    if level not in geometry.levels:
+        raise KeyError(f"level {level!r} not in geometry {geometry.name!r}; available: {sorted(geometry.levels)}")
+    lev = geometry.levels[level]
+    meshes = [(v, np.asarray(geometry.vertebrae[v].mesh.vertices, float) * MM,
+               np.asarray(geometry.vertebrae[v].mesh.faces, np.int64), c)
+              for v, c in zip((lev.upper, lev.lower), BONE)]
+    groups = {}
+    for lig in lev.ligaments:
+        g = groups.setdefault(lig.kind, dict(points=[], fibres=[]))
+        g["points"] += [np.asarray(lig.upper) * MM, np.asarray(lig.lower) * MM]
+        g["fibres"] += list(zip(np.asarray(lig.upper) * MM, np.asarray(lig.lower) * MM))
+    for f in lev.facets.values():
+        groups.setdefault("facet_superior", dict(points=[], fibres=[]))["points"].append(np.asarray(f.superior) * MM)
+        groups.setdefault("facet_inferior", dict(points=[], fibres=[]))["points"].append(np.asarray(f.inferior) * MM)
+    for g in groups.values():
+        g["points"] = np.vstack(g["points"])
+    return dict(meshes=meshes, groups=groups, centre=np.asarray(lev.disc_centre) * MM,
+                title=f"{geometry.name} {level}")
+
+
+def _views(items):
+    pts = np.vstack([v for _, v, _, _ in items["meshes"]])
+    centre = 0.5 * (pts.min(0) + pts.max(0))
+    radius = float(np.max(np.linalg.norm(pts - centre, axis=1)))
+    d = 1.02 * radius / (np.tan(np.radians(15.0)) * WINDOW_SIZE[0] / 2 / WINDOW_SIZE[1])
+    up = (0.0, 0.0, 1.0)
+    obl = np.array([-0.75, 0.55, 0.37])
+    return [("sagittal (from left)", (tuple(centre + d * np.array([0.0, 1.0, 0.0])), tuple(centre), up)),
+            ("oblique (posterior-left)", (tuple(centre + d * obl / np.linalg.norm(obl)), tuple(centre), up))]
+
+
+def _render_pyvista(items, path):
+    import pyvista as pv  # noqa: PLC0415 - optional engine; without GL the module imports, matplotlib draws
+
+    def draw(p):
+        for _, v, f, colour in items["meshes"]:
+            faces = np.hstack([np.full((len(f), 1), 3, np.int64), f]).ravel()
+            p.add_mesh(pv.PolyData(v, faces), color=colour, opacity=0.3)
+        p.add_mesh(pv.Sphere(radius=1.5, center=items["centre"]), color="black")
+        for kind, g in items["groups"].items():
+            colour = STRUCTURE_COLOURS.get(kind, "black")
+            p.add_points(g["points"], color=colour, point_size=10, render_points_as_spheres=True)
+            if g["fibres"]:
+                n = len(g["fibres"])
+                pts = np.empty((2 * n, 3))
+                pts[0::2] = [a for a, _ in g["fibres"]]
+                pts[1::2] = [b for _, b in g["fibres"]]
+                lines = np.hstack([np.full((n, 1), 2), np.arange(2 * n).reshape(n, 2)]).ravel()
+                p.add_mesh(pv.PolyData(pts, lines=lines), color=colour, line_width=2)
+        p.add_legend([[k, STRUCTURE_COLOURS.get(k, "black")] for k in items["groups"]], bcolor="white",
+                     size=(0.18, 0.3))
+
+    pyvista_views(path, items["title"], _views(items), draw)
+
+
+def _render_matplotlib(items, path):
+    fig = Figure(figsize=(WINDOW_SIZE[0] / 100, WINDOW_SIZE[1] / 100), dpi=100)
+    allv = np.vstack([v for _, v, _, _ in items["meshes"]])
+    lo, hi = allv.min(0), allv.max(0)
+    half, mid = 0.5 * float(np.max(hi - lo)), 0.5 * (lo + hi)
+    for col, (label, (pos, focal, _)) in enumerate(_views(items)):
+        ax = fig.add_subplot(1, 2, col + 1, projection="3d")
+        for _, v, f, colour in items["meshes"]:
+            step = max(1, len(f) // 4000)
+            ax.add_collection3d(Poly3DCollection(v[f[::step]], facecolor=colour, edgecolor="none", alpha=0.25))
+        ax.scatter(*items["centre"], color="black", s=40)
+        for kind, g in items["groups"].items():
+            colour = STRUCTURE_COLOURS.get(kind, "black")
+            ax.scatter(*g["points"].T, color=colour, s=14, label=kind)
+            for a, b in g["fibres"]:
+                ax.plot(*np.vstack([a, b]).T, color=colour, lw=1.0)
+        mpl_view(ax, mid, half, pos, focal, f"{items['title']}: {label}")
+        if col == 0:
+            ax.legend(loc="upper left", fontsize=7)
+    save_png_closing(fig, path)
+
+
+def render_landmarks(geometry, level: str, path, backend: str = "auto") -> str:
+    """QA figure of one level's landmarks (module doc); returns the backend used."""
+    check_backend(backend)
+    return render_with(backend, _items(geometry, level), Path(path), _render_pyvista, _render_matplotlib)
+
+
+def main(argv=None, prog: str = "lumbar landmarks") -> int:
+    from ..geometry.specimen_build import build_specimen  # noqa: PLC0415 - the command's work, not the figure's
+    from ..geometry.specimen_io import read_specimen  # noqa: PLC0415
+    from ..geometry.specimen_tables import write_tables  # noqa: PLC0415
+    p = argparse.ArgumentParser(prog=prog, description="Landmarks of a specimen: align a folder of vertebra surfaces "
+                                "to the project frame from the anatomy and place every ligament insertion, facet "
+                                "face and disc of each level present (docs/specimen.md).")
+    p.add_argument("mesh_dir", help="folder with one surface per vertebra (L1..L5, S1 in the file names)")
+    p.add_argument("--units", default="mm", choices=("mm", "m"), help="units of the mesh coordinates")
+    p.add_argument("--axes", default="LPS", help="axes of the mesh coordinates: LPS (3D Slicer, DICOM), RAS (NIfTI "
+                   "world), project (x anterior, y left, z superior)")
+    p.add_argument("--pattern", default=None, help="file pattern with {level}, e.g. '{level}_vertebra.obj', where "
+                   "a folder holds several surfaces per level")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--backend", default="auto", choices=("auto", "pyvista", "matplotlib", "none"),
+                   help="QA figure engine ('none': no figures)")
+    a = p.parse_args(argv)
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    try:
+        read = read_specimen(a.mesh_dir, units=a.units, axes=a.axes, pattern=a.pattern)
+        sources = {v: str(f) for v, f in read.files.items()}
+        sp = build_specimen(read.meshes, axes=a.axes, sources=sources, units=a.units, name=Path(a.mesh_dir).name)
+        paths = write_tables(sp, a.out)
+    except GeometryError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    det = sp.alignment.detected
+    print(f"# {a.mesh_dir}: vertebrae {', '.join(sp.meshes)}; levels {', '.join(sp.geometry.levels) or 'none'}")
+    print(f"# alignment: superior from the {det['superior_rule']}; anterior votes {det['anterior_votes']}; "
+          f"{det.get('angle_to_declared_deg', 'n/a')} deg from the declared axes {a.axes}")
+    for key, path in paths.items():
+        print(f"{key}: {path}")
+    if a.backend != "none":
+        for lv in sp.geometry.levels:
+            out = Path(a.out) / f"qa_{lv}.png"
+            used = render_landmarks(sp.geometry, lv, out, backend=a.backend)
+            print(f"figure: {out} ({used})")
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main(prog="python -m lumbar.plots.specimen"))

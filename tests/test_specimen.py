@@ -1,0 +1,224 @@
+"""A user's specimen (lumbar.geometry.specimen*, lumbar.plots.specimen): the project frame from the anatomy, the
+landmarks, the tables and their read-back, the command, and the accuracy on the Visible Human set (leave one out).
+
+Every claim has a control that fails: landmarks compared without the alignment differ by centimetres; a correct
+declaration passes where a wrong one raises; the atlas without registration misses the accuracy thresholds.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from lumbar.geometry import GeometryError, load_geometry
+from lumbar.geometry.specimen import align_to_project, check_winding, declared_matrix
+from lumbar.geometry.specimen_accuracy import LPS_FROM_PROJECT, ct_pose, visible_human_accuracy, write_posed_meshes
+from lumbar.geometry.specimen_build import build_specimen, facet_space_range_m
+from lumbar.geometry.specimen_tables import geometry_from_table, read_landmark_table, write_tables
+
+RAS_FROM_PROJECT = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+PAIR = ("L4", "L5")
+TOL_M = 1e-4          # 0.1 mm
+#: the snap to the surface (closest point) is discontinuous at concave creases and across a joint gap: a carried
+#: point that moves by 1 um (the registration's round-off under a rigid motion) may land on the other side of a
+#: crease, up to 0.25 mm away (measured: CL, a facet and an ISL point of L4-L5). Every other landmark agrees to
+#: ~1 um; the test asserts 0.1 mm for 95 % of the landmarks and 0.3 mm for all
+SNAP_JUMP_M = 3e-4
+
+
+def _agree(a, b):
+    d = np.linalg.norm(a - b, axis=1)
+    return np.quantile(d, 0.95) < TOL_M and d.max() < SNAP_JUMP_M
+
+
+def _pose(R, t=(0.0, 0.0, 0.0)):
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = t
+    return T
+
+
+def _rot(axis, deg):
+    axis = np.asarray(axis, float) / np.linalg.norm(axis)
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    a = np.radians(deg)
+    return np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * K @ K
+
+
+@pytest.fixture(scope="module")
+def vh():
+    return load_geometry("visible_human")
+
+
+@pytest.fixture(scope="module")
+def project_meshes(vh):
+    return {v: vh.vertebrae[v].mesh for v in PAIR}
+
+
+def _moved(meshes, T):
+    return {v: m.copy().apply_transform(T) for v, m in meshes.items()}
+
+
+def _points(sp):
+    """Every landmark of the specimen (project frame), in a fixed order."""
+    out = []
+    for lv in sorted(sp.landmarks):
+        lm = sp.landmarks[lv]
+        for name in sorted(lm["ligaments"]):
+            out += [lm["ligaments"][name][0], lm["ligaments"][name][1]]
+        for side in sorted(lm["facets"]):
+            out += list(lm["facets"][side])
+    return np.vstack(out)
+
+
+@pytest.fixture(scope="module")
+def reference_specimen(project_meshes):
+    return build_specimen(project_meshes, axes="project")
+
+
+def test_declared_axes_codes():
+    assert np.allclose(declared_matrix("LPS"), LPS_FROM_PROJECT.T)
+    assert np.allclose(declared_matrix("RAS"), RAS_FROM_PROJECT.T)
+    assert np.allclose(declared_matrix("project"), np.eye(3))
+    assert declared_matrix("any") is None
+    with pytest.raises(GeometryError, match="left-handed"):
+        declared_matrix("LPI")                       # control: a mirrored code
+    with pytest.raises(GeometryError, match="three-letter code"):
+        declared_matrix("LPX")
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_landmarks_invariant_under_rigid_motion(project_meshes, reference_specimen, seed):
+    """Any rotation and shift of the input ("any": the anatomy alone) gives the same project-frame landmarks."""
+    rng = np.random.default_rng(seed)
+    T = _pose(_rot(rng.normal(size=3), rng.uniform(20, 170)), rng.normal(size=3) * 0.3)
+    sp = build_specimen(_moved(project_meshes, T), axes="any")
+    ref = _points(reference_specimen)
+    assert _agree(_points(sp), ref)
+    # control: the same landmarks carried back without the alignment differ by centimetres
+    raw = _points(sp) @ np.linalg.inv(sp.alignment.transform)[:3, :3].T
+    assert not _agree(raw, ref) and np.abs(raw - ref).max() > 0.01
+
+
+def test_lps_and_ras_inputs_agree(project_meshes, reference_specimen):
+    tilt = _rot([1.0, 0.3, 0.0], 25.0)
+    lps = build_specimen(_moved(project_meshes, _pose(LPS_FROM_PROJECT @ tilt, (0.01, 0.2, -0.9))), axes="LPS")
+    ras = build_specimen(_moved(project_meshes, _pose(RAS_FROM_PROJECT @ tilt, (-0.05, 0.1, 0.3))), axes="RAS")
+    assert _agree(_points(lps), _points(ras))
+    assert _agree(_points(lps), _points(reference_specimen))
+    assert lps.alignment.detected["angle_to_declared_deg"] == pytest.approx(25.0, abs=8.0)
+
+
+def test_anterior_posterior_swapped_raises(project_meshes):
+    ras_data = _moved(project_meshes, _pose(RAS_FROM_PROJECT))
+    align_to_project(ras_data, axes="RAS")         # control: the right declaration passes
+    with pytest.raises(GeometryError, match="anterior/posterior swapped"):
+        align_to_project(ras_data, axes="LPS")
+
+
+def test_declared_axes_contradicting_the_column_raise(project_meshes):
+    # turned upside down about the antero-posterior axis: anterior still agrees, superior does not
+    flipped = _moved(project_meshes, _pose(LPS_FROM_PROJECT @ _rot([1.0, 0, 0], 180.0)))
+    with pytest.raises(GeometryError, match="contradict the anatomy"):
+        align_to_project(flipped, axes="LPS")
+    align_to_project(flipped, axes="any")          # control: without a declaration the anatomy decides
+
+
+def test_mirrored_mesh_raises(project_meshes):
+    mirrored = {v: m.copy() for v, m in project_meshes.items()}
+    mirrored["L4"].vertices[:, 1] *= -1.0          # one axis flipped, faces not re-ordered
+    with pytest.raises(GeometryError, match="L4 mesh.*wind inwards"):
+        align_to_project(mirrored, axes="project")
+    assert check_winding(project_meshes["L4"], "L4") > 0    # control: the original passes
+
+
+def test_specimen_builds_a_unit_that_solves(reference_specimen):
+    from lumbar.experiments.fsu import build_fsu, range_of_motion
+    from lumbar.inputs.characteristics import resolve_characteristic_set
+    geo = reference_specimen.geometry
+    fsu = build_fsu(geo, resolve_characteristic_set("calibrated"), "L4-L5")
+    df = range_of_motion(fsu, (10.0,))
+    assert df["converged"].all() and df["valid"].all()
+    assert (df["rom_deg"] > 0.5).all() and (df["rom_deg"] < 20).all()
+    f = geo.levels["L4-L5"].facets["left"]
+    assert f.contact == "touching" and len(f.contact_points) >= 9
+
+
+def test_facet_space_range_is_the_sourced_one():
+    mean, low, high = facet_space_range_m()
+    assert mean == pytest.approx(1.93e-3) and low == pytest.approx(0.91e-3) and high == pytest.approx(2.95e-3)
+
+
+def test_tables_round_trip_and_edits(reference_specimen, tmp_path):
+    sp = reference_specimen                      # built from meshes in metres: input units "m"
+    paths = write_tables(sp, tmp_path)
+    df = pd.read_csv(paths["landmarks"])
+    assert {"x_input", "y_input", "z_input", "extra_length_m", "rule", "source", "kind"} <= set(df.columns)
+    back = read_landmark_table(paths["landmarks"], sp.meshes, sp.alignment, units="m")
+    geo = geometry_from_table(back, sp)
+    a, b = geo.levels["L4-L5"], sp.geometry.levels["L4-L5"]
+    for la, lb in zip(a.ligaments, b.ligaments):
+        assert np.abs(la.upper - lb.upper).max() < 1e-6 and np.abs(la.lower - lb.lower).max() < 1e-6
+    # an edited copy: a point moved 5 mm off the bone is refused with its row and columns
+    bad = df.copy()
+    row = int(np.flatnonzero(bad["structure"] == "FL")[0])
+    bad.loc[row, "x_m"] += 0.005
+    bad[["x_input", "y_input", "z_input"]] = np.nan        # the input columns emptied: computed from x_m..
+    bad.to_csv(tmp_path / "bad.csv", index=False)
+    with pytest.raises(GeometryError, match=f"data row {row + 1} column x_m,y_m,z_m: FL point"):
+        read_landmark_table(tmp_path / "bad.csv", sp.meshes, sp.alignment, units="m")
+    # project and input columns that disagree are refused; emptying one set is accepted
+    bad = df.copy()
+    bad.loc[row, "x_input"] += 0.003
+    bad.to_csv(tmp_path / "bad2.csv", index=False)
+    with pytest.raises(GeometryError, match="x_input,y_input,z_input: describes a point 3.00 mm"):
+        read_landmark_table(tmp_path / "bad2.csv", sp.meshes, sp.alignment, units="m")
+    # a point moved along the bone, edited in input coordinates only, is accepted and carried to the project frame
+    moved = np.asarray(sp.meshes[df.loc[row, "body"]].vertices)[int(df.loc[row, "vertex_index"]) + 7]
+    bad.loc[row, ["x_input", "y_input", "z_input"]] = sp.alignment.inverse(moved)[0]
+    bad.loc[row, ["x_m", "y_m", "z_m"]] = np.nan
+    bad.to_csv(tmp_path / "ok.csv", index=False)
+    ok = read_landmark_table(tmp_path / "ok.csv", sp.meshes, sp.alignment, units="m")
+    assert np.allclose(ok.loc[row, ["x_m", "y_m", "z_m"]].to_numpy(float), moved, atol=1e-9)
+    bad = df.copy()
+    bad.loc[row, "body"] = "L3"
+    bad.to_csv(tmp_path / "bad3.csv", index=False)
+    with pytest.raises(GeometryError, match="column body: 'L3'; expected L4 or L5"):
+        read_landmark_table(tmp_path / "bad3.csv", sp.meshes, sp.alignment, units="m")
+    levels = pd.read_csv(paths["levels"])
+    assert {"disc_height_mm", "disc_csa_mm2", "facet_left_mean_p30", "facet_left_bone_gap_mm"} <= set(levels.columns)
+
+
+def test_cli_writes_tables_and_figures(vh, tmp_path):
+    from lumbar.cli import main
+    write_posed_meshes(vh, ct_pose(3), tmp_path / "in", PAIR)
+    assert main(["landmarks", str(tmp_path / "in"), "--units", "mm", "--axes", "LPS", "--out",
+                 str(tmp_path / "out"), "--backend", "matplotlib"]) == 0
+    for f in ("landmarks.csv", "levels.csv", "transform.json", "qa_L4-L5.png"):
+        assert (tmp_path / "out" / f).stat().st_size > 0
+    # control: the same files declared RAS are refused, naming the files
+    assert main(["landmarks", str(tmp_path / "in"), "--units", "mm", "--axes", "RAS", "--out",
+                 str(tmp_path / "out2"), "--backend", "none"]) == 2
+
+
+#: what the leave-one-out measurement reaches (docs/specimen.md, "Accuracy"), with a small margin
+ACCURACY = dict(overall_median_mm=2.0, structure_median_mm=3.5, facet_bone_median_mm=2.0,
+                length_rel=0.15, length_exempt=("ALL", "CL_L", "CL_R"), exempt_length_rel=0.3)
+
+
+@pytest.mark.slow
+def test_accuracy_on_the_visible_human_set_leave_one_out():
+    r = visible_human_accuracy(seed=0)
+    s = r["summary"].set_index("structure")
+    assert s.loc["all ligament groups", "median_mm"] <= ACCURACY["overall_median_mm"]
+    kinds = ["ALL", "PLL", "FL", "CL", "ISL", "SSL", "ITL"]
+    assert (s.loc[kinds, "median_mm"] <= ACCURACY["structure_median_mm"]).all()
+    assert s.loc["facet faces vs their bone points", "median_mm"] <= ACCURACY["facet_bone_median_mm"]
+    le = r["lengths"].set_index("structure")
+    keep = [n for n in le.index if n not in ACCURACY["length_exempt"]]
+    assert (le.loc[keep, "relative_error"].abs() <= ACCURACY["length_rel"]).all()
+    # known misses (docs/specimen.md): the ALL's via-point path and the capsule fibres' length are the atlas's
+    assert (le["relative_error"].abs() <= ACCURACY["exempt_length_rel"]).all()
+    # control: the atlas without the registration step (templates only moved onto the target's centroid)
+    c = visible_human_accuracy(seed=0, method="translation")["summary"].set_index("structure")
+    assert c.loc["all ligament groups", "median_mm"] > ACCURACY["overall_median_mm"]
