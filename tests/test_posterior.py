@@ -260,6 +260,7 @@ def test_null_model_counts_copy_the_calibrated_level_and_the_mean_pressure():
             _row("L4-L5 IDP in vivo", "crate", 1.0, 1.8, False),
             _row("ROM, other levels", "L1-L2 flexion 10 N*m", 1.0, 5.8, False, role=V.TARGET)]   # not independent
     t = V.null_model_counts(pd.DataFrame(rows), yam).set_index("quantity")
+    assert len(t) == 2                             # the model's own L4-L5 null needs the model's values
     lv = t.loc["ROM, other levels"]
     assert (lv["n_rows"], lv["model_within"], lv["null_within"]) == (3, 2, 1) and bool(lv["model_beats_null"])
     iv = t.loc["L4-L5 IDP in vivo"]            # null 1.15 MPa: outside both bands
@@ -296,3 +297,11 @@ def test_discovery_model_band_joins_the_row_spread_in_quadrature(tmp_path):
                   "low90": [6.5], "high90": [7.5]}).to_csv(p, index=False)
     np.testing.assert_allclose(model_band_sd(keys, p), [0.3, 0.0])     # a scenario without a band adds nothing
     np.testing.assert_allclose(model_band_sd(keys, None), [0.0, 0.0])
+
+
+def test_null_model_with_the_models_own_calibrated_level():
+    yam = pd.DataFrame({"level": ["L4-L5"], "quantity": ["rom"], "direction": ["flexion"], "value_deg": [8.9]})
+    rows = [_row("ROM, other levels", "L3-L4 flexion 10 N*m", 8.0, 8.0, True)]
+    t = V.null_model_counts(pd.DataFrame(rows), yam, model_calibrated_level={"flexion": 12.0})
+    own = t[t["null_model"] == "model's L4-L5 copied"].iloc[0]
+    assert own["null_within"] == 0 and own["model_within"] == 1          # 12 is outside 8 +- 25 %

@@ -142,7 +142,10 @@ rows += V.internal_load_rows(pd.read_csv(snakemake.input.curves), pd.read_csv(sn
                              pd.read_csv(snakemake.input.literature))
 df = V.scoreboard(rows, pd.read_csv(snakemake.input.bands))
 write_table_atomic(df, snakemake.output.table)
-nulls = V.null_model_counts(df, pd.read_csv(snakemake.input.yamamoto), f["level"])
+bands = pd.read_csv(snakemake.input.bands)
+own = bands[(bands["quantity"] == "rotation_deg") & np.isclose(bands["moment_nm"].astype(float), 10.0)]
+nulls = V.null_model_counts(df, pd.read_csv(snakemake.input.yamamoto), f["level"],
+                            dict(zip(own["direction"], own["map"])))
 write_table_atomic(nulls, snakemake.output.null_models)
 for r in nulls.itertuples(index=False):
     log.info("%s: the model %d of %d within, a trivial model (%s) %d", r.quantity, r.model_within, r.n_rows,

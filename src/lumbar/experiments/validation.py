@@ -485,32 +485,39 @@ def condition_label(condition: str) -> str:
 
 #: the trivial models the independent counts are set beside (what the model adds over a model that knows nothing
 #: of mechanics): quantity of the scoreboard -> (name, description)
-NULL_MODELS = {
-    "ROM, other levels": ("L4-L5 copied", "the measured L4-L5 ROM of the same direction (Yamamoto et al. 1989) "
-                                          "copied to every level"),
-    "L4-L5 IDP in vivo": ("mean of the measurements", "the mean of the measured in-vivo pressures over the "
+NULL_MODELS = (
+    ("ROM, other levels", "measured L4-L5 copied", "the measured L4-L5 ROM of the same direction (Yamamoto et al. "
+                                                    "1989) copied to every level"),
+    ("ROM, other levels", "model's L4-L5 copied", "the calibrated unit's own L4-L5 ROM of the same direction copied to "
+                                                   "every level (what the levels' own geometry adds)"),
+    ("L4-L5 IDP in vivo", "mean of the measurements", "the mean of the measured in-vivo pressures over the "
                                                       "activities, the same value for every activity"),
-}
+)
 NULL_COLUMNS = ("quantity", "null_model", "description", "n_rows", "model_within", "null_within",
                 "model_beats_null")
 
 
-def null_model_counts(scoreboard_df: pd.DataFrame, yamamoto_levels: pd.DataFrame, calibrated_level="L4-L5"):
+def null_model_counts(scoreboard_df: pd.DataFrame, yamamoto_levels: pd.DataFrame, calibrated_level="L4-L5",
+                      model_calibrated_level: dict | None = None):
     """Per scoreboard quantity of :data:`NULL_MODELS`: the independent rows the model has within their acceptance
     band beside the rows a trivial model has within the same bands (results/tables/validation_null_models.csv).
-    The null's value for a row: other levels, the calibrated level's measured ROM of that direction (a model that
-    says every level moves like L4-L5); in-vivo IDP, the mean measured pressure. Rows the model could not simulate
-    count as misses for the model, never for the null."""
+    The null's value for a row: other levels, the calibrated level's measured ROM of that direction, or the
+    model's own ROM there (``model_calibrated_level``: {direction: deg}, the one-side names without "_one_side";
+    a model that says every level moves like L4-L5); in-vivo IDP, the mean measured pressure. Rows the model could
+    not simulate count as misses for the model, never for the null."""
     rows = []
     ind = scoreboard_df[scoreboard_df["role"] == INDEPENDENT]
     y = yamamoto_levels[(yamamoto_levels["quantity"] == "rom") & (yamamoto_levels["level"] == calibrated_level)]
     ref = {str(d).replace("_one_side", ""): float(v) for d, v in zip(y["direction"], y["value_deg"])}
-    for q, (name, desc) in NULL_MODELS.items():
+    for q, name, desc in NULL_MODELS:
         g = ind[(ind["quantity"] == q) & (ind["set"] != "paper_table3_as_published")]
         if g.empty:
             continue
         if q == "ROM, other levels":
-            nulls = [ref.get(str(c).split()[1].replace("_one_side", ""), np.nan) for c in g["condition"]]
+            src = ref if name.startswith("measured") else (model_calibrated_level or {})
+            if not src:
+                continue
+            nulls = [src.get(str(c).split()[1].replace("_one_side", ""), np.nan) for c in g["condition"]]
         else:
             nulls = [float(g["measured"].mean())] * len(g)
         null_ok = []
