@@ -18,7 +18,7 @@ FIT_MARGIN = {"rest_facet_n": 15.0, "pretension_fraction": 0.9, "nz_fraction": 0
 
 
 def fit_penalties(mt, limit, nz):
-    """(name, value) of every one-sided penalty term of :func:`fit_admissible` (0 inside its margin)."""
+    """(name, value) of every one-sided penalty term of :func:`.admissible.fit_admissible` (0 inside its margin)."""
     p = []
     for side, f in zip(("left", "right"), mt["rest_facet"]):
         p.append((f"unloaded facet {side}", max(0.0, f - FIT_MARGIN["rest_facet_n"]) / 5.0))
@@ -59,7 +59,7 @@ def fit_penalties(mt, limit, nz):
 
 
 def scale_penalties(names, q, mt):
-    """(name, value) of the force-scale criterion inside :func:`fit_admissible`: a ligament's force scale outside
+    """(name, value) of the force-scale criterion inside :func:`.admissible.fit_admissible`: a ligament's force scale outside
     [``ADM.SCALE_MIN``, ``ADM.SCALE_MAX``] x its source law must keep its tension within ``ADM.REMUS_FACTOR`` (less a
     margin) of the Remus et al. (2021) law of the same fibres where that law loads it most (metrics ``remus``), when
     it carries more than 1 N there (the criterion's own exception); elsewhere the scale itself is pulled back inside. Zero
