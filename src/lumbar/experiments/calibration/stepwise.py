@@ -31,6 +31,7 @@ stage's 20 scenarios (5 moments x 4 directions); each evaluation solves the stag
 started). Residual = (ROM_sim - ROM_mean) / width with width = max - min where the row has a range,
 else 2 x ``tolerance_deg``; a scenario without equilibrium contributes a fixed penalty of 10.
 
+The facet stiffness (step 4) is one parameter (log-scaled, bounds ``K_FACET_BOUNDS``: 100 N/m - 1e7 N/m).
 This module never imports snakemake.
 """
 from __future__ import annotations
