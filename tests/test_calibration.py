@@ -9,6 +9,7 @@ import pandas as pd
 import pytest
 
 from lumbar.experiments import calibration as cal
+from lumbar.experiments.calibration.penalties import scale_penalties
 from lumbar.inputs.characteristics import SoftplusLaw, load_characteristic_set
 from lumbar.mechanics.elements.ligament import softplus_force
 from lumbar.experiments.fsu import build_fsu
@@ -363,7 +364,7 @@ def test_force_scale_penalty_is_the_criterions_own_exception():
     def pen(t_pll, t_fl, remus):
         model = {"PLL": t_pll, "FL": t_fl, "SSL": 3.0}
         mt = {"remus": {k: (model[k], v) for k, v in remus.items()}}
-        return dict(cal._scale_penalties(names, q, mt))
+        return dict(scale_penalties(names, q, mt))
 
     p = pen(1.2, 30.0, {"PLL": 10.0, "FL": 70.0, "SSL": 0.5})
     assert p["force scale PLL"] > 0            # 1.2 N vs 10 N: below 1 / 5 of the Remus law

@@ -14,7 +14,7 @@ from lumbar.experiments import load_sharing as LS
 from lumbar.experiments.fsu import build_fsu, moment_loads, softplus_fibre_params
 from lumbar.geometry import load_geometry
 from lumbar.inputs import resources
-from lumbar.inputs.characteristics import SoftplusLaw
+from lumbar.inputs.characteristics import SoftplusLaw, load_characteristic_set
 from lumbar.mechanics.elements.ligament import softplus_force
 from lumbar.mechanics.solve import solve
 
@@ -153,7 +153,7 @@ def test_admissible_set_passes_every_criterion(admissible_curves, limits):
 def test_snap_check_catches_a_negative_stiffness_law(geometry, admissible, limits):
     """The paper's concave flavum (force falling with stretch), strong and pre-tensioned on its own fibres, gives
     the unit a negative stiffness in flexion: a jump between two steps, caught; the monotone set has none."""
-    pub = C.load_characteristic_set("calibrated").ligaments["FL"]
+    pub = load_characteristic_set("calibrated").ligaments["FL"]
     concave = dataclasses.replace(pub, a=pub.a * 4.0, c=pub.c * 4.0)
     cs = dataclasses.replace(admissible, ligaments={**admissible.ligaments, "FL": concave})
     fsu = build_fsu(geometry, cs, "L4-L5")

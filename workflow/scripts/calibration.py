@@ -99,10 +99,14 @@ if snakemake.rule == "calibrate":
     write_table_atomic(cal.table3(res, paper), snakemake.output.table3)
     log.info("wrote %s and tables 1-3", out_dir)
 elif snakemake.rule == "fig4_disc_torque_angle":
+    from lumbar.plots.calibration import plot_disc_torque_angle
+
     pts, tab = pd.read_csv(snakemake.input.points), pd.read_csv(snakemake.input.table)
-    cal.plot_disc_torque_angle(pts, tab, snakemake.output[0], data_label=_label(pts))
+    plot_disc_torque_angle(pts, tab, snakemake.output[0], data_label=_label(pts))
     log.info("wrote %s", snakemake.output[0])
 elif snakemake.rule == "fig5_ligament_characteristics":
+    from lumbar.plots.calibration import plot_ligament_characteristics
+
     pts, tab = pd.read_csv(snakemake.input.points), pd.read_csv(snakemake.input.table)
-    cal.plot_ligament_characteristics(pts, tab, snakemake.output[0], data_label=_label(tab))
+    plot_ligament_characteristics(pts, tab, snakemake.output[0], data_label=_label(tab))
     log.info("wrote %s", snakemake.output[0])
