@@ -139,16 +139,20 @@ def test_workflow_stepwise_reduction_rules_run(dag_workdir):
     from scipy.optimize import brentq
     from lumbar.mechanics.elements.disc import torque_angle
 
-    disc = load_characteristic_set("rupp2015").disc.torque
+    # the calibrated set's disc is the MAP fit's: the disc-only law of step 1 (fitted to the derived rows) scaled by
+    # the posterior's disc-torque factors, so the calibrated rows follow the written law, not the derived rows
+    discs = {"rupp2015": load_characteristic_set("rupp2015").disc.torque,
+             "calibrated": load_characteristic_set("calibrated", data_dir=tmp_path / "results/calibration/"
+                                                   "characteristics").disc.torque}
     wo_all = syn[syn["stage"] == "wo_all"].set_index(["set", "direction", "moment_nm"])
     assert len(wo_all) == 2 * 4 * len(moments) and wo_all["converged"].all()
     for (s, d, M), row in wo_all.iterrows():
-        if s == "rupp2015":
-            lo, hi = (np.radians(1.8), np.radians(15.6)) if d == "flexion" else (1e-9, np.radians(40))
-            phi = np.degrees(brentq(lambda p: torque_angle(p, *disc[d])[0] - M, lo, hi, xtol=1e-14))
-            assert row["rom_sim_deg"] == pytest.approx(phi, abs=1e-4), (s, d, M)
-        else:
-            assert row["rom_sim_deg"] == pytest.approx(row["rom_mean_deg"], abs=0.01), (s, d, M)
+        disc = discs[s]
+        lo, hi = (np.radians(1.8), np.radians(15.6)) if d == "flexion" and disc[d][2] < 0 else (1e-9, np.radians(40))
+        phi = np.degrees(brentq(lambda p: torque_angle(p, *disc[d])[0] - M, lo, hi, xtol=1e-14))
+        assert row["rom_sim_deg"] == pytest.approx(phi, abs=1e-4), (s, d, M)
+        if s == "calibrated":      # the posterior moves the law by at most its spread's order: within 25 % of the row
+            assert abs(row["rom_sim_deg"] - row["rom_mean_deg"]) <= 0.25 * row["rom_mean_deg"], (s, d, M)
     # Table 4's counts are the synopsis's outlier flags, per set
     counts = pd.read_csv(tmp_path / "results/tables/table4_outlier_counts.csv").set_index("set")
     assert counts["n_outliers"].to_dict() == syn.groupby("set")["outlier"].sum().to_dict()

@@ -519,13 +519,13 @@ class ReportBuilder:
                 q = f"{V.condition_label(r.quantity)} [{V.unit_label(r.unit)}]"
                 band = (f"{fmt(r.band_low)} to {fmt(r.band_high)}" if np.isfinite(r.band_low) else "")
                 sim = fmt(r.sim) if np.isfinite(r.sim) else "no value"
-                if np.isfinite(getattr(r, "sim_band_low", np.nan)):
-                    sim += f" ({fmt(r.sim_band_low)} to {fmt(r.sim_band_high)})"
-                rows.append([q if q != last else "", V.condition_label(r.condition), sim, fmt(r.measured), band,
+                blo = getattr(r, "sim_band_low", np.nan)
+                post = f"{fmt(blo)}-{fmt(r.sim_band_high)}" if np.isfinite(blo) else ""
+                rows.append([q if q != last else "", V.condition_label(r.condition), sim, post, fmt(r.measured), band,
                              CHECK if r.within else CROSS, V.sets_label(r.sets)])
                 last = q
             self.table_block(f"{title}: {w} of {n} distinct comparisons within", ["quantity [unit]", "condition",
-                             "simulated (90 % posterior band)", "measured", "acceptance interval", "within",
+                             "simulated", "90 % band", "measured", "acceptance interval", "within",
                              "simulated by"], rows,
                              source=rel, label=f"Table {label}" if label else None, marks=True, key_cols=2)
 

@@ -335,9 +335,15 @@ def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", publ
     nz = nz_reference if nz_reference is not None else ADM.neutral_zones(level)
     ks0 = float(k_shear if k_shear is not None else charset.disc.k_shear)
     names, lo, hi, prior_q = _parameter_vector(geometry.levels[level], charset, ks0, fit_disc_torque)
-    q_start = prior_q.copy()
+    if np.any(lo >= hi):
+        bad = [n for n, a, b in zip(names, lo, hi) if a >= b]
+        raise ValueError(f"fit_admissible: empty parameter range for {bad} (the prior law leaves no admissible "
+                         "pre-elongation on this level's fibres)")
+    # the prior centre may lie outside a physical bound (e.g. a prior pre-elongation beyond what this level's shortest
+    # fibre allows): the fit starts inside the bounds and the prior term still pulls toward the centre
+    q_start = np.clip(prior_q, lo, hi)
     for j, n in enumerate(names):
-        if start and n in start:
+        if start and n in start and np.isfinite(start[n]):
             q_start[j] = float(np.clip(start[n], lo[j], hi[j]))
     base = charset if k_shear is None else dataclasses.replace(
         charset, disc=dataclasses.replace(charset.disc, k_shear=ks0))

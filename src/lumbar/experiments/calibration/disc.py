@@ -67,7 +67,9 @@ def fit_disc_direction(phi_rad, torque_nm):
     def res(q):
         return eq3(phi, (q[0], 10.0 ** q[1], q[2])) - M
 
-    sol = least_squares(res, [p0[0], math.log10(p0[1]), p0[2]], method="trf",
+    # the variable-projection start is unconstrained in p3 (and p1 above): start inside the fit's bounds
+    x0 = np.clip([p0[0], math.log10(p0[1]), p0[2]], [P1_MIN_NM, -9.0, -1e3], [1e3, 1.0, 1e3])
+    sol = least_squares(res, x0, method="trf",
                         bounds=([P1_MIN_NM, -9, -1e3], [1e3, 1, 1e3]), x_scale=[1.0, 0.1, 1.0],
                         xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=2000)
     return float(sol.x[0]), float(10.0 ** sol.x[1]), float(sol.x[2])
