@@ -1,5 +1,13 @@
 """Fitting and scoring the candidate effects of a discovery problem: batched grid solves, splines, the
-bootstrap likelihood-ratio test, the naming rule, identifiability and cross-validation (:func:`discover`)."""
+bootstrap likelihood-ratio test, the naming rule, identifiability and cross-validation (:func:`discover`).
+
+:func:`discover` runs named phases, each a function with a dataclass result that can be run and tested on its own:
+grid (:func:`fit_grids`: the coarse parameter grid of every candidate in one forward batch), the null prediction
+(:func:`null_prediction`), refinement (:func:`refine`: spline estimates and the fine grid; :func:`scorer`, the metric
+of the tests; :func:`refit`: estimates in that metric and the exact refit of the best candidate), null tests
+(:func:`null_tests`: the parametric bootstrap, max-T p-values), nuisance comparison (:func:`nuisance_refits`,
+:func:`compare_nuisance`), :func:`diagnostics`, :func:`explained_share`, decision (:func:`decide` on an
+:class:`Evidence`) and the record (:func:`result_record`)."""
 from __future__ import annotations
 
 import time
@@ -808,8 +816,7 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
     return {"result": res, "scenarios": scen, "problem": problem}
 
 
-# result_record is one long literal: the result's fields, in the order discovery.json has kept them; cut, it would
-# spread one record over functions that each build a part of a dict.
+# result_record (112 lines) is mostly one literal: the result's fields in the order discovery.json has kept them.
 def result_record(problem, s, cands, cand_rank, best, est, exact, grids, null, score, obs, tests, refits, diag,
                   comparison, evidence, decision, ident) -> tuple[dict, pd.DataFrame]:
     """The result (discovery.json's fields, without ``forward_batches`` and ``seconds``, which :func:`discover` adds)
