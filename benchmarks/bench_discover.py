@@ -1,6 +1,6 @@
 """Benchmark: time per discrepancy-discovery run (lumbar.discovery) on one core.
 
-On TEST FIXTURES from virtual specimens (lumbar.discovery.benchmark, generator virtual_specimens) of the default
+On TEST FIXTURES from virtual specimens (lumbar.discovery.power_study, generator virtual_specimens) of the default
 configuration, with the null hypothesis drawn from the bank of virtual specimens (``discovery.null_specimens``), the
 nuisance explanations, the candidate-versus-nuisance test and the identifiability step included:
 

@@ -17,6 +17,7 @@ import ast
 import importlib
 import importlib.util
 import pkgutil
+import re
 import sys
 import textwrap
 from dataclasses import dataclass, field
@@ -205,6 +206,55 @@ def test_layer_checker_detects_an_upward_import():
     g = nx.DiGraph([("lumbar.mechanics.model", "lumbar.inputs.io"), ("lumbar.inputs.io", "lumbar.inputs.tables")])
     assert layer_violations(g, LAYERS) == ["lumbar.mechanics.model -> lumbar.inputs.io (layer 0 -> 1)"]
     assert layer_violations(nx.DiGraph([("lumbar.new.x", "lumbar.mechanics.so3")]), LAYERS) == ["lumbar.new.x: no layer"]
+
+
+DESIGN = Path(__file__).resolve().parents[1] / "docs" / "design.md"
+
+
+def documented_layers(text: str) -> dict[str, tuple[int, set[str]]]:
+    """The "Layers" list of docs/design.md: ``{package: (layer, {module, ...})}`` with full module names. In the list's
+    code block a line ``layer N  lumbar.<package>`` opens a package; each of its modules is a line of its own indented
+    by two spaces (a nested module by its dotted name); deeper-indented lines continue a description."""
+    block = text.split("## Layers", 1)[1].split("```", 2)[1]
+    out, current = {}, None
+    for line in block.splitlines():
+        head = re.match(r"layer (\d+)\s+(lumbar(?:\.\w+)*)\b", line)
+        item = re.match(r"  ([A-Za-z_][\w.]*)(?:\s{2,}|$)", line)
+        if head:
+            current = head.group(2)
+            out[current] = (int(head.group(1)), set())
+        elif item and current is not None:
+            out[current][1].add(f"{current}.{item.group(1)}")
+    return out
+
+
+def layer_list_mismatch(layers: dict[str, tuple[int, set[str]]], modules: set[str]) -> tuple[list, list]:
+    """(modules that exist but are not listed, listed names that are no module); ``lumbar`` itself is below all."""
+    listed = {"lumbar"} | set(layers) | {m for _, mods in layers.values() for m in mods}
+    return sorted(modules - listed), sorted(listed - modules)
+
+
+def test_design_layer_list_names_every_module_and_no_other():
+    modules = {"lumbar"} | {m.name for m in pkgutil.walk_packages(lumbar.__path__, "lumbar.")}
+    layers = documented_layers(DESIGN.read_text(encoding="utf-8"))
+    missing, extra = layer_list_mismatch(layers, modules)
+    assert not missing and not extra, (f"docs/design.md's layer list: not listed {missing}; listed but no module "
+                                       f"{extra}")
+    # the layer numbers of the list are the ones the layer rule checks
+    assert {p: n for p, (n, _) in layers.items()} == {p: n for p, n in LAYERS.items() if p != "lumbar"}
+
+
+def test_layer_list_check_fails_for_an_unlisted_or_a_vanished_module():
+    text = "## Layers\n```\nlayer 0  lumbar.mechanics   the mechanics\n  so3           rotations\n" \
+           "                continued: not a module\n  elements.disc   the disc\nlayer 6  lumbar.cli   the command\n```\n"
+    layers = documented_layers(text)
+    assert layers == {"lumbar.mechanics": (0, {"lumbar.mechanics.so3", "lumbar.mechanics.elements.disc"}),
+                      "lumbar.cli": (6, set())}
+    modules = {"lumbar", "lumbar.cli", "lumbar.mechanics", "lumbar.mechanics.so3", "lumbar.mechanics.elements.disc"}
+    assert layer_list_mismatch(layers, modules) == ([], [])
+    # control: a module absent from the list, and a listed module that is gone
+    assert layer_list_mismatch(layers, modules | {"lumbar.mechanics.kernel"}) == (["lumbar.mechanics.kernel"], [])
+    assert layer_list_mismatch(layers, modules - {"lumbar.mechanics.so3"}) == ([], ["lumbar.mechanics.so3"])
 
 
 def test_one_effect_registry():

@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 
 from lumbar import discovery as D
-from lumbar.discovery import benchmark as discovery_benchmark
+from lumbar.discovery import power_study
 from lumbar.discovery import fit as discovery_fit
 from lumbar.experiments import effects as fx
 from lumbar.mechanics import so3
@@ -316,7 +316,7 @@ def test_benchmark_summary_false_positive_rate_interval_and_power():
     assert s["decisions"]["out_of_library"] == {"named": 1, "nuisance": 1, "unexplained": 1}
     assert s["pass"]["false_positive_rate_max"] is False and s["pass"]["library_named_at_benchmark_magnitudes_min"]
     assert s["pass"]["out_of_library_unnamed_min"] is False and s["all_pass"] is False
-    assert discovery_benchmark._interval(0, 50)[0] == 0 and 0.05 < discovery_benchmark._interval(0, 50)[1] < 0.08
+    assert power_study._interval(0, 50)[0] == 0 and 0.05 < power_study._interval(0, 50)[1] < 0.08
 
 
 def test_virtual_specimens_without_equilibrium_are_redrawn_not_dropped():

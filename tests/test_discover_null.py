@@ -19,7 +19,7 @@ from lumbar.experiments import effects as fx
 
 #: Kolmogorov-Smirnov threshold for "the null p-values are uniform enough": the test of uniformity must not reject
 #: at the 1 % level (over 60 null tables of the synthetic population; the benchmark applies the same threshold to
-#: its nulls, lumbar.discovery.benchmark.TARGETS)
+#: its nulls, lumbar.discovery.power_study.TARGETS)
 KS_P_MIN = 0.01
 
 

@@ -31,7 +31,7 @@ rule discovery_specimen_bank:
 
 
 # the virtual specimens the IDP fixtures of the benchmark are drawn from (a stream disjoint from the null bank's),
-# in parts (lumbar.discovery.benchmark.IDP_FIXTURE_PARTS), so both cores make them
+# in parts (lumbar.discovery.power_study.IDP_FIXTURE_PARTS), so both cores make them
 rule discovery_fixture_specimens_idp:
     input:
         geometry_inputs,

@@ -23,7 +23,7 @@ import time  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from lumbar import discovery as discover  # noqa: E402
-from lumbar.discovery import benchmark as discovery_benchmark  # noqa: E402
+from lumbar.discovery import power_study  # noqa: E402
 from lumbar.discovery import specimens  # noqa: E402
 from lumbar.plots.discovery import plot_benchmark  # noqa: E402
 from lumbar.inputs.io import write_json_atomic, write_table_atomic, write_text_atomic  # noqa: E402
@@ -60,7 +60,7 @@ elif rule == "discovery_specimen_bank":
     log.info("null bank %s: %d virtual specimens x %d scenarios, %d without equilibrium", experiment, K,
              len(bank) // max(K, 1), int(v.isna().sum()))
 elif rule == "discovery_fixture_specimens_idp":
-    first, count = discovery_benchmark.fixture_part(cfg, int(snakemake.wildcards.part))
+    first, count = power_study.fixture_part(cfg, int(snakemake.wildcards.part))
     t = specimens.idp_bank_table(cfg, count, specimens.FIXTURE_STREAM, first=first)
     t["source"] = (f"virtual specimens of the nominal L2-S1 model, seed {specimens.bank_seed(cfg, specimens.FIXTURE_STREAM)}"
                    f" (lumbar.discovery.specimens.idp_bank_table): the benchmark's TEST FIXTURES are drawn from them; "

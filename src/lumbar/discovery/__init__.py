@@ -45,19 +45,21 @@
    with each nuisance family.
 
 Outputs in DIR: discovery.json, scenarios.csv, disagreement_map.png, ranking.png, before_after.png,
-section.md. The benchmark (test fixtures from other virtual specimens: nulls, library effects, out-of-library causes)
-is :func:`make_hidden_effect_dataset` / :func:`run_benchmark_cases` / :func:`summarise_benchmark`.
+section.md. The benchmark, a power study (test fixtures from other virtual specimens: nulls, library effects,
+out-of-library causes) is :func:`make_hidden_effect_dataset` / :func:`run_benchmark_cases` /
+:func:`summarise_benchmark`.
 
 Modules: :mod:`.detect` (settings, reading and recognising a measured table), :mod:`.problems` (measured data +
 batched forward model per experiment), :mod:`.specimens` (the banks of virtual specimens and the null tables),
 :mod:`.nuisance` (nuisance explanations), :mod:`.fit` (:func:`discover`: fit, test, name, identifiability),
-:mod:`.report` (output files, :func:`run`, the summary of the real-data discoveries), :mod:`.benchmark`
-(hidden-effect fixtures), :mod:`.cli` (``python -m lumbar.discovery``); the candidate effects are
+:mod:`.outputs` (output files, :func:`run`, the summary of the real-data discoveries), :mod:`.power_study`
+(the discrepancy benchmark: the discovery's power and false-positive rate on hidden-effect fixtures), :mod:`.cli`
+(``python -m lumbar.discovery``); the candidate effects are
 :mod:`lumbar.experiments.effects`, the figures :mod:`lumbar.plots.discovery`. This package re-exports the public names.
 """
 from __future__ import annotations
 
-from .benchmark import (
+from .power_study import (
                         OUT_OF_LIBRARY,
                         TARGETS,
                         FixtureSpecimens,
@@ -94,7 +96,7 @@ from .problems import (
                         rom_problem,
                         solve_idp_model,
 )
-from .report import REAL_DATA_COLUMNS, benchmark_paragraph, real_data_summary, run, section_markdown, write_outputs
+from .outputs import REAL_DATA_COLUMNS, benchmark_paragraph, real_data_summary, run, section_markdown, write_outputs
 
 __all__ = ["OUT_OF_LIBRARY", "FixtureSpecimens", "job_cases", "TARGETS", "benchmark_cases", "benchmark_magnitudes", "benchmark_settings", "make_hidden_effect_dataset",
            "run_benchmark_cases", "summarise_benchmark", "main", "INTERNAL_SETTINGS", "DiscoveryInputError",

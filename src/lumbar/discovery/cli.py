@@ -1,5 +1,5 @@
 """Command line of the discrepancy discovery: ``python -m lumbar.discovery --config CONFIG --measured FILE.csv
---out DIR`` (writes the outputs of :func:`lumbar.discovery.report.run`, prints the result's headline as JSON)."""
+--out DIR`` (writes the outputs of :func:`lumbar.discovery.outputs.run`, prints the result's headline as JSON)."""
 from __future__ import annotations
 
 import argparse
@@ -9,7 +9,7 @@ import sys
 
 from ..inputs.config import ConfigError, load_config
 from .detect import DiscoveryInputError
-from .report import run
+from .outputs import run
 
 DESCRIPTION = ("Discrepancy discovery: where do model and measurement disagree, and which missing effect "
                "explains it?")

@@ -1,10 +1,20 @@
 """Fitting and scoring the candidate effects of a discovery problem: batched grid solves, splines, the
-bootstrap likelihood-ratio test, the naming rule, identifiability and cross-validation (:func:`discover`)."""
+bootstrap likelihood-ratio test, the naming rule, identifiability and cross-validation (:func:`discover`).
+
+:func:`discover` runs named phases, each a function with a dataclass result that can be run and tested on its own:
+grid (:func:`fit_grids`: the coarse parameter grid of every candidate in one forward batch), the null prediction
+(:func:`null_prediction`), refinement (:func:`refine`: spline estimates and the fine grid; :func:`scorer`, the metric
+of the tests; :func:`refit`: estimates in that metric and the exact refit of the best candidate), null tests
+(:func:`null_tests`: the parametric bootstrap, max-T p-values), nuisance comparison (:func:`nuisance_refits`,
+:func:`compare_nuisance`), :func:`diagnostics`, :func:`explained_share`, decision (:func:`decide` on an
+:class:`Evidence`) and the record (:func:`result_record`)."""
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, field
 
 import numpy as np
+import pandas as pd
 from scipy.interpolate import CubicSpline
 from scipy.optimize import minimize_scalar
 
@@ -257,20 +267,23 @@ def _identifiability(problem, cands, S, s, cache):
     return out
 
 
-def discover(problem: Problem, settings: dict | None = None, cache: dict | None = None) -> dict:
-    """Rank the candidate effects and the nuisance explanations, test them against the null hypothesis with
-    specimens in it and against each other, and decide (see the package doc)."""
-    s = default_settings()
-    s.update(settings or {})
-    t_start = time.perf_counter()
-    y, sig = problem.y, problem.sigma
-    w = 1.0 / sig**2
-    cands = list(problem.candidates)
-    n_batches = 0
-    # batch 1: no-effect model and the coarse grid of every candidate
-    grids = {c: coarse_grid(*fx.EFFECTS[c].bounds, int(s["grid_points"])) for c in cands}
+# ------------------------------------------------------------------ the phases of discover()
+@dataclass
+class Grids:
+    """Phase 1 (grid): every candidate's coarse parameter grid and its predictions, with the no-effect model's, from
+    one batched forward solve (or the cache)."""
+    grids: dict          # candidate -> parameter values (coarse_grid)
+    base: np.ndarray     # (n,) the nominal model's prediction
+    coarse: dict         # candidate -> (len(grid), n) predictions
+    batches: int = 0     # forward batches solved here (0: from the cache)
+
+
+def fit_grids(problem: Problem, cands: list, settings: dict, cache: dict | None = None) -> Grids:
+    """Phase 1: the no-effect model and the coarse grid (``grid_points`` values) of every candidate in one batch."""
+    grids = {c: coarse_grid(*fx.EFFECTS[c].bounds, int(settings["grid_points"])) for c in cands}
     key = ("coarse", problem.experiment, tuple(map(tuple, problem.keys.astype(str).to_numpy())),
-           tuple(cands), int(s["grid_points"]))
+           tuple(cands), int(settings["grid_points"]))
+    batches = 0
     if cache is not None and key in cache:
         base, coarse = cache[key]
     else:
@@ -279,79 +292,148 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
         else:
             out = [problem.forward({})]
         base, coarse = out[0][0], dict(zip(cands, out[1:]))
-        n_batches += 1
+        batches = 1
         if cache is not None:
             cache[key] = (base, coarse)
-    # the null hypothesis' prediction: the mean of virtual specimens of the nominal model (specimen-mean shift)
+    return Grids(grids, base, coarse, batches)
+
+
+@dataclass
+class NullPrediction:
+    """The null hypothesis' prediction r (the mean of virtual specimens of the nominal model, or the nominal model
+    without a bank), the rows compared, and the gap of the nominal model to the data."""
+    bank: object | None       # the problem's SpecimenBank, or None
+    r: np.ndarray             # (n,) the null prediction
+    shift: np.ndarray         # r - base: the specimen-mean shift
+    valid: np.ndarray         # rows with a finite model, datum, sigma and r
+    yr: np.ndarray            # the data relative to the shift: the candidates' grids fit it
+    z0: np.ndarray            # (base - y) / sigma
+    chi_nominal: float
+    nv: int                   # number of rows compared
+    gap_before: float         # RMS z of the nominal model over the valid rows
+
+    @property
+    def none_label(self) -> str:
+        """The null model's name among the explanations."""
+        return "specimen-mean shift" if self.bank is not None else "nominal model"
+
+    @property
+    def null_text(self) -> str:
+        """What the null tables are made of."""
+        return ("the nominal model with specimen variation" if self.bank is not None else
+                "the nominal model and the measurement noise")
+
+
+def null_prediction(problem: Problem, base: np.ndarray) -> NullPrediction:
+    """The null model's prediction and the compared rows of ``problem`` (``base``: the nominal model's prediction)."""
+    y, sig = problem.y, problem.sigma
     bank = problem.meta.get("bank")
     r = np.where(np.isfinite(bank.mean), bank.mean, np.nan) if bank is not None else base.copy()
     shift = r - base
     valid = np.isfinite(base) & np.isfinite(y) & np.isfinite(sig) & np.isfinite(r)
-    # the null model's name among the explanations, and what the null tables are made of
-    none_label = "specimen-mean shift" if bank is not None else "nominal model"
-    null_text = ("the nominal model with specimen variation" if bank is not None else
-                 "the nominal model and the measurement noise")
-    yr = y - np.where(valid, shift, 0.0)           # the data relative to the shift: the candidates' grids fit it
+    yr = y - np.where(valid, shift, 0.0)
     z0 = (base - y) / sig
-    chi_nominal = float((z0[valid] ** 2).sum())
     nv = int(valid.sum())
     gap_before = float(np.sqrt(np.mean(z0[valid] ** 2))) if nv else float("nan")
-    # coarse estimates, then batch 2: fine grid around each optimum
+    return NullPrediction(bank, r, shift, valid, yr, z0, float((z0[valid] ** 2).sum()), nv, gap_before)
+
+
+@dataclass
+class Refinement:
+    """Phase 2 (refinement): each candidate's estimate on its spline, the fine grids around the leading candidates'
+    optima and every candidate's merged (theta, predictions) curve."""
+    est: dict            # candidate -> estimate (nan: no finite fit)
+    fine_theta: dict     # leading candidate -> fine grid
+    fine: dict           # leading candidate -> its predictions on the fine grid
+    curves_raw: dict     # candidate -> (theta, P) of the coarse and fine grids, sorted
+    batches: int = 0
+
+
+def refine(problem: Problem, cands: list, grids: Grids, null: NullPrediction, settings: dict) -> Refinement:
+    """Phase 2: coarse spline estimates, then one batch of a fine grid (``fine_points``) around the optimum of the
+    ``fine_candidates`` lowest coarse chi2 (it refines the estimate that can be named; the others keep their
+    coarse-spline estimate), and the refined estimates on the merged curves."""
+    w = 1.0 / problem.sigma ** 2
     est, fine_theta, coarse_chi = {}, {}, {}
     for c in cands:
         lo, hi = fx.EFFECTS[c].bounds
-        est[c], coarse_chi[c] = _spline_fit(grids[c], coarse[c], yr, w, lo, hi, valid)
-    # the fine grid only for the leading candidates (``fine_candidates`` lowest coarse chi2): it refines the
-    # estimate that can be named; the others keep their coarse-spline estimate
-    lead = sorted([c for c in cands if np.isfinite(est[c])], key=lambda c: coarse_chi[c])[: int(s["fine_candidates"])]
+        est[c], coarse_chi[c] = _spline_fit(grids.grids[c], grids.coarse[c], null.yr, w, lo, hi, null.valid)
+    lead = sorted([c for c in cands if np.isfinite(est[c])],
+                  key=lambda c: coarse_chi[c])[: int(settings["fine_candidates"])]
     for c in lead:
         lo, hi = fx.EFFECTS[c].bounds
-        g = grids[c]
+        g = grids.grids[c]
         j = int(np.clip(np.searchsorted(g, est[c]), 1, len(g) - 1))
         step = g[j] - g[j - 1]
         t = est[c]
-        fine_theta[c] = np.unique(np.clip(np.linspace(t - step, t + step, int(s["fine_points"])), lo, hi))
+        fine_theta[c] = np.unique(np.clip(np.linspace(t - step, t + step, int(settings["fine_points"])), lo, hi))
     fine = dict(zip(fine_theta, _batch(problem, list(fine_theta.items()))))
-    n_batches += bool(fine_theta)
     curves_raw = {}
     for c in cands:
         lo, hi = fx.EFFECTS[c].bounds
-        th, P = _curve([grids[c]] + ([fine_theta[c]] if c in fine else []),
-                       [coarse[c]] + ([fine[c]] if c in fine else []), lo, hi)
+        th, P = _curve([grids.grids[c]] + ([fine_theta[c]] if c in fine else []),
+                       [grids.coarse[c]] + ([fine[c]] if c in fine else []), lo, hi)
         curves_raw[c] = (th, P)
         if c in fine:
-            est[c], _ = _spline_fit(th, P, yr, w, lo, hi, valid)
-    # ---- statistics of every model on the data (dense spline curves on top of the specimen-mean shift)
-    curves = {c: (lambda td, D: (td, D + shift))(*_dense(*curves_raw[c], *fx.EFFECTS[c].bounds)) for c in cands}
-    too_few = int(valid.sum()) < int(s["min_rows"])
+            est[c], _ = _spline_fit(th, P, null.yr, w, lo, hi, null.valid)
+    return Refinement(est, fine_theta, fine, curves_raw, int(bool(fine_theta)))
+
+
+@dataclass
+class Scorer:
+    """Every model's statistics on tables (:func:`_statistics`) in the metric of the tests: the table's standard
+    errors, decorrelated by the specimens' correlation (the bank's, shrunk, with the fitted noise); independent rows
+    without a bank. ``scorer(Y, cands, nuis)`` scores tables Y (B, n) by the given candidates and nuisance families
+    (None: all)."""
+    metric: Metric
+    curves: dict          # candidate -> (dense theta, predictions on top of the specimen-mean shift)
+    curves_w: dict        # the same in the metric
+    nuis: list            # nuisance families (none with too few rows)
+    nuis_w: dict          # family name -> (family, its columns in the metric)
+    r0: np.ndarray        # the null prediction, 0 outside the valid rows
+    r_w: np.ndarray       # r0 in the metric
+    normalise: bool       # LR statistics divided by the overdispersion c0
+    null_model: object    # the fitted null noise (fit_null_noise) with a bank, else None
+    too_few: bool         # fewer than min_rows rows compared
+
+    def __call__(self, Y, cands_=None, nuis_=None):
+        cw_ = self.curves_w if cands_ is None else {c: self.curves_w[c] for c in cands_}
+        nw_ = self.nuis_w if nuis_ is None else {n: self.nuis_w[n] for n in nuis_}
+        return _statistics(cw_, nw_, self.r_w, self.metric(np.where(np.isfinite(Y), Y, self.r0)),
+                           normalise=self.normalise)
+
+
+def scorer(problem: Problem, cands: list, refinement: Refinement, null: NullPrediction, settings: dict) -> Scorer:
+    """The dense spline curves of the candidates on top of the specimen-mean shift, the nuisance families and the
+    metric of the tests (``test_metric``, ``lr_normalise``)."""
+    y, sig, valid, bank = problem.y, problem.sigma, null.valid, null.bank
+    curves = {c: (lambda td, D: (td, D + null.shift))(*_dense(*refinement.curves_raw[c], *fx.EFFECTS[c].bounds))
+              for c in cands}
+    too_few = int(valid.sum()) < int(settings["min_rows"])
     nuis = families(problem, valid) if not too_few else []
-    # the metric of the tests: the table's standard errors, decorrelated by the specimens' correlation (the bank's,
-    # shrunk, with the fitted noise); independent rows without a bank
     null_model = None
     if bank is not None:
         null_model = fit_null_noise(problem.meta.get("spec_sd", np.full(len(y), np.nan)), bank, valid)
-    decorrelate = s["test_metric"] == "specimen_correlation"
+    decorrelate = settings["test_metric"] == "specimen_correlation"
     metric = (specimen_metric(bank, null_model, sig, valid) if decorrelate and bank is not None and valid.sum() >= 3
               else Metric(valid, sig))
-    normalise = bool(s["lr_normalise"]) or bank is None
-    r0 = np.where(valid, r, 0.0)
+    normalise = bool(settings["lr_normalise"]) or bank is None
+    r0 = np.where(valid, null.r, 0.0)
     curves_w = {c: (td, metric(np.where(np.isfinite(D), D, r0 + 10.0 * sig))) for c, (td, D) in curves.items()}
-    r_w = metric(r0)[0]
     nuis_w = {nu.name: (nu, metric(nu.columns(r0).T).T) for nu in nuis}
+    return Scorer(metric, curves, curves_w, nuis, nuis_w, r0, metric(r0)[0], normalise, null_model, too_few)
 
-    def stats(Y, cands_=None, nuis_=None):
-        cw_ = curves_w if cands_ is None else {c: curves_w[c] for c in cands_}
-        nw_ = nuis_w if nuis_ is None else {n: nuis_w[n] for n in nuis_}
-        return _statistics(cw_, nw_, r_w, metric(np.where(np.isfinite(Y), Y, r0)), normalise=normalise)
 
-    obs = stats(y[None, :])
-    T_obs = {c: float(v[0]) for c, v in obs["T_c"].items()}
-    cand_rank = sorted(cands, key=lambda c: -T_obs[c])
-    best = cand_rank[0] if cand_rank else None
-    # the estimates in the metric of the tests: the spline's chi-square minimised around the dense grid's optimum
-    y_w = metric(np.where(np.isfinite(y), y, r0))[0]
+def refit(problem: Problem, cands: list, best: str | None, refinement: Refinement, null: NullPrediction,
+          score: Scorer, obs: dict) -> tuple[dict, dict, int]:
+    """The estimates in the metric of the tests (each candidate's spline chi-square minimised around the dense grid's
+    optimum ``obs["th_c"]``) and the refits on top of the specimen-mean shift: the exact model at the ``best``
+    candidate's estimate (one forward batch), the others' splines at theirs. Returns (estimates, refits, batches)."""
+    y = problem.y
+    est = dict(refinement.est)
+    y_w = score.metric(np.where(np.isfinite(y), y, score.r0))[0]
     for c in cands:
-        th, P = curves_raw[c]
+        th, P = refinement.curves_raw[c]
         ok = np.isfinite(P).all(0)
         if ok.all() and len(th) >= 2:
             spline = CubicSpline(th, P, axis=0)
@@ -361,137 +443,225 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
             a, b = th[max(j - 1, 0)], th[min(j + 1, len(th) - 1)]
 
             def f(t, spline=spline):
-                return float(((metric(spline(t) + shift) - y_w) ** 2).sum())
+                return float(((score.metric(spline(t) + null.shift) - y_w) ** 2).sum())
 
             res = minimize_scalar(f, bounds=(max(a, lo), min(b, hi)), method="bounded",
                                   options={"xatol": 1e-6 * (hi - lo)})
             est[c] = float(res.x) if res.fun <= f(t0) else t0
-    # batch 3: the exact model at the best candidate's estimate (its refit), on top of the specimen-mean shift; the
-    # other candidates' refits are their splines at their estimates
     exact = {}
     for c in cands:
         if np.isfinite(est[c]):
-            th, P = curves_raw[c]
+            th, P = refinement.curves_raw[c]
             ok = np.isfinite(P).all(0)
             e = np.full(len(y), np.nan)
             e[ok] = CubicSpline(th, P[:, ok], axis=0)(est[c])
-            exact[c] = e + shift
+            exact[c] = e + null.shift
+    batches = 0
     if best is not None and np.isfinite(est[best]):
-        exact[best] = _batch(problem, [(best, np.array([est[best]]))])[0][0] + shift
-        n_batches += 1
+        exact[best] = _batch(problem, [(best, np.array([est[best]]))])[0][0] + null.shift
+        batches = 1
+    return est, exact, batches
+
+
+@dataclass
+class NullTests:
+    """Phase 3 (null tests): the parametric bootstrap under the null hypothesis and its p-values."""
+    B: int                      # null tables asked for (n_bootstrap)
+    c_hat0: float               # overdispersion of the null model on the data
+    p_adj: dict = field(default_factory=dict)       # candidate -> max-T p-value
+    p_raw: dict = field(default_factory=dict)       # candidate -> its own bootstrap p-value
+    Tmax_null: np.ndarray = field(default_factory=lambda: np.array([]))
+    boot: dict | None = None    # the statistics of the null tables (None: no bootstrap)
+    Yb: np.ndarray | None = None   # null tables of the LR tests and their sigmas
+    Sb: np.ndarray | None = None
+    Yf: np.ndarray | None = None   # null tables of the goodness-of-fit tests and their sigmas
+    Sf: np.ndarray | None = None
+    fit0: dict | None = None    # statistics of the goodness-of-fit tables without specimens
+    p_nuis: dict = field(default_factory=dict)      # nuisance family -> max-T p-value among the families
+    p_fit: dict = field(default_factory=dict)       # explanation -> goodness-of-fit p-value
+
+
+def null_tests(problem: Problem, cands: list, null: NullPrediction, score: Scorer, obs: dict,
+               settings: dict) -> NullTests:
+    """Phase 3: ``n_bootstrap`` null tables (virtual specimens of the bank, or the null prediction plus Gaussian noise
+    x sqrt(c0)), every candidate's LR statistic on them, the single-step max-T p-values (candidates, and nuisance
+    families among themselves) and the null model's goodness of fit. None of it with too few rows or B = 0."""
+    T_obs = {c: float(v[0]) for c, v in obs["T_c"].items()}
+    out = NullTests(int(settings["n_bootstrap"]), float(obs["c0"][0]))
+    rng = np.random.default_rng([int(settings.get("seed", 0)), 15])
+    bank, r = null.bank, null.r
+    if score.too_few or out.B <= 0 or null.nv < 2:
+        return out
+    if bank is not None:
+        # the reference path when the problem carries new specimens for every null table (tests)
+        out.Yb, out.Sb = null_datasets(problem, bank, score.null_model, out.B, rng,
+                                       fresh=problem.meta.get("null_fresh"))
+    else:
+        out.Yb, out.Sb = _resample(problem, r, np.sqrt(out.c_hat0), out.B, rng)
+    # the goodness-of-fit (adequacy) tests take the null at face value: without specimens, the table's stated
+    # noise (the LR tests above use it x sqrt(c), robust to a table noisier than it says); with specimens the
+    # same null tables
+    out.Yf, out.Sf = (out.Yb, out.Sb) if bank is not None else _resample(problem, r, 1.0, out.B, rng)
+    out.fit0 = score(out.Yf, cands_=[], nuis_=[]) if bank is None else None
+    out.boot = boot = score(out.Yb)
+    if cands:
+        out.Tmax_null = np.max(np.vstack([boot["T_c"][c] for c in cands]), axis=0)
+        for c in cands:
+            out.p_raw[c] = _p(boot["T_c"][c], T_obs[c])
+            out.p_adj[c] = _p(out.Tmax_null, T_obs[c])
+    if score.nuis:
+        Tn_max = np.max(np.vstack([boot["T_n"][nu.name] for nu in score.nuis]), axis=0)
+        out.p_nuis = {nu.name: _p(Tn_max, float(obs["T_n"][nu.name][0])) for nu in score.nuis}
+    out.p_fit["specimen_mean"] = _p((boot if out.fit0 is None else out.fit0)["chi_r"], float(obs["chi_r"][0]))
+    return out
+
+
+@dataclass
+class NuisanceRefits:
+    """Phase 4a: the nuisance explanations refitted to the data, the best one, and which candidates act on the
+    experiment as a nuisance family does."""
+    aic: dict            # explanation (the null model's label, each family) -> AIC with the overdispersion c0
+    nres: dict           # family -> its description, parameters, chi2, p-value, gap, equivalent candidates
+    ncorr: dict          # candidate -> family -> multiple correlation of their effects
+    equiv: dict          # candidate -> families it is equivalent to (multiple correlation >= max_correlation)
+    best_nuisance: str   # lowest AIC (ties: the null model)
+    fam: dict            # family name -> family
+
+
+def nuisance_refits(problem: Problem, cands: list, null: NullPrediction, score: Scorer, obs: dict,
+                    tests: NullTests, settings: dict) -> NuisanceRefits:
+    """Phase 4a: every nuisance family's closed-form refit, its AIC (with the overdispersion of the null model) and
+    its multiple correlation with each candidate's effect in the metric of the tests."""
+    y, sig, valid, nv = problem.y, problem.sigma, null.valid, null.nv
+    S_w = {c: (lambda td, D: D[np.abs(td - _ref_value(c)).argmin()] - D[np.abs(td).argmin()])(*score.curves_w[c])
+           for c in cands}
+    aic = {null.none_label: float(obs["chi_r"][0]) / tests.c_hat0}
+    nres = {}
+    for nu in score.nuis:
+        par = obs["par_n"][nu.name][0]
+        pred = nu.predict(np.where(valid, null.r, 0.0), par)
+        aic[nu.name] = float(obs["chi_n"][nu.name][0]) / tests.c_hat0 + 2 * nu.k
+        zn = (pred - y) / sig
+        nres[nu.name] = {"description": nu.describe(par, problem.unit), "k": nu.k,
+                         "parameters": dict(zip(nu.labels, map(float, par))), "chi2": float(obs["chi_n"][nu.name][0]),
+                         "aic": aic[nu.name], "lr_statistic": float(obs["T_n"][nu.name][0]),
+                         "p_value": tests.p_nuis.get(nu.name),
+                         "gap": float(np.sqrt(np.mean(zn[valid] ** 2))) if nv else None,
+                         "equivalent_candidates": []}
+    ncorr = {c: {nu.name: multiple_correlation(S_w[c], score.nuis_w[nu.name][1]) for nu in score.nuis} for c in cands}
+    equiv = {c: [n for n, m in ncorr[c].items() if np.isfinite(m) and m >= float(settings["max_correlation"])]
+             for c in cands}
+    for c, names in equiv.items():
+        for nm in names:
+            nres[nm]["equivalent_candidates"].append(c)
+    best_nuisance = min(aic, key=lambda k: (aic[k], k != null.none_label))
+    return NuisanceRefits(aic, nres, ncorr, equiv, best_nuisance, {nu.name: nu for nu in score.nuis})
+
+
+@dataclass
+class Diagnostics:
+    """Ranking and diagnostics of the refits: chi2 per model, QAICc, the candidates' weights, cross-validation, and
+    the naming margins in the metric of the tests."""
+    chi: dict                 # "none" and every refitted candidate -> chi2 (RMS z basis, 10 sigma per lost row)
+    score: dict               # QAICc
+    cw: dict                  # candidate weights (confidence)
+    cv: dict                  # grouped cross-validation RMS z
+    gap_null: float           # RMS of the null prediction's residuals in the metric
+    chi_null_obs: float       # its chi2 in the metric
+    gap_after_best: float     # RMS z after the best candidate's exact refit
+    gap_after_best_w: float   # the same in the metric of the tests
+
+
+def diagnostics(problem: Problem, cands: list, best: str | None, exact: dict, grids: Grids, refinement: Refinement,
+                null: NullPrediction, score: Scorer, obs: dict) -> Diagnostics:
+    """Every refit's chi2, QAICc, weights among the candidates and cross-validation (diagnostics), and the gap
+    against the null prediction and after the best candidate's refit in the metric of the tests (with specimens, a
+    table's correlated deviations, which no effect explains, weigh there as what they are; without, the RMS z)."""
+    y, sig, valid, nv, r = problem.y, problem.sigma, null.valid, null.nv, null.r
+    w = 1.0 / sig ** 2
     chi = {"none": float(((r - y)[valid] ** 2 * w[valid]).sum())}
     for c in exact:
         ok = valid & np.isfinite(exact[c])
         z = (exact[c] - y) / sig
         # a scenario that loses its equilibrium under the effect counts as a large residual (10 sigma)
         chi[c] = float((np.where(ok, z, 10.0)[valid] ** 2).sum())
-    too_few = nv < int(s["min_rows"])
-    B = int(s["n_bootstrap"])
-    c_hat0 = float(obs["c0"][0])
-    rng = np.random.default_rng([int(s.get("seed", 0)), 15])
-    p_adj, p_raw, Tmax_null, boot, Yb, Sb, Yf, Sf, fit0 = {}, {}, np.array([]), None, None, None, None, None, None
-    p_nuis, p_fit = {}, {}
-    if not too_few and B > 0 and nv >= 2:
-        if bank is not None:
-            # the reference path when the problem carries new specimens for every null table (tests)
-            Yb, Sb = null_datasets(problem, bank, null_model, B, rng, fresh=problem.meta.get("null_fresh"))
-        else:
-            Yb, Sb = _resample(problem, r, np.sqrt(c_hat0), B, rng)
-        # the goodness-of-fit (adequacy) tests take the null at face value: without specimens, the table's stated
-        # noise (the LR tests above use it x sqrt(c), robust to a table noisier than it says); with specimens the
-        # same null tables
-        Yf, Sf = (Yb, Sb) if bank is not None else _resample(problem, r, 1.0, B, rng)
-        fit0 = stats(Yf, cands_=[], nuis_=[]) if bank is None else None
-        boot = stats(Yb)
-        if cands:
-            Tmax_null = np.max(np.vstack([boot["T_c"][c] for c in cands]), axis=0)
-            for c in cands:
-                p_raw[c] = _p(boot["T_c"][c], T_obs[c])
-                p_adj[c] = _p(Tmax_null, T_obs[c])
-        if nuis:
-            Tn_max = np.max(np.vstack([boot["T_n"][nu.name] for nu in nuis]), axis=0)
-            p_nuis = {nu.name: _p(Tn_max, float(obs["T_n"][nu.name][0])) for nu in nuis}
-        p_fit["specimen_mean"] = _p((boot if fit0 is None else fit0)["chi_r"], float(obs["chi_r"][0]))
-    # ---- nuisance models: refits, the best one (AIC with the overdispersion of "none"), equivalence with candidates
-    S = _sensitivities(curves, cands, sig, valid)
-    S_w = {c: (lambda td, D: D[np.abs(td - _ref_value(c)).argmin()] - D[np.abs(td).argmin()])(*curves_w[c])
-           for c in cands}
-    aic = {none_label: float(obs["chi_r"][0]) / c_hat0}
-    nres = {}
-    for nu in nuis:
-        par = obs["par_n"][nu.name][0]
-        pred = nu.predict(np.where(valid, r, 0.0), par)
-        aic[nu.name] = float(obs["chi_n"][nu.name][0]) / c_hat0 + 2 * nu.k
-        zn = (pred - y) / sig
-        nres[nu.name] = {"description": nu.describe(par, problem.unit), "k": nu.k,
-                         "parameters": dict(zip(nu.labels, map(float, par))), "chi2": float(obs["chi_n"][nu.name][0]),
-                         "aic": aic[nu.name], "lr_statistic": float(obs["T_n"][nu.name][0]),
-                         "p_value": p_nuis.get(nu.name), "gap": float(np.sqrt(np.mean(zn[valid] ** 2))) if nv else None,
-                         "equivalent_candidates": []}
-    ncorr = {c: {nu.name: multiple_correlation(S_w[c], nuis_w[nu.name][1]) for nu in nuis} for c in cands}
-    equiv = {c: [n for n, m in ncorr[c].items() if np.isfinite(m) and m >= float(s["max_correlation"])]
-             for c in cands}
-    for c, names in equiv.items():
-        for nm in names:
-            nres[nm]["equivalent_candidates"].append(c)
-    best_nuisance = min(aic, key=lambda k: (aic[k], k != none_label))
-    # ---- ranking (by the LR statistic), confidence among the candidates, diagnostics
     chat = max(1.0, min(chi.values()) / max(nv - 1, 1))
-    score = {m: _qaicc(v, 0 if m == "none" else 1, nv, chat) for m, v in chi.items()}
+    qaicc = {m: _qaicc(v, 0 if m == "none" else 1, nv, chat) for m, v in chi.items()}
     c_best = max(1.0, chi[best] / max(nv - 1, 1)) if best in chi else 1.0
     cw = {c: np.exp(-0.5 * (chi[c] - min(chi[k] for k in exact)) / c_best) for c in exact}
     tot = sum(cw.values())
     cw = {c: float(v / tot) for c, v in cw.items()} if tot > 0 else {}
-    cv = _cross_validate(problem, cands, grids, coarse, fine_theta, fine, exact, yr, w, sig, valid, gap_before) \
-        if nv >= 3 else {"none": gap_before}
-    # the naming margins in the metric of the tests: the RMS of the decorrelated residuals against the null
-    # prediction r and after the best candidate's exact refit (with specimens, a table's correlated deviations,
-    # which no effect explains, weigh there as what they are; without, these are the RMS z)
+    cv = _cross_validate(problem, cands, grids.grids, grids.coarse, refinement.fine_theta, refinement.fine, exact,
+                         null.yr, w, sig, valid, null.gap_before) if nv >= 3 else {"none": null.gap_before}
     gap_null = float(np.sqrt(obs["chi_r"][0] / nv)) if nv else float("nan")
-    chi_null_obs = float(obs["chi_r"][0])
     gap_after_best, gap_after_best_w = float("nan"), float("nan")
     if best is not None and best in exact:
         zb = (exact[best] - y) / sig
         gap_after_best = float(np.sqrt(np.mean(np.where(np.isfinite(zb), zb, 10.0)[valid] ** 2)))
-        eb = np.where(np.isfinite(exact[best]), exact[best], r0 + 10.0 * sig)
-        gap_after_best_w = float(np.sqrt(((metric(eb) - y_w) ** 2).sum() / nv))
-    # ---- the best candidate against the best nuisance it is not equivalent to, by the same bootstrap LR test;
-    # the adequacy of each explanation: its residual chi2 against its own bootstrap
-    versus, p_vs, D_obs = None, None, None
-    fam = {nu.name: nu for nu in nuis}
-    if best is not None and boot is not None:
+        eb = np.where(np.isfinite(exact[best]), exact[best], score.r0 + 10.0 * sig)
+        y_w = score.metric(np.where(np.isfinite(y), y, score.r0))[0]
+        gap_after_best_w = float(np.sqrt(((score.metric(eb) - y_w) ** 2).sum() / nv))
+    return Diagnostics(chi, qaicc, cw, cv, gap_null, float(obs["chi_r"][0]), gap_after_best, gap_after_best_w)
+
+
+@dataclass
+class NuisanceComparison:
+    """Phase 4b: the best candidate against the best nuisance explanation it is not equivalent to, and the adequacy
+    of the best candidate's and the best nuisance's refits."""
+    versus: str | None = None     # the explanation the best candidate is tested against
+    p_vs: float | None = None     # bootstrap p-value of that test
+    D_obs: float | None = None    # its observed statistic
+    p_fit: dict = field(default_factory=dict)   # the null tests' p_fit with best_candidate and best_nuisance added
+
+
+def compare_nuisance(cands: list, best: str | None, exact: dict, null: NullPrediction, score: Scorer, obs: dict,
+                     tests: NullTests, refits: NuisanceRefits) -> NuisanceComparison:
+    """Phase 4b: the best candidate against the best nuisance it is not equivalent to (lowest AIC), by the same
+    bootstrap LR test on tables of the nuisance hypothesis (the null tables moved by the nuisance's refit); the
+    adequacy of each explanation: its residual chi2 against its own null tables."""
+    out = NuisanceComparison(p_fit=dict(tests.p_fit))
+    T_obs = {c: float(v[0]) for c, v in obs["T_c"].items()}
+    r, valid, nv = null.r, null.valid, null.nv
+    fam, aic, equiv, best_nuisance = refits.fam, refits.aic, refits.equiv, refits.best_nuisance
+    if best is not None and tests.boot is not None:
         allowed = {k: v for k, v in aic.items() if k not in equiv.get(best, [])}
-        versus = min(allowed, key=lambda k: (allowed[k], k != none_label))
-        if versus == none_label:
-            p_vs, D_obs = p_adj.get(best), T_obs[best]
+        out.versus = versus = min(allowed, key=lambda k: (allowed[k], k != null.none_label))
+        if versus == null.none_label:
+            out.p_vs, out.D_obs = tests.p_adj.get(best), T_obs[best]
         else:
             nu = fam[versus]
-            Yn, _ = nu.transform(Yb, Sb, r, obs["par_n"][versus][0])
-            bn = stats(Yn, nuis_=[versus])
+            Yn, _ = nu.transform(tests.Yb, tests.Sb, r, obs["par_n"][versus][0])
+            bn = score(Yn, nuis_=[versus])
 
             def dstat(st):
-                cn = np.maximum(1.0, st["chi_n"][versus] / max(nv - 1 - nu.k, 1)) if normalise else 1.0
+                cn = np.maximum(1.0, st["chi_n"][versus] / max(nv - 1 - nu.k, 1)) if score.normalise else 1.0
                 return (st["chi_n"][versus] - np.min(np.vstack([st["chi_c"][c] for c in cands]), axis=0)) / cn
 
-            D_obs = float(dstat(obs)[0])
-            p_vs = _p(dstat(bn), D_obs)
+            out.D_obs = float(dstat(obs)[0])
+            out.p_vs = _p(dstat(bn), out.D_obs)
         # adequacy of the best candidate: null tables shifted by its refit effect, refitted
         if best in exact and np.isfinite(exact[best][valid]).all():
-            Yc = Yf + (exact[best] - r)[None, :]
-            bc = stats(Yc, cands_=[best], nuis_=[])
-            p_fit["best_candidate"] = _p(bc["chi_c"][best], float(obs["chi_c"][best][0]))
-    if boot is not None and best_nuisance != none_label:
+            Yc = tests.Yf + (exact[best] - r)[None, :]
+            bc = score(Yc, cands_=[best], nuis_=[])
+            out.p_fit["best_candidate"] = _p(bc["chi_c"][best], float(obs["chi_c"][best][0]))
+    if tests.boot is not None and best_nuisance != null.none_label:
         nu = fam[best_nuisance]
-        Yn, _ = nu.transform(Yf, Sf, r, obs["par_n"][best_nuisance][0])
-        bn = stats(Yn, cands_=[], nuis_=[best_nuisance])
-        p_fit["best_nuisance"] = _p(bn["chi_n"][best_nuisance], float(obs["chi_n"][best_nuisance][0]))
-    elif "specimen_mean" in p_fit:
-        p_fit["best_nuisance"] = p_fit["specimen_mean"]
-    # the share of the discrepancy the best candidate's refit explains: its chi2 drop (metric of the tests) over the
-    # excess of the observed chi2 above its expectation under the null (the null tables taken at face value); the
-    # null's own discrepancy (specimens, noise) is no effect's to explain
+        Yn, _ = nu.transform(tests.Yf, tests.Sf, r, obs["par_n"][best_nuisance][0])
+        bn = score(Yn, cands_=[], nuis_=[best_nuisance])
+        out.p_fit["best_nuisance"] = _p(bn["chi_n"][best_nuisance], float(obs["chi_n"][best_nuisance][0]))
+    elif "specimen_mean" in out.p_fit:
+        out.p_fit["best_nuisance"] = out.p_fit["specimen_mean"]
+    return out
+
+
+def explained_share(gap_after_best_w: float, nv: int, chi_null_obs: float, tests: NullTests) -> tuple:
+    """The share of the discrepancy the best candidate's refit explains: its chi2 drop (metric of the tests) over
+    the excess of the observed chi2 above its expectation under the null (the null tables taken at face value); the
+    null's own discrepancy (specimens, noise) is no effect's to explain. Returns (share, chi2 after the refit,
+    chi2 expected under the null)."""
     chi_after_obs = gap_after_best_w ** 2 * nv if np.isfinite(gap_after_best_w) else float("nan")
-    null_chi = (boot if fit0 is None else fit0) if boot is not None else None     # fit0: tables without specimens
+    # fit0: tables without specimens
+    null_chi = (tests.boot if tests.fit0 is None else tests.fit0) if tests.boot is not None else None
     chi_null_expected = float(np.mean(null_chi["chi_r"])) if null_chi is not None else float(nv)
     excess = chi_null_obs - chi_null_expected
     if not np.isfinite(chi_after_obs):
@@ -502,47 +672,91 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
         # no discrepancy beyond what the null tables give: the share has nothing to measure, the directed tests
         # (max-T, candidate against nuisance, the refit's goodness of fit) decide; the refit must not fit worse
         explained = 1.0 if chi_after_obs <= chi_null_obs else 0.0
-    # ---- decision
+    return explained, chi_after_obs, chi_null_expected
+
+
+@dataclass
+class Evidence:
+    """What the decision reads (phase 5): the best candidate, its tests, and what the nuisance explanations and the
+    null model give. Defaults: nothing tested."""
+    best: str | None
+    n_rows: int                       # rows compared
+    n_candidates: int
+    gap_before: float
+    too_few: bool = False
+    p_adj: dict = field(default_factory=dict)       # candidate -> max-T p-value
+    B: int = 0                                      # null tables
+    with_specimens: bool = False                    # the null tables are virtual specimens (a bank)
+    versus: str | None = None
+    p_vs: float | None = None
+    p_fit: dict = field(default_factory=dict)
+    explained: float = 0.0
+    chi_null_obs: float = float("nan")
+    chi_after_obs: float = float("nan")
+    chi_null_expected: float = float("nan")
+    null_text: str = "the nominal model and the measurement noise"
+    none_label: str = "nominal model"
+    best_nuisance: str = "nominal model"
+    p_nuis: dict = field(default_factory=dict)
+    nres: dict = field(default_factory=dict)        # NuisanceRefits.nres
+
+
+@dataclass
+class Decision:
+    named: str | None     # the named effect, or None
+    decision: str         # "named: <effect>", "nothing named...", "nuisance: ...", "unexplained"
+    reasons: list         # why (every criterion the best candidate fails; what the table is otherwise)
+
+
+def decide(ev: Evidence, settings: dict) -> Decision:
+    """Phase 5: ``named: <best>`` only if at least ``min_rows`` rows are compared, gap_before > ``min_gap``, its max-T
+    p < ``alpha``, it beats the nuisance ``versus`` at ``alpha``, its refit is adequate (p >= alpha) and explains at
+    least ``min_gap_reduction`` of the discrepancy; otherwise what the table is (nothing named, a nuisance,
+    unexplained), with the reasons."""
+    s, best, nv, bank = settings, ev.best, ev.n_rows, ev.with_specimens
+    p_fit, p_nuis, nres, best_nuisance = ev.p_fit, ev.p_nuis, ev.nres, ev.best_nuisance
+    gap_before, null_text = ev.gap_before, ev.null_text
     alpha = float(s["alpha"])
     reasons = []
     if best is None:
         reasons.append("no candidate effect acts on this experiment")
-    elif too_few:
+    elif ev.too_few:
         reasons.append(f"too few rows: {nv} scenario(s) compared, at least {int(s['min_rows'])} needed to test "
-                       f"{len(cands)} candidate(s) against the measurement noise; nothing can be named from these data")
+                       f"{ev.n_candidates} candidate(s) against the measurement noise; nothing can be named from "
+                       f"these data")
     else:
         if not gap_before > s["min_gap"]:
             reasons.append(f"gap_before {gap_before:.2f} <= min_gap {s['min_gap']:g}: model and data agree within the "
                            f"measurement uncertainty")
-        if not p_adj.get(best, 1.0) < alpha:
-            reasons.append(f"p = {p_adj.get(best, float('nan')):.3g} for {best} (max-T over {len(cands)} candidates, "
-                           f"{B} null tables{' of virtual specimens' if bank is not None else ''}) is not below alpha "
-                           f"{alpha:g}")
-        if not (p_vs if p_vs is not None else 1.0) < alpha:
-            reasons.append(f"{best} does not beat the nuisance explanation '{versus}' (p = {fmt_p(p_vs)} by the same "
-                           f"bootstrap LR test, tables of the nuisance hypothesis) below alpha {alpha:g}")
+        if not ev.p_adj.get(best, 1.0) < alpha:
+            reasons.append(f"p = {ev.p_adj.get(best, float('nan')):.3g} for {best} (max-T over {ev.n_candidates} "
+                           f"candidates, {ev.B} null tables{' of virtual specimens' if bank else ''}) is not below "
+                           f"alpha {alpha:g}")
+        if not (ev.p_vs if ev.p_vs is not None else 1.0) < alpha:
+            reasons.append(f"{best} does not beat the nuisance explanation '{ev.versus}' (p = {fmt_p(ev.p_vs)} by the "
+                           f"same bootstrap LR test, tables of the nuisance hypothesis) below alpha {alpha:g}")
         if not p_fit.get("best_candidate", 0.0) >= alpha:
             reasons.append(f"the refit of {best} leaves a misfit the null tables do not have (p = "
                            f"{fmt_p(p_fit.get('best_candidate'))} < alpha {alpha:g}): part of the discrepancy is not "
                            f"this effect")
-        red = explained
+        red = ev.explained
         if not red >= s["min_gap_reduction"]:
             reasons.append(f"the refit explains {100 * red:.0f}% < {100 * s['min_gap_reduction']:.0f}% of the "
-                           f"discrepancy beyond what the null hypothesis gives (chi2 {chi_null_obs:.1f} -> "
-                           f"{chi_after_obs:.1f}, {chi_null_expected:.1f} expected)")
+                           f"discrepancy beyond what the null hypothesis gives (chi2 {ev.chi_null_obs:.1f} -> "
+                           f"{ev.chi_after_obs:.1f}, {ev.chi_null_expected:.1f} expected)")
     named = best if best is not None and not reasons else None
     if named:
         decision = f"named: {named}"
-    elif too_few or best is None:
+    elif ev.too_few or best is None:
         decision = "nothing named: " + "; ".join(reasons)
     elif p_fit.get("specimen_mean", 0.0) >= alpha:
-        shifted = bank is not None and gap_before > s["min_gap"]
+        shifted = bank and gap_before > s["min_gap"]
         decision = "nuisance: specimen-mean shift" if shifted else "nothing named"
         reasons.append(f"the table is consistent with {null_text} (goodness of fit p = "
                        f"{fmt_p(p_fit.get('specimen_mean'))})" + (
                            f"; its gap to the nominal model ({gap_before:.2f}) is what the mean of varied specimens "
                            f"gives" if shifted else ""))
-    elif (best_nuisance != none_label and p_nuis.get(best_nuisance, 1.0) < alpha
+    elif (best_nuisance != ev.none_label and p_nuis.get(best_nuisance, 1.0) < alpha
           and p_fit.get("best_nuisance", 0.0) >= alpha):
         decision = f"nuisance: {nres[best_nuisance]['description']}"
         reasons.append(f"the table differs from {null_text} (p = "
@@ -556,28 +770,78 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
                        f"(best '{nres[best_nuisance]['description'] if best_nuisance in nres else best_nuisance}', "
                        f"refit p = {fmt_p(p_fit.get('best_nuisance'))}) accounts for it: something is missing that "
                        f"the library does not hold")
+    return Decision(named, decision, reasons)
+
+
+def discover(problem: Problem, settings: dict | None = None, cache: dict | None = None) -> dict:
+    """Rank the candidate effects and the nuisance explanations, test them against the null hypothesis with
+    specimens in it and against each other, and decide (see the package doc). The phases: :func:`fit_grids`,
+    :func:`null_prediction`, :func:`refine`, :func:`scorer` and :func:`refit`, :func:`null_tests`,
+    :func:`nuisance_refits`, :func:`diagnostics`, :func:`compare_nuisance`, :func:`explained_share`, :func:`decide`;
+    :func:`result_record` writes the result."""
+    s = default_settings()
+    s.update(settings or {})
+    t_start = time.perf_counter()
+    cands = list(problem.candidates)
+    grids = fit_grids(problem, cands, s, cache)
+    null = null_prediction(problem, grids.base)
+    refinement = refine(problem, cands, grids, null, s)
+    score = scorer(problem, cands, refinement, null, s)
+    obs = score(problem.y[None, :])
+    T_obs = {c: float(v[0]) for c, v in obs["T_c"].items()}
+    cand_rank = sorted(cands, key=lambda c: -T_obs[c])
+    best = cand_rank[0] if cand_rank else None
+    est, exact, refit_batches = refit(problem, cands, best, refinement, null, score, obs)
+    tests = null_tests(problem, cands, null, score, obs, s)
+    refits = nuisance_refits(problem, cands, null, score, obs, tests, s)
+    diag = diagnostics(problem, cands, best, exact, grids, refinement, null, score, obs)
+    comparison = compare_nuisance(cands, best, exact, null, score, obs, tests, refits)
+    explained, chi_after_obs, chi_null_expected = explained_share(diag.gap_after_best_w, null.nv, diag.chi_null_obs,
+                                                                  tests)
+    evidence = Evidence(best, null.nv, len(cands), null.gap_before, score.too_few, tests.p_adj, tests.B,
+                        null.bank is not None, comparison.versus, comparison.p_vs, comparison.p_fit, explained,
+                        diag.chi_null_obs, chi_after_obs, chi_null_expected, null.null_text, null.none_label,
+                        refits.best_nuisance, tests.p_nuis, refits.nres)
+    decision = decide(evidence, s)
+    S = _sensitivities(score.curves, cands, problem.sigma, null.valid)
+    ident = _identifiability(problem, cands, S, s, cache) \
+        if len(cands) >= 2 and null.nv >= 1 else {"correlation": {}, "max_correlation": float(s["max_correlation"]),
+                                                  "non_separable": []}
+    ident["nuisance_correlation"] = refits.ncorr
+    batches = grids.batches + refinement.batches + refit_batches
+    res, scen = result_record(problem, s, cands, cand_rank, best, est, exact, grids, null, score, obs, tests, refits,
+                              diag, comparison, evidence, decision, ident)
+    res["forward_batches"] = batches
+    res["seconds"] = time.perf_counter() - t_start
+    return {"result": res, "scenarios": scen, "problem": problem}
+
+
+# result_record (112 lines) is mostly one literal: the result's fields in the order discovery.json has kept them.
+def result_record(problem, s, cands, cand_rank, best, est, exact, grids, null, score, obs, tests, refits, diag,
+                  comparison, evidence, decision, ident) -> tuple[dict, pd.DataFrame]:
+    """The result (discovery.json's fields, without ``forward_batches`` and ``seconds``, which :func:`discover` adds)
+    and the per-scenario table of the phases' outputs."""
+    y, sig, valid, nv, r, base, bank = problem.y, problem.sigma, null.valid, null.nv, null.r, grids.base, null.bank
+    named, reasons, alpha = decision.named, decision.reasons, float(s["alpha"])
+    fam, nres, best_nuisance, equiv = refits.fam, refits.nres, refits.best_nuisance, refits.equiv
+    p_adj, p_raw, B, Tmax_null, c_hat0 = tests.p_adj, tests.p_raw, tests.B, tests.Tmax_null, tests.c_hat0
+    T_obs = {c: float(v[0]) for c, v in obs["T_c"].items()}
+    gap_before, z0 = null.gap_before, null.z0
     nuis_pred = r if best_nuisance not in fam else fam[best_nuisance].predict(
         np.where(valid, r, np.nan), obs["par_n"][best_nuisance][0])
     after = exact[named] if named else base
     z1 = (after - y) / sig
-    gap_after = gap_after_best if named else gap_before
+    gap_after = diag.gap_after_best if named else gap_before
     zr = (r - y) / sig
     zn = (nuis_pred - y) / sig
     rms_phys0 = float(np.sqrt(np.mean((base - y)[valid] ** 2))) if nv else float("nan")
     dev1 = np.where(np.isfinite(after), after - y, np.nan)[valid]
     rms_phys1 = float(np.sqrt(np.mean(dev1 ** 2))) if nv else float("nan")
     scen = problem.keys.copy()
-    scen["measured"] = y
-    scen["sigma"] = sig
-    scen["model_before"] = base
-    scen["z_before"] = z0
-    scen["model_specimen_mean"] = r
-    scen["z_specimen_mean"] = zr
-    scen["model_nuisance"] = nuis_pred
-    scen["z_nuisance"] = zn
-    scen["model_after"] = after
-    scen["z_after"] = z1
-    scen["unit"] = problem.unit
+    for k, v in (("measured", y), ("sigma", sig), ("model_before", base), ("z_before", z0), ("model_specimen_mean", r),
+                 ("z_specimen_mean", zr), ("model_nuisance", nuis_pred), ("z_nuisance", zn), ("model_after", after),
+                 ("z_after", z1), ("unit", problem.unit)):
+        scen[k] = v
     for k in ("quantity", "nominal_model"):      # what is compared, and with which model (when the problem says)
         if k in problem.meta:
             scen[k] = problem.meta[k]
@@ -587,15 +851,11 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
         lo, hi = fx.EFFECTS[c].bounds
         return bool(np.isfinite(est[c]) and min(est[c] - lo, hi - est[c]) <= 1e-3 * (hi - lo))
 
-    ident = _identifiability(problem, cands, S, s, cache) \
-        if len(cands) >= 2 and nv >= 1 else {"correlation": {}, "max_correlation": float(s["max_correlation"]),
-                                             "non_separable": []}
-    ident["nuisance_correlation"] = ncorr
     ranking = [["none", 0.0]] + [[c, T_obs[c]] for c in cand_rank]
     ranking = sorted(ranking, key=lambda kv: -kv[1])
     kind = ("virtual_specimens" if bank is not None else "gaussian")
     null_desc = ({"kind": kind, "specimens": bank.K, "bank": bank.source,
-                  "correlation_shrinkage": metric.shrinkage} | null_model.describe(problem.unit)
+                  "correlation_shrinkage": score.metric.shrinkage} | score.null_model.describe(problem.unit)
                  if bank is not None else {"kind": kind, "noise_scale": float(np.sqrt(c_hat0))})
     gr = float(np.sqrt(np.mean(zr[valid] ** 2))) if nv else float("nan")
     res = {
@@ -603,12 +863,12 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
         "n_scenarios": nv,
         "unit": problem.unit,
         "named_effect": named,
-        "decision": decision,
+        "decision": decision.decision,
         "decision_reasons": reasons,
         "parameter_estimate": ({"effect": named, "parameter": eff.parameter, "value": est[named], "unit": eff.unit,
                                 "at_bound": at_bound(named)} if named else None),
         "named_equivalent_to": equiv.get(named, []) if named else [],
-        "p_value": p_adj.get(best) if best is not None and not too_few else None,
+        "p_value": p_adj.get(best) if best is not None and not score.too_few else None,
         "p_value_method": (f"single-step max-T (Westfall-Young): share of {B} null tables whose largest LR statistic "
                            f"over the {len(cands)} candidates reaches the observed one, (1 + k) / (B + 1); null tables "
                            + ("of the table's n virtual specimens of the nominal model (a bank of "
@@ -624,41 +884,41 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
         "lr_statistic": T_obs,
         "p_values_adjusted": p_adj,
         "p_values_unadjusted": p_raw,
-        "specimen_mean": {"chi2": float(obs["chi_r"][0]), "gap": gr, "chi2_nominal": chi_nominal,
-                          "p_fit": p_fit.get("specimen_mean")},
+        "specimen_mean": {"chi2": float(obs["chi_r"][0]), "gap": gr, "chi2_nominal": null.chi_nominal,
+                          "p_fit": comparison.p_fit.get("specimen_mean")},
         "nuisance": nres,
         "best_nuisance": best_nuisance,
         "best_nuisance_description": nres[best_nuisance]["description"] if best_nuisance in nres else best_nuisance,
-        "nuisance_test": {"candidate": best, "against": versus, "statistic": D_obs, "p_value": p_vs,
-                          "equivalent_nuisance": equiv.get(best, []) if best else []},
-        "adequacy_p": p_fit,
+        "nuisance_test": {"candidate": best, "against": comparison.versus, "statistic": comparison.D_obs,
+                          "p_value": comparison.p_vs, "equivalent_nuisance": equiv.get(best, []) if best else []},
+        "adequacy_p": comparison.p_fit,
         "gap_before": gap_before, "gap_after": gap_after,
         "gap_after_above_threshold": bool(np.isfinite(gap_after) and gap_after > s["min_gap"]),
         "gap_before_rms": rms_phys0, "gap_after_rms": rms_phys1,
         "gap_specimen_mean": gr,
         "gap_nuisance": float(np.sqrt(np.mean(zn[valid] ** 2))) if nv else float("nan"),
         "gap_reduction": (1 - gap_after / gap_before) if named and gap_before > 0 else 0.0,
-        "discrepancy_explained": explained,
-        "gap_metric": {"null": gap_null, "after_best_candidate": gap_after_best_w,
+        "discrepancy_explained": evidence.explained,
+        "gap_metric": {"null": diag.gap_null, "after_best_candidate": diag.gap_after_best_w,
                        "definition": "RMS of the residuals in the metric of the tests (standard errors of the table, "
                                      "decorrelated by the specimens' correlation; the RMS z without specimens): the "
                                      "naming margins min_gap and min_gap_reduction apply to it"},
         "ranking": ranking,
-        "confidence": cw.get(named) if named else None,
+        "confidence": diag.cw.get(named) if named else None,
         "confidence_definition": ("probability of the named effect among the candidates: weights exp(-chi2_c / "
                                   "(2 c_best)) normalised over the candidates (each has one parameter); null when "
                                   "nothing is named"),
-        "candidate_weights": cw,
+        "candidate_weights": diag.cw,
         "best_candidate": best,
         "best_candidate_estimate": est.get(best) if best else None,
-        "best_candidate_gap_after": gap_after_best,
+        "best_candidate_gap_after": diag.gap_after_best,
         "estimates": {c: est[c] for c in cands},
         "at_bound": {c: at_bound(c) for c in cands},
         "bounds": {c: list(fx.EFFECTS[c].bounds) for c in cands},
-        "too_few_rows": bool(too_few),
+        "too_few_rows": bool(score.too_few),
         "identifiability": ident,
-        "qaicc": score,
-        "cv_rms_z": cv,
+        "qaicc": diag.score,
+        "cv_rms_z": diag.cv,
         "overdispersion_none": c_hat0,
         "input_warnings": list(problem.meta.get("input_warnings", [])),
         "criterion": ("LR statistic T_c = (chi2_0 - chi2_c) / c, chi2_0 of the specimen mean (nominal model + "
@@ -667,10 +927,8 @@ def discover(problem: Problem, settings: dict | None = None, cache: dict | None 
                       "explanation it is not equivalent to by the same test, and its refit is consistent with its own "
                       "null tables; gap = RMS of z against the nominal model"),
         "margins": {k: s[k] for k in ("alpha", "min_gap", "min_gap_reduction", "min_rows", "n_bootstrap")},
-        "forward_batches": n_batches,
-        "seconds": time.perf_counter() - t_start,
     }
-    return {"result": res, "scenarios": scen, "problem": problem}
+    return res, scen
 
 
 def fmt_p(p):

@@ -65,7 +65,7 @@ STAGES = ("intact", "wo_ssl", "wo_isl", "wo_fl", "wo_cl", "wo_va", "wo_pll", "wo
 #: the four loading directions of the stepwise-reduction tables
 MAIN_DIRECTIONS = ("flexion", "extension", "lateral_bending", "axial_rotation")
 #: the out-of-library causes of the discovery benchmark (config key discovery.benchmark.out_of_library;
-#: lumbar.discovery.benchmark.OUT_OF_LIBRARY describes them) and the experiment each acts on: which benchmark job
+#: lumbar.discovery.power_study.OUT_OF_LIBRARY describes them) and the experiment each acts on: which benchmark job
 #: needs which model and specimen files (the workflow's rule files import it)
 OUT_OF_LIBRARY_EXPERIMENT = {"disc_scale": "stepwise_rom", "ligament_removed": "stepwise_rom",
                              "rom_scale_per_direction": "stepwise_rom", "idp_scale": "idp_invitro"}

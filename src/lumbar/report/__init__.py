@@ -31,7 +31,7 @@ from .document import Doc, Para
 from .html_renderer import render_html
 from .pdf_renderer import render_pdf
 from .sections import NOT_BUILT, SECTIONS, ReportBuilder, fmt, report_section
-from . import load_sharing as _load_sharing_section  # noqa: F401, E402 - registers its report section
+from . import load_sharing_section as _load_sharing_section  # noqa: F401, E402 - registers its report section
 from . import posterior as _posterior_section  # noqa: F401, E402 - registers its report section
 
 __all__ = ["build_document", "build_report", "render_html", "render_pdf", "NOT_BUILT", "ReportBuilder", "Doc", "fmt",

@@ -1,5 +1,8 @@
-"""The discrepancy benchmark (test fixtures, never data): tables the discovery did not make, discovery on each, and
-the summary (false positives on nulls, library effects named, out-of-library causes left unnamed, power curve).
+"""The power study of the discovery, called the discrepancy benchmark in the configuration (``discovery.benchmark``)
+and the workflow (rules ``discovery_benchmark*``, results/discrepancy/benchmark*); a statistical study, not a timing
+benchmark (those are in benchmarks/). Test fixtures, never data: tables the discovery did not make, discovery on
+each, and the summary (false positives on nulls, library effects named, out-of-library causes left unnamed, power
+curve).
 
 Generator ``virtual_specimens`` (the default): every fixture is the mean of its own 6-8 virtual specimens (the
 configured :class:`lumbar.experiments.virtual_experiment.SpecimenVariation`: geometry scale, insertion and landmark
@@ -38,7 +41,7 @@ from ..inputs.tables import IDP_FIXTURE_PARTS, OUT_OF_LIBRARY_EXPERIMENT
 from .detect import benchmark_settings, discovery_settings
 from .fit import discover
 from .problems import build_problem, fsu_variants_from_config, idp_forward, idp_model_table
-from .report import write_outputs
+from .outputs import write_outputs
 from .specimens import FIXTURE_STREAM, idp_bank_table, rom_bank
 from .text import jsonable
 
@@ -301,13 +304,13 @@ def make_hidden_effect_dataset(config, experiment, effect, magnitude, seed, idp_
         out["kind"] = "surrogate"
         out["source"] = (f"TEST FIXTURE (benchmark): {what}, seed {seed}, {drawn['n_specimens']} virtual specimens "
                          f"of the nominal model (of {specimens.K} in stream {FIXTURE_STREAM}; "
-                         f"lumbar.discovery.benchmark), noise {100 * drawn['noise_rel']:.1f} % + "
+                         f"lumbar.discovery.power_study), noise {100 * drawn['noise_rel']:.1f} % + "
                          f"{drawn['noise_add']:.3g} {'deg' if experiment == 'stepwise_rom' else 'MPa'}; not data")
         return out
     n = int(b["n_specimens"])
     vals = {} if effect == "none" else {effect: np.array([float(magnitude)])}
     src = (f"TEST FIXTURE (benchmark): hidden effect {effect} = {magnitude:g} {unit}, seed {seed}, {n} noisy "
-           f"measurements of the calibration model (lumbar.discovery.benchmark.make_hidden_effect_dataset); not data")
+           f"measurements of the calibration model (lumbar.discovery.power_study.make_hidden_effect_dataset); not data")
     if experiment == "stepwise_rom":
         scen = rom_scenarios(config)
         fv = fsu_variants_from_config(config)
@@ -486,5 +489,5 @@ def summarise_benchmark(bench: pd.DataFrame, generator="virtual_specimens") -> d
                                "measurement noise per virtual specimen (no geometric/material specimen variation)",
                       "virtual_specimens": "every fixture from its own 6-8 virtual specimens with full variation "
                                            "(a stream disjoint from the discovery's null bank), multiplicative and "
-                                           "additive noise, for both experiments (lumbar.discovery.benchmark)"}[generator]
+                                           "additive noise, for both experiments (lumbar.discovery.power_study)"}[generator]
     return jsonable(m)

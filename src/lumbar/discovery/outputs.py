@@ -1,5 +1,6 @@
 """The outputs of one discovery (discovery.json, scenarios.csv, figures, the report section in markdown),
-:func:`run` (read, build, discover, write) and the summary of the discoveries on real data."""
+:func:`run` (read, build, discover, write) and the summary of the discoveries on real data; the paper-style report
+that shows them is the package :mod:`lumbar.report`."""
 from __future__ import annotations
 
 import json
@@ -181,7 +182,7 @@ def real_data_summary(paths) -> pd.DataFrame:
 
 def benchmark_paragraph(summary: dict) -> str:
     """The benchmark in one paragraph for the report, every number read from ``summary``
-    (:func:`lumbar.discovery.benchmark.summarise_benchmark`)."""
+    (:func:`lumbar.discovery.power_study.summarise_benchmark`)."""
     s = summary
     lib, ool, nul = s["library_at_benchmark_magnitudes"], s["out_of_library_unnamed"], s["null_p_values"]
 
