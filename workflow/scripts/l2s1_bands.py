@@ -9,10 +9,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _common.py
 import _common  # noqa: E402
-import pandas as pd  # noqa: E402
 from lumbar.experiments import l2s1  # noqa: E402
 from lumbar.experiments.calibration import shift_parameter  # noqa: E402
-from lumbar.experiments.posterior import read_posterior, table_bands  # noqa: E402
+from lumbar.experiments.posterior import table_bands_from_files  # noqa: E402
 from lumbar.geometry import load_geometry  # noqa: E402
 from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
@@ -22,11 +21,6 @@ KEYS = ("muscle_setup", "load_case")
 
 def main(snakemake, log):
     g, f, s, p = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solver, snakemake.params.l2s1
-    post = read_posterior(snakemake.input.posterior, snakemake.input.covariance)
-    if post is None:
-        log.info("the calibration has no posterior (no admissible fit): no bands")
-        write_table_atomic(pd.DataFrame(columns=list(KEYS) + ["map", "sd", "low90", "high90"]), snakemake.output[0])
-        return
     geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=list(l2s1.LEVELS))
     cs = load_characteristic_set("calibrated", data_dir=Path(_common.as_list(snakemake.input.characteristics)[0]).parent)
     cables = l2s1.derive_cables(snakemake.input.cables)
@@ -39,10 +33,14 @@ def main(snakemake, log):
                              tol=min(s["tol_force_n"], s["tol_moment_nm"]), moment_nm=p["moment_nm"])
         return df
 
-    bands = table_bands(table_of, "idp_mpa", KEYS, cs, post[0], post[1], shift_parameter)
+    bands = table_bands_from_files(snakemake.input.posterior, snakemake.input.covariance, table_of, "idp_mpa", KEYS, cs,
+                                   shift_parameter)
     write_table_atomic(bands, snakemake.output[0])
-    log.info("posterior bands of %d L2-S1 IDP scenarios (%d parameters); median 90 %% half-width %.3g MPa",
-             len(bands), len(post[0]), float((bands["high90"] - bands["map"]).median()))
+    if not len(bands):
+        log.info("the calibration has no posterior (no admissible fit): no bands")
+    else:
+        log.info("posterior bands of %d L2-S1 IDP scenarios; median 90 %% half-width %.3g MPa", len(bands),
+                 float((bands["high90"] - bands["map"]).median()))
 
 
 if __name__ == "__main__":

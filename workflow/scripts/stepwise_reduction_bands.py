@@ -9,11 +9,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _common.py
 import _common  # noqa: E402
-import pandas as pd  # noqa: E402
 from lumbar.experiments import stepwise_reduction as sr_mod  # noqa: E402
 from lumbar.experiments.calibration import shift_parameter  # noqa: E402
 from lumbar.experiments.fsu import build_fsu  # noqa: E402
-from lumbar.experiments.posterior import table_bands, read_posterior  # noqa: E402
+from lumbar.experiments.posterior import table_bands_from_files  # noqa: E402
 from lumbar.geometry import load_geometry  # noqa: E402
 from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
@@ -23,11 +22,6 @@ KEYS = ("stage", "direction", "moment_nm")
 
 def main(snakemake, log):
     g, f, s, sr = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solver, snakemake.params.sr
-    post = read_posterior(snakemake.input.posterior, snakemake.input.covariance)
-    if post is None:
-        log.info("the calibration has no posterior (no admissible fit): no bands")
-        write_table_atomic(pd.DataFrame(columns=list(KEYS) + ["map", "sd", "low90", "high90"]), snakemake.output[0])
-        return
     geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
     cs = load_characteristic_set("calibrated", data_dir=Path(_common.as_list(snakemake.input.characteristics)[0]).parent)
 
@@ -38,10 +32,14 @@ def main(snakemake, log):
                                                   tol=min(s["tol_force_n"], s["tol_moment_nm"]),
                                                   load_steps=s["load_steps"])
 
-    bands = table_bands(table_of, "rom_deg", KEYS, cs, post[0], post[1], shift_parameter)
+    bands = table_bands_from_files(snakemake.input.posterior, snakemake.input.covariance, table_of, "rom_deg", KEYS, cs,
+                                   shift_parameter)
     write_table_atomic(bands, snakemake.output[0])
-    log.info("posterior bands of %d stepwise-reduction scenarios (%d parameters); median 90 %% half-width %.3g deg",
-             len(bands), len(post[0]), float((bands["high90"] - bands["map"]).median()))
+    if not len(bands):
+        log.info("the calibration has no posterior (no admissible fit): no bands")
+    else:
+        log.info("posterior bands of %d stepwise-reduction scenarios; median 90 %% half-width %.3g deg", len(bands),
+                 float((bands["high90"] - bands["map"]).median()))
 
 
 if __name__ == "__main__":

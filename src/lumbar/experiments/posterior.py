@@ -261,3 +261,13 @@ def table_bands(table_of, value_col: str, key_cols, charset, names, cov, shift) 
     out = keys[0].copy()
     out["map"], out["sd"], out["low90"], out["high90"] = y, sd, y - Z90 * sd, y + Z90 * sd
     return out
+
+
+def table_bands_from_files(posterior_csv, covariance_csv, table_of, value_col: str, key_cols, charset,
+                           shift) -> pd.DataFrame:
+    """:func:`table_bands` with the calibration's posterior read from its files; an empty table with the columns
+    when the calibration has no posterior (no admissible fit)."""
+    post = read_posterior(posterior_csv, covariance_csv)
+    if post is None:
+        return pd.DataFrame(columns=list(key_cols) + ["map", "sd", "low90", "high90"])
+    return table_bands(table_of, value_col, key_cols, charset, post[0], post[1], shift)
