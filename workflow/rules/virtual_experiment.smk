@@ -7,6 +7,8 @@ rule stepwise_reduction_surrogate:
             [config["stepwise_reduction"]["generator_set"]],
         ),
         real_targets=config["stepwise_reduction"]["real_targets"],
+        # the disc-only rows: data of the anchoring fit as of the calibration's final fit (same MAP problem)
+        derived=stepwise_reduction_derived,
     output:
         table="results/experiments/stepwise_reduction_surrogate.csv",
         generator_fit="results/experiments/stepwise_reduction_generator_fit.csv",

@@ -31,9 +31,11 @@ if sr.get("anchor_generator") and sr.get("real_targets"):
         published = cs
         vh_path = g["path"] if g["kind"] == "visible_human" else None
         cs, _, spreads = calibration_prior(published, geo, f["level"], vh_path, sr["ligament_prior"])
+        derived = _common.first(snakemake.input.get("derived", []))
         fit = fit_admissible(geo, cs, targets, level=f["level"], published=published, geometry_path=vh_path,
                              k_shear=f.get("disc_shear_stiffness_n_per_m"), max_iter=s["max_iter"],
-                             prior_spread=spreads)
+                             prior_spread=spreads,
+                             disc_rows=read_experiment_table(derived) if derived else None)
     else:
         fit = fit_real_targets(geo, cs, targets, level=f["level"], k_shear=f.get("disc_shear_stiffness_n_per_m"),
                                max_iter=s["max_iter"])
