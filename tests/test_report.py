@@ -307,7 +307,7 @@ def fake_full(fake_results, tmp_path):
     figure (drawn by the library), a table far wider than the page, and workflow logs with warnings."""
     import pandas as pd
 
-    from lumbar.experiments.validation import plot_scoreboard
+    from lumbar.plots.validation import plot_scoreboard
 
     tmp, config, inputs = fake_results
     t, f = Path("results/tables"), Path("results/figures")

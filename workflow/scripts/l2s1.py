@@ -19,6 +19,7 @@ from lumbar.experiments import l2s1  # noqa: E402
 from lumbar.inputs.characteristics import load_characteristic_set, resolve_characteristic_set  # noqa: E402
 from lumbar.geometry import load_geometry  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
+from lumbar.plots import l2s1 as L2P  # noqa: E402
 
 
 def _geometry(g):
@@ -86,8 +87,8 @@ elif rule == "table5":
     internal = sims.drop(columns=["idp_mpa"]).merge(syn[["set", "muscle_setup", "load_case", "idp_sim_mpa",
                                                          "outlier", "data_kind"]], on=["set", "muscle_setup", "load_case"])
     write_table_atomic(internal, out.internal)
-    l2s1.plot_table5_grid(syn, out.grid)
-    l2s1.plot_fig7(syn, out.fig7)
+    L2P.plot_table5_grid(syn, out.grid)
+    L2P.plot_fig7(syn, out.fig7)
     for _, r in vs.iterrows():
         log.info("set %s: %d outliers of %d (paper: %s) [reference %s]", r["set"], r["n_outliers"],
                  r["n_scenarios"], r["paper_n_outliers"], r["data_kind"])

@@ -17,6 +17,7 @@ import pandas as pd  # noqa: E402
 
 from lumbar.experiments import load_sharing as LS  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
+from lumbar.plots import load_sharing as LSP  # noqa: E402
 
 if snakemake.rule == "load_sharing_curves":
     s, ls = snakemake.params.solver, snakemake.params.ls
@@ -57,14 +58,14 @@ elif snakemake.rule == "load_sharing_summary":
     lvl = snakemake.params.fsu["level"]
     ref = y[(y["level"] == lvl) & (y["quantity"] == "rom")].assign(
         direction=lambda d: d["direction"].str.replace("_one_side", "", regex=False))
-    LS.plot_curves(curves, ref, snakemake.output.curves_figure, bands=pd.read_csv(snakemake.input.bands))
+    LSP.plot_curves(curves, ref, snakemake.output.curves_figure, bands=pd.read_csv(snakemake.input.bands))
     if "calibrated" in curves:
-        LS.plot_shares(curves["calibrated"], snakemake.output.shares_figure,
+        LSP.plot_shares(curves["calibrated"], snakemake.output.shares_figure,
                        title=f"Moment carried by each structure, calibrated {lvl} unit (below 0: acting with the applied "
                        "moment; upper stack minus lower stack = the applied moment, dashed)")
     else:
         first = next(iter(curves))
-        LS.plot_shares(curves[first], snakemake.output.shares_figure)
+        LSP.plot_shares(curves[first], snakemake.output.shares_figure)
     write_table_atomic(summary, snakemake.output.summary)
     reduction = LS.reduction_flexion(pd.concat(list(curves.values()), ignore_index=True))
     write_table_atomic(reduction, snakemake.output.reduction)

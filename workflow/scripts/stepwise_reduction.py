@@ -17,6 +17,7 @@ snakemake, log = _common.start(globals())
 
 from lumbar.experiments import stepwise_reduction as sr_mod  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
+from lumbar.plots import stepwise_reduction as SRP  # noqa: E402
 
 if snakemake.rule == "stepwise_reduction_sim":
     s, sr = snakemake.params.solver, snakemake.params.sr
@@ -57,9 +58,9 @@ elif snakemake.rule == "table4":
     write_table_atomic(syn, snakemake.output.synopsis)
     write_table_atomic(counts, snakemake.output.counts)
     write_table_atomic(vs, snakemake.output.vs_paper)
-    sr_mod.plot_table4_grid(syn, snakemake.output.grid)
+    SRP.plot_table4_grid(syn, snakemake.output.grid)
 elif snakemake.rule == "fig6_rom_stepwise_reduction":
     syn = pd.read_csv(snakemake.input[0])
     set_name = "calibrated" if "calibrated" in set(syn["set"]) else str(syn["set"].iloc[0])
-    sr_mod.plot_rom_stepwise_reduction(syn, snakemake.output[0], set_name)
+    SRP.plot_rom_stepwise_reduction(syn, snakemake.output[0], set_name)
     log.info("wrote %s", snakemake.output[0])

@@ -16,10 +16,11 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from lumbar.experiments import validation as V  # noqa: E402
+from lumbar.plots import validation as VP  # noqa: E402
 
 if snakemake.rule == "validation_scoreboard_figure":
     table = pd.read_csv(snakemake.input[0])
-    V.plot_scoreboard(table, snakemake.output[0])
+    VP.plot_scoreboard(table, snakemake.output[0])
     counts = V.role_counts(V.distinct_comparisons(table))
     log.info("validation scoreboard figure: %d rows, %s", len(table),
              "; ".join(f"{role}: {w} of {n} distinct comparisons within" for role, (w, n) in counts.items()))
@@ -81,7 +82,7 @@ if snakemake.rule == "multilevel_validation":
     write_table_atomic(curves, snakemake.output.curves)
     write_table_atomic(adm, snakemake.output.admissibility)
     write_table_atomic(rom, snakemake.output.rom)
-    V.plot_multilevel(rom, curves, snakemake.output.figure)
+    VP.plot_multilevel(rom, curves, snakemake.output.figure)
     # the same levels (and the calibrated one) under the other readings of the transfer (lumbar.experiments.
     # level_transfer): whether a miss comes from the transfer rule or from what the model does not have
     yam = pd.read_csv(snakemake.input.yamamoto)
