@@ -316,9 +316,9 @@ def test_share_figure_stacks_every_structure_so_that_the_stacks_balance_the_mome
     """The moment-share figure draws the structures that act with the applied moment below zero: the upper stack
     minus the lower one is the applied moment at every step (a figure that leaves the pre-stressed structures out
     shows a stack above the applied moment at low moments, as this unit's pre-tensioned ligaments give)."""
-    import lumbar.inputs.io as io
+    import lumbar.plots.load_sharing as LSP
     figs = []
-    monkeypatch.setattr(io, "save_figure_atomic", lambda fig, path, **kw: figs.append(fig))
+    monkeypatch.setattr(LSP, "save_figure_atomic", lambda fig, path, **kw: figs.append(fig))
     curves = admissible_curves[0]
     plot_shares(curves, tmp_path / "shares.png")
     sh = LS.moment_shares(curves[(curves["stage"] == "intact") & (curves["moment_nm"] > 0)])
