@@ -344,7 +344,9 @@ def test_checkers_find_the_faults_of_a_fake_package(fake_package):
 #: what the workflow's table, figure and report jobs import (they read results; no mesh, no equilibrium)
 RESULT_READERS = ("lumbar.report", "lumbar.report.docs", "lumbar.experiments.validation",
                   "lumbar.experiments.stepwise_reduction", "lumbar.experiments.l2s1", "lumbar.experiments.load_sharing",
-                  "lumbar.experiments.admissibility", "lumbar.experiments.fsu", "lumbar.geometry", "lumbar.plots.discovery")
+                  "lumbar.experiments.admissibility", "lumbar.experiments.fsu", "lumbar.geometry", "lumbar.plots.discovery",
+                  "lumbar.plots.stepwise_reduction", "lumbar.plots.load_sharing", "lumbar.plots.validation",
+                  "lumbar.plots.l2s1", "lumbar.plots.muscle_model")
 #: imported by the functions that build meshes or solve equilibria, never at module level
 HEAVY = ("trimesh", "shapely", "scipy.spatial", "numba", "lumbar.mechanics.kernel")
 

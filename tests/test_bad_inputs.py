@@ -1,7 +1,7 @@
 """Bad inputs are rejected with a message naming the file, row, column (or config key) and the expected form,
 and the rule that read them leaves no result behind.
 
-Most cases run the rule's workflow script by hand, in this process (``python workflow/scripts/<stage>.py
+Most cases run the rule's workflow script by hand, in this process (``python workflow/scripts/<rule>.py
 <rule> --configfile ... --output <tmp_path>/...``, as README.md documents), on a config pointing at a
 corrupted copy of one data table; a few run Snakemake on a copied tree. Each case asserts the exact
 message content and that neither the output nor a temporary file of the atomic writer exists.
@@ -218,7 +218,7 @@ def test_bad_measured_rom_table_rejected_by_table4(tmp_path, monkeypatch, mutate
     cfg = config_file(tmp_path, stepwise_reduction={"measured_table": str(path)})
     out = [tmp_path / "out" / f for f in TABLE4_OUT]
     (tmp_path / "out").mkdir()
-    exc = run_rule("stepwise_reduction", "table4", cfg, out, monkeypatch)
+    exc = run_rule("table4", "table4", cfg, out, monkeypatch)
     assert_message(exc, f"{path}, row {row}", *parts)
     assert_no_result(out)
 
@@ -240,7 +240,7 @@ def test_malformed_derived_disc_only_table_rejected_by_table4(tmp_path, monkeypa
     measured, _ = _measured(tmp_path, lambda df: None)
     cfg = config_file(tmp_path, stepwise_reduction={"disc_only_derived": str(bad), "measured_table": str(measured)})
     out = [tmp_path / f for f in TABLE4_OUT]
-    exc = run_rule("stepwise_reduction", "table4", cfg, out, monkeypatch)
+    exc = run_rule("table4", "table4", cfg, out, monkeypatch)
     assert_message(exc, f"{bad}, row {row}, column 'rom_mean_deg'", "non-finite value 'NaN'")
     assert_no_result(out)
 
@@ -263,7 +263,7 @@ def test_bad_cable_table_rejected_by_fig3(tmp_path, monkeypatch, column, value, 
     row = set_cell(CABLES, bad, column, value)
     cfg = config_file(tmp_path, l2s1={"cables": str(bad)})
     out = [tmp_path / "fig3_l2s1_cables.png"]
-    exc = run_rule("l2s1", "fig3_l2s1_cables", cfg, out, monkeypatch)
+    exc = run_rule("fig3_l2s1_cables", "fig3_l2s1_cables", cfg, out, monkeypatch)
     assert_message(exc, f"{bad}, row {row}", *parts)
     assert_no_result(out)
 
@@ -273,7 +273,7 @@ def test_bad_cable_table_rejected_by_idp_surrogate(tmp_path, monkeypatch):
     row = set_cell(CABLES, bad, "tension_per_side", "forty")
     cfg = config_file(tmp_path, l2s1={"cables": str(bad)})
     out = [tmp_path / "idp_surrogate.csv"]
-    exc = run_rule("l2s1", "idp_surrogate", cfg, out, monkeypatch)
+    exc = run_rule("idp_surrogate", "idp_surrogate", cfg, out, monkeypatch)
     assert_message(exc, f"{bad}, row {row}, column 'tension_per_side'", "got 'forty', which is not a number")
     assert_no_result(out)
 
@@ -309,7 +309,7 @@ def test_bad_measured_idp_table_rejected_by_table5(tmp_path, monkeypatch, mutate
     cfg = config_file(tmp_path, l2s1={"measured_table": str(path)})
     out = [tmp_path / "out" / f for f in TABLE5_OUT]
     (tmp_path / "out").mkdir()
-    exc = run_rule("l2s1", "table5", cfg, out, monkeypatch)
+    exc = run_rule("table5", "table5", cfg, out, monkeypatch)
     assert_message(exc, str(path), *parts)
     assert_no_result(out)
 
@@ -318,7 +318,7 @@ def test_bad_idp_table_missing_scenarios_rejected(tmp_path, monkeypatch):
     path = write_rows(_idp_table().iloc[:-3], tmp_path / "idp.csv")
     cfg = config_file(tmp_path, l2s1={"measured_table": str(path)})
     out = [tmp_path / f for f in TABLE5_OUT]
-    exc = run_rule("l2s1", "table5", cfg, out, monkeypatch)
+    exc = run_rule("table5", "table5", cfg, out, monkeypatch)
     assert_message(exc, str(path), "missing")
     assert_no_result(out)
 
@@ -327,7 +327,7 @@ def test_bad_idp_table_missing_scenarios_rejected(tmp_path, monkeypatch):
 def test_reject_missing_visible_human_directory_names_config_key(tmp_path, monkeypatch):
     cfg = config_file(tmp_path, geometry={"kind": "visible_human", "path": str(tmp_path / "nope")})
     out = [tmp_path / "fsu_geometry.csv"]
-    exc = run_rule("geometry", "fsu_geometry", cfg, out, monkeypatch)
+    exc = run_rule("fsu_geometry", "fsu_geometry", cfg, out, monkeypatch)
     assert_message(exc, str(tmp_path / "nope"), "directory missing", "geometry.path")
     assert_no_result(out)
 

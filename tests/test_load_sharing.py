@@ -11,6 +11,7 @@ import pytest
 from lumbar.experiments import admissibility as ADM
 from lumbar.experiments import calibration as C
 from lumbar.experiments import load_sharing as LS
+from lumbar.plots.load_sharing import plot_shares
 from lumbar.experiments.fsu import build_fsu, moment_loads, softplus_fibre_params
 from lumbar.geometry import load_geometry
 from lumbar.inputs import resources
@@ -315,11 +316,11 @@ def test_share_figure_stacks_every_structure_so_that_the_stacks_balance_the_mome
     """The moment-share figure draws the structures that act with the applied moment below zero: the upper stack
     minus the lower one is the applied moment at every step (a figure that leaves the pre-stressed structures out
     shows a stack above the applied moment at low moments, as this unit's pre-tensioned ligaments give)."""
-    import lumbar.inputs.io as io
+    import lumbar.plots.load_sharing as LSP
     figs = []
-    monkeypatch.setattr(io, "save_figure_atomic", lambda fig, path, **kw: figs.append(fig))
+    monkeypatch.setattr(LSP, "save_figure_atomic", lambda fig, path, **kw: figs.append(fig))
     curves = admissible_curves[0]
-    LS.plot_shares(curves, tmp_path / "shares.png")
+    plot_shares(curves, tmp_path / "shares.png")
     sh = LS.moment_shares(curves[(curves["stage"] == "intact") & (curves["moment_nm"] > 0)])
     assert (sh["moment_resisted_nm"] < -0.05).any()        # the case the figure must draw: a structure acting with M
     for ax, d in zip(figs[0].axes, LS.CURVE_DIRECTIONS):

@@ -375,3 +375,38 @@ def test_validation_metrics_with_and_without_flagged_postures(model, baseline):
     assert m["r2"] == pytest.approx(np.corrcoef(ok["idp_sim_mpa"], ok["idp_in_vivo_mpa"])[0, 1] ** 2)
     assert m["r2_all"] == pytest.approx(np.corrcoef(val["idp_sim_mpa"], val["idp_in_vivo_mpa"])[0, 1] ** 2)
     assert m["rmse_all_mpa"] > m["rmse_mpa"]      # the flagged row (in vivo 0.2 MPa) is far off
+
+
+def test_baseline_file_round_trips_the_baseline_postures(tmp_path):
+    """write_baseline/read_baseline (the muscle_validation job writes, the sensitivity and Sobol jobs read): every
+    baseline posture's poses and activations come back unchanged, under the posture's short name, whatever else was
+    solved; a file without a posture is an error, not a silent default."""
+    from types import SimpleNamespace
+
+    from lumbar.muscles.muscle_model import POSTURES, read_baseline, write_baseline
+    rng = np.random.default_rng(3)
+    names = ["lifting_20kg", *POSTURES.values()]
+    sols = [SimpleNamespace(x=rng.normal(size=(6, 3)), R=rng.normal(size=(6, 3, 3)), a=rng.random(10)) for _ in names]
+    write_baseline(sols, names, tmp_path / "baseline.npz")
+    assert not list(tmp_path.glob("*.tmp*"))
+    back = read_baseline(tmp_path / "baseline.npz")
+    assert set(back) == set(POSTURES)
+    for post, name in POSTURES.items():
+        s = sols[names.index(name)]
+        np.testing.assert_array_equal(back[post].x, s.x)
+        np.testing.assert_array_equal(back[post].R, s.R)
+        np.testing.assert_array_equal(back[post].a, s.a)
+    # control: the other activity's solution is not what was stored for a posture
+    assert not np.array_equal(back["standing"].x, sols[0].x)
+    np.savez(tmp_path / "partial.npz", standing_x=sols[1].x, standing_R=sols[1].R, standing_a=sols[1].a)
+    with pytest.raises(KeyError):
+        read_baseline(tmp_path / "partial.npz")
+
+
+def test_uncertified_message_names_the_count_the_statuses_and_the_table():
+    from lumbar.muscles.muscle_model import uncertified_message
+    assert uncertified_message("muscle_validation", [], "t.csv", []) is None
+    msg = uncertified_message("muscle_validation", ["a", "b"], "t.csv", ["Maximum_Iterations_Exceeded"] * 2)
+    assert msg.startswith("muscle_validation: 2 reached posture(s)") and "Maximum_Iterations_Exceeded;" in msg
+    assert "certified=False in t.csv" in msg
+    assert "(see ipopt_status;" in uncertified_message("x", ["a"], "t.csv")

@@ -241,9 +241,9 @@ def test_report_deterministic_bytes(fake_results):
 
 
 def test_report_script_by_hand(fake_results, tmp_path):
-    """workflow/scripts/report.py runs without Snakemake (the _common.stand_in path)."""
+    """workflow/scripts/paper_report.py runs without Snakemake (the _common.stand_in path)."""
     tmp, _, _ = fake_results
-    r = subprocess.run([sys.executable, str(ROOT / "workflow" / "scripts" / "report.py"), "paper_report",
+    r = subprocess.run([sys.executable, str(ROOT / "workflow" / "scripts" / "paper_report.py"), "paper_report",
                         "--configfile", str(ROOT / "config" / "test" / "config.yaml"),
                         "--output", "results/report/h.html", "results/report/h.pdf"],
                        cwd=tmp, capture_output=True, text=True, timeout=300)
@@ -307,7 +307,7 @@ def fake_full(fake_results, tmp_path):
     figure (drawn by the library), a table far wider than the page, and workflow logs with warnings."""
     import pandas as pd
 
-    from lumbar.experiments.validation import plot_scoreboard
+    from lumbar.plots.validation import plot_scoreboard
 
     tmp, config, inputs = fake_results
     t, f = Path("results/tables"), Path("results/figures")

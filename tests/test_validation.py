@@ -4,6 +4,7 @@ import pandas as pd
 import pytest
 
 from lumbar.experiments import l2s1, validation as V
+from lumbar.plots.validation import plot_scoreboard
 from lumbar.experiments.stepwise_reduction import outlier_counts
 
 
@@ -109,11 +110,11 @@ def test_scoreboard_figure_grows_with_new_quantities(tmp_path):
     from PIL import Image
 
     a, b = tmp_path / "a.png", tmp_path / "b.png"
-    V.plot_scoreboard(_scoreboard_rows(), a)
-    V.plot_scoreboard(_scoreboard_rows(levels=("L1-L2", "L2-L3", "L3-L4", "L5-S1")), b)
+    plot_scoreboard(_scoreboard_rows(), a)
+    plot_scoreboard(_scoreboard_rows(levels=("L1-L2", "L2-L3", "L3-L4", "L5-S1")), b)
     (wa, ha), (wb, hb) = Image.open(a).size, Image.open(b).size
     assert wa == wb and hb > ha * 1.5
-    V.plot_scoreboard(_scoreboard_rows().iloc[0:0], tmp_path / "empty.png")       # no row: a figure that says so
+    plot_scoreboard(_scoreboard_rows().iloc[0:0], tmp_path / "empty.png")       # no row: a figure that says so
     assert (tmp_path / "empty.png").stat().st_size > 0
 
 

@@ -14,7 +14,7 @@ rule fsu_geometry:
     params:
         geometry=config["geometry"],
     script:
-        "../scripts/geometry.py"
+        "../scripts/fsu_geometry.py"
 
 
 rule fig1_l4l5_model:
@@ -37,4 +37,4 @@ rule fig1_l4l5_model:
         level=config["fsu"]["level"],
         backend=config["render"]["backend"],
     script:
-        "../scripts/geometry.py"
+        "../scripts/fig1_l4l5_model.py"

@@ -24,7 +24,7 @@ rule l2s1_idp:
         solver=config["solver"],
         l2s1=config["l2s1"],
     script:
-        "../scripts/l2s1.py"
+        "../scripts/l2s1_idp.py"
 
 
 # The 90 % posterior band of every Table 5 scenario of the calibrated set (linearisation of the calibration's
@@ -98,7 +98,7 @@ rule table5:
         l2s1=config["l2s1"],
         published=config["paths"]["published_model_results"],
     script:
-        "../scripts/l2s1.py"
+        "../scripts/table5.py"
 
 
 rule fig3_l2s1_cables:
@@ -121,4 +121,4 @@ rule fig3_l2s1_cables:
         geometry=config["geometry"],
         render=config["render"],
     script:
-        "../scripts/l2s1.py"
+        "../scripts/fig3_l2s1_cables.py"

@@ -24,7 +24,7 @@ rule load_sharing_curves:
         solver=config["solver"],
         ls=config["load_sharing"],
     script:
-        "../scripts/load_sharing.py"
+        "../scripts/load_sharing_curves.py"
 
 
 # The 90 % posterior bands of the calibrated unit's intact curves and internal loads (linearisation of the
@@ -103,4 +103,4 @@ rule load_sharing_summary:
     params:
         fsu=config["fsu"],
     script:
-        "../scripts/load_sharing.py"
+        "../scripts/load_sharing_summary.py"

@@ -78,7 +78,7 @@ rule muscle_validation:
         muscle_model=config["muscle_model"],
         published=config["paths"]["published_model_results"],
     script:
-        "../scripts/muscle_model.py"
+        "../scripts/muscle_validation.py"
 
 
 rule muscle_sensitivity:
@@ -100,7 +100,7 @@ rule muscle_sensitivity:
     params:
         muscle_model=config["muscle_model"],
     script:
-        "../scripts/muscle_model.py"
+        "../scripts/muscle_sensitivity.py"
 
 
 rule muscle_sensitivity_table:
@@ -136,7 +136,7 @@ rule muscle_sensitivity_table:
     params:
         muscle_model=config["muscle_model"],
     script:
-        "../scripts/muscle_model.py"
+        "../scripts/muscle_sensitivity_table.py"
 
 
 rule muscle_sobol_chunk:
@@ -160,7 +160,7 @@ rule muscle_sobol_chunk:
         muscle_model=config["muscle_model"],
         seed=config["seed"],
     script:
-        "../scripts/muscle_model.py"
+        "../scripts/muscle_sobol_chunk.py"
 
 
 rule muscle_sobol:
@@ -189,4 +189,4 @@ rule muscle_sobol:
         muscle_model=config["muscle_model"],
         seed=config["seed"],
     script:
-        "../scripts/muscle_model.py"
+        "../scripts/muscle_sobol.py"

@@ -34,7 +34,7 @@ rule paper_report:
         # report's "Flags" section; not inputs (a log is no rule's output file)
         logs_dir="logs",
     script:
-        "../scripts/report.py"
+        "../scripts/paper_report.py"
 
 
 # Documents whose numbers are read from the results (lumbar.report.docs): docs/templates/<name>.md rendered into
@@ -51,4 +51,4 @@ rule docs_numbers:
     conda:
         "../envs/lumbar.yaml"
     script:
-        "../scripts/report.py"
+        "../scripts/docs_numbers.py"

@@ -19,7 +19,7 @@ rule stepwise_reduction_sim:
         solver=config["solver"],
         sr=config["stepwise_reduction"],
     script:
-        "../scripts/stepwise_reduction.py"
+        "../scripts/stepwise_reduction_sim.py"
 
 
 # The 90 % posterior band of every Table 4 scenario of the calibrated set (linearisation of the calibration's
@@ -87,7 +87,7 @@ rule table4:
         sr=config["stepwise_reduction"],
         published=config["paths"]["published_model_results"],
     script:
-        "../scripts/stepwise_reduction.py"
+        "../scripts/table4.py"
 
 
 rule fig6_rom_stepwise_reduction:
@@ -104,4 +104,4 @@ rule fig6_rom_stepwise_reduction:
     conda:
         "../envs/lumbar.yaml"
     script:
-        "../scripts/stepwise_reduction.py"
+        "../scripts/fig6_rom_stepwise_reduction.py"

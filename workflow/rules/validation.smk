@@ -37,7 +37,7 @@ rule validation_real_data:
         sr=config["stepwise_reduction"],
         idp_table=config["l2s1"]["measured_table"],
     script:
-        "../scripts/validation.py"
+        "../scripts/validation_real_data.py"
 
 
 rule multilevel_validation:
@@ -81,7 +81,7 @@ rule multilevel_validation:
         fsu=config["fsu"],
         ls=config["load_sharing"],
     script:
-        "../scripts/validation.py"
+        "../scripts/multilevel_validation.py"
 
 
 # The first figure of the report: every distinct comparison of validation_real_data.csv (measured value, the
@@ -101,4 +101,4 @@ rule validation_scoreboard_figure:
     conda:
         "../envs/lumbar.yaml"
     script:
-        "../scripts/validation.py"
+        "../scripts/validation_scoreboard_figure.py"

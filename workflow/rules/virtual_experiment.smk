@@ -61,4 +61,4 @@ rule idp_surrogate:
         l2s1=config["l2s1"],
         seed=config["seed"],
     script:
-        "../scripts/l2s1.py"
+        "../scripts/idp_surrogate.py"

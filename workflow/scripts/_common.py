@@ -3,17 +3,22 @@
 Every script in this directory runs two ways and reads the same object either way:
   * from Snakemake (``script:`` directive): the global ``snakemake`` object is given;
   * by hand, for debugging (from the repository root, or from another working directory as ``snakemake -s``):
-        python workflow/scripts/<stage>.py <rule> [wildcard=value ...] [--configfile F] [--output P ...] [--log F]
+        python workflow/scripts/<rule>.py <rule> [wildcard=value ...] [--configfile F] [--output P ...] [--log F]
     :func:`mock_snakemake` parses the Snakefile with Snakemake's own API and builds the job of ``<rule>``, with the
     rule's real input, output, params, wildcards, threads and config. Paths are written only in the rules
     (workflow/rules/*.smk); a script reads ``snakemake.input.<name>`` / ``snakemake.output.<name>``.
 
-A script starts with::
+One script per rule, named like it (rules of a family share library functions, not a script); a script is::
 
     sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _common.py
     import _common  # noqa: E402
 
-    snakemake, log = _common.start(globals())
+    def main(snakemake, log):
+        ...
+
+    if __name__ == "__main__":
+        snakemake, log = _common.start(globals())
+        main(snakemake, log)
 """
 from __future__ import annotations
 

@@ -526,6 +526,55 @@ def make_solver(model, cfg=None):
     return solver
 
 
+def model_from_config(cfg: dict, passive_dir) -> LumbarMuscleModel:
+    """The model of the config section ``muscle_model`` (``body_mass_kg``, ``passive_set``, ``symmetric_passive``,
+    ``in_situ_posture``, ``iap_force_n``), the passive set's tables read from ``passive_dir`` (its folder of declared
+    tables, the published or the calibrated one)."""
+    d = Path(passive_dir)
+    return LumbarMuscleModel(body_mass_kg=cfg["body_mass_kg"], passive_set=cfg["passive_set"], data_dir=d,
+                             calibrated_dir=d, symmetric_passive=cfg.get("symmetric_passive", True),
+                             in_situ_posture=cfg.get("in_situ_posture", "reference"),
+                             iap_force_n=cfg.get("iap_force_n", 0.0))
+
+
+def write_baseline(sols, names, path) -> Path:
+    """The solved baseline postures (:data:`POSTURES`; ``sols`` in the order of ``names``) as one ``.npz``
+    (``<posture>_x``, ``_R``, ``_a``), written atomically; :func:`read_baseline` reads it back."""
+    base = {}
+    for post, name in POSTURES.items():
+        s = sols[names.index(name)]
+        base.update({f"{post}_x": s.x, f"{post}_R": s.R, f"{post}_a": s.a})
+    path = Path(path)
+    tmp = path.with_suffix(".tmp.npz")
+    np.savez(tmp, **base)
+    tmp.replace(path)
+    return path
+
+
+def read_baseline(path) -> dict:
+    """{posture: PostureSolution} of the baseline postures written by :func:`write_baseline` (the start and the
+    reference of the sensitivity and Sobol scenarios)."""
+    from .redundancy import PostureSolution
+    z = np.load(path)
+    return {posture: PostureSolution(z[f"{posture}_x"], z[f"{posture}_R"], z[f"{posture}_a"], True, True, 0.0, 0.0,
+                                     0.0, 0.0, 0) for posture in POSTURES}
+
+
+def uncertified_message(what, which, table, statuses=()) -> str | None:
+    """The one warning of a job for the reached postures ``which`` whose optimum IPOPT could not certify (None if
+    there are none): a reported value (a row of the validation or of the sensitivity study) that may not be the
+    optimum; postures the muscles cannot reach are expected outcomes (red stars), counted in the job's summary line.
+    The Sobol chunks do not warn: their uncertified samples are kept in the expansion by design and counted in
+    sobol_indices.csv (n_uncertified)."""
+    if not len(which):
+        return None
+    why = ", ".join(sorted({str(s) for s in statuses})) or "see ipopt_status"
+    return (f"{what}: {len(which)} reached posture(s) whose optimum IPOPT could not certify ({why}; certified=False "
+            f"in {table}): read them as equilibria that may not be the optimum. A larger muscle_model.solver."
+            "ipopt_max_iter helps where IPOPT was still converging; near the edge of the muscles' capacity it may "
+            "stall at any limit")
+
+
 def solve_postures(model, solver, activities, props_list=None, start=None):
     """Solve the activities (names) as one batch; ``props_list``: per-scenario MuscleProperties;
     ``start``: per-scenario PostureSolution to warm-start from (e.g. the baseline of the same posture)."""

@@ -1,37 +1,23 @@
-"""Stepwise-reduction stage: rules stepwise_reduction_sim (one characteristic set, 160 scenarios),
-table4 (synopsis, outlier counts, comparison with the paper, check/cross grid) and
-fig6_rom_stepwise_reduction.
+"""Stepwise-reduction stage, rule table4: the synopsis of every set against the reference table (with the calibrated
+set's 90 % posterior band), the outlier counts, the comparison with the paper and the check/cross grid
+(lumbar.plots.stepwise_reduction).
 
-By hand: python workflow/scripts/stepwise_reduction.py stepwise_reduction_sim set=chazal1985 \
-    --configfile config/test/config.yaml --output /tmp/rom_chazal1985.csv
+By hand: python workflow/scripts/table4.py table4 --configfile config/test/config.yaml
 """
 import sys
 from pathlib import Path
 
-import pandas as pd
-
 sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _common.py
 import _common  # noqa: E402
 
-snakemake, log = _common.start(globals())
+import pandas as pd  # noqa: E402
 
 from lumbar.experiments import stepwise_reduction as sr_mod  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
+from lumbar.plots.stepwise_reduction import plot_table4_grid  # noqa: E402
 
-if snakemake.rule == "stepwise_reduction_sim":
-    s, sr = snakemake.params.solver, snakemake.params.sr
-    set_name, data_dir, fsu = _common.set_fsu(snakemake)
-    sim = sr_mod.simulate_stepwise_reduction(fsu, moments_nm=sr["moments_nm"], max_iter=s["max_iter"],
-                                             tol=min(s["tol_force_n"], s["tol_moment_nm"]), load_steps=s["load_steps"])
-    sim.insert(0, "set", set_name)
-    bad = sim.loc[~sim["converged"]]
-    where = ", ".join(f"{st} ({n})" for st, n in bad.groupby("stage", sort=False).size().items())
-    saddle = sorted(set(sim.loc[~sim["rest_state_stable"].astype(bool), "stage"]))
-    log.info("set %s (characteristics from %s): %d scenarios, %d not converged%s; ROM measured from an unstable "
-             "0 N*m state (rest_state_stable=False): %s", set_name, data_dir, len(sim), len(bad),
-             f" (by stage: {where})" if len(bad) else "", ", ".join(saddle) or "none")
-    write_table_atomic(sim, snakemake.output[0])
-elif snakemake.rule == "table4":
+
+def main(snakemake, log):
     sr = snakemake.params.sr
     exp = sr_mod.read_experiment_table(snakemake.input.experiment)
     derived = sr_mod.read_experiment_table(_common.first(snakemake.input.derived)) \
@@ -57,9 +43,8 @@ elif snakemake.rule == "table4":
     write_table_atomic(syn, snakemake.output.synopsis)
     write_table_atomic(counts, snakemake.output.counts)
     write_table_atomic(vs, snakemake.output.vs_paper)
-    sr_mod.plot_table4_grid(syn, snakemake.output.grid)
-elif snakemake.rule == "fig6_rom_stepwise_reduction":
-    syn = pd.read_csv(snakemake.input[0])
-    set_name = "calibrated" if "calibrated" in set(syn["set"]) else str(syn["set"].iloc[0])
-    sr_mod.plot_rom_stepwise_reduction(syn, snakemake.output[0], set_name)
-    log.info("wrote %s", snakemake.output[0])
+    plot_table4_grid(syn, snakemake.output.grid)
+
+if __name__ == "__main__":
+    snakemake, log = _common.start(globals())
+    main(snakemake, log)

@@ -1,0 +1,43 @@
+"""Muscle-driven model (paper 2), rule muscle_sensitivity_table: the sensitivity chunks as one table with the change
+from the baseline IDP, the directions of the paper's statements, and one figure per parameter
+(lumbar.plots.muscle_model.plot_sensitivity).
+
+By hand: python workflow/scripts/muscle_sensitivity_table.py muscle_sensitivity_table --configfile config/test/config.yaml
+"""
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _common.py
+import _common  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+
+from lumbar.inputs.io import write_table_atomic  # noqa: E402
+from lumbar.muscles import muscle_model as mm  # noqa: E402
+from lumbar.plots.muscle_model import plot_sensitivity  # noqa: E402
+
+
+def main(snakemake, log):
+    p = snakemake.params.muscle_model
+    df = pd.concat([pd.read_csv(f) for f in snakemake.input.chunks], ignore_index=True)
+    base = pd.read_csv(snakemake.input.baseline_table).set_index("activity")
+    cols = ["parameter", "value", "ssl_um", "group_scope", "posture", "idp_mpa", "idp_force_mpa", "idp_moment_mpa",
+            "converged", "reached", "certified", "kkt_residual", "ipopt_status", "tracking_error_deg", "extensor_active_n",
+            "extensor_passive_n", "abdominal_active_n", "paper_change"]
+    df = df[cols].copy()
+    df["baseline_idp_mpa"] = [base.loc[mm.POSTURES[q], "idp_sim_mpa"] if mm.POSTURES[q] in base.index else np.nan
+                              for q in df["posture"]]
+    df["change_pct"] = 100 * (df["idp_mpa"] / df["baseline_idp_mpa"] - 1)
+    write_table_atomic(df, snakemake.output[0])
+    dirs = mm.sensitivity_directions(df)
+    write_table_atomic(dirs, snakemake.output[-1])
+    log.info("paper statements reproduced in direction: %d of %d (%d reached postures with uncertified optimum)",
+             int(dirs["agrees"].sum()), len(dirs), int((dirs["reached"] & ~dirs["certified"]).sum()))
+    scopes = list(p["sensitivity"]["scopes"])
+    posts = list(p["sensitivity"]["postures"])
+    for k, param in enumerate(mm.PARAMETERS):      # the order of the rule's figures output (the same constant)
+        plot_sensitivity(df, param, scopes, posts, snakemake.output[1 + k])
+
+if __name__ == "__main__":
+    snakemake, log = _common.start(globals())
+    main(snakemake, log)

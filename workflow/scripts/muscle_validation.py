@@ -1,0 +1,93 @@
+"""Muscle-driven model (paper 2), rule muscle_validation: the activities and the baseline postures solved, the
+L4-L5 segment loads, the in-vivo validation of the IDP (table, metrics, Fig. 3 analog), flexion-relaxation, facet
+contact, the fascicles and the extension capacity; the baseline postures for the sensitivity and Sobol jobs. The
+solve logs progress lines through the library's logger (lumbar.muscles.muscle_model).
+
+By hand: python workflow/scripts/muscle_validation.py muscle_validation --configfile config/test/config.yaml
+"""
+import json
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _common.py
+import _common  # noqa: E402
+import time  # noqa: E402
+
+from lumbar.inputs.io import write_table_atomic  # noqa: E402
+from lumbar.muscles import muscle_model as mm  # noqa: E402
+from lumbar.plots.muscle_model import plot_in_vivo_validation  # noqa: E402
+
+
+def main(snakemake, log):
+    p = snakemake.params.muscle_model
+    model = mm.model_from_config(p, Path(_common.as_list(snakemake.input.passive)[0]).parent)
+    solver = mm.make_solver(model, p["solver"])
+    names = list(p["activities"])
+    for post in mm.POSTURES.values():          # the baseline postures of the sweep are always solved
+        if post not in names:
+            names.append(post)
+    t0 = time.perf_counter()
+    sols = mm.solve_postures(model, solver, names)
+    log.info("%d activities solved in %.1f s; converged: %s", len(names), time.perf_counter() - t0,
+             {n: s.converged for n, s in zip(names, sols)})
+    warning = mm.uncertified_message("muscle_validation", [n for n, s in zip(names, sols) if s.reached and not s.certified],
+                                     snakemake.output.segment_loads,
+                                     [s.ipopt_status for s in sols if s.reached and not s.certified])
+    if warning:
+        log.warning("%s", warning)
+    for n, s in zip(names, sols):
+        log.info("%s: converged=%s reached=%s certified=%s KKT residual %.1e, residual %.1e N %.1e N*m, tracking "
+                 "error %.3f deg, %d iterations %s", n, s.converged, s.reached, s.certified, s.kkt_residual,
+                 s.residual_force_n, s.residual_moment_nm, s.tracking_error_deg, s.iterations, s.message)
+    seg, val, metrics = mm.validation(model, sols, names, mm.read_in_vivo(snakemake.input.in_vivo), p["disc_area_m2"])
+    keep = [n for n in names if n in p["activities"]]
+    seg = seg[seg["activity"].isin(keep)]
+    val = val[val["activity"].isin(keep)]
+    _, val2, metrics = mm.validation(model, [s for n, s in zip(names, sols) if n in keep], keep,
+                                     mm.read_in_vivo(snakemake.input.in_vivo), p["disc_area_m2"])
+    fr = mm.flexion_relaxation(model, sols, names)
+    fr = fr[fr["activity"].isin(list(mm.POSTURES.values()))].copy()
+    paper = {"upright_standing": (206.0, 0.0, 4.0), "flexion_36deg": (44.0, 334.0, 371.0)}
+    fr["paper_extensor_active_n"] = [paper[a][0] for a in fr["activity"]]
+    fr["paper_extensor_passive_n"] = [paper[a][1] for a in fr["activity"]]
+    fr["paper_abdominal_active_n"] = [paper[a][2] for a in fr["activity"]]
+    fr["paper_source"] = "paraspinal_muscle_properties_spinal_loading.md, Sect. 3.1 (original_text)"
+    fr["note"] = ("as the paper (Sect. 2.1): pelvis fixed, all 36 deg of thorax rotation in L1-S1; SL = in-situ SL x "
+                  "fibre length / its length in the as-segmented myo-sim posture (Christophy 2012 normalisation; "
+                  "optimal fibre and path lengths within 3 % of Christophy's table; MuJoCo wrapping changes extensor "
+                  "lengths by < 3 mm). Extensor fibres stretch ~20-30 % from in-situ 2.2-2.4 um and reach only the "
+                  "toe of the passive curve; 334 N over the extensors' PCSA would need SL ~3.5 um in all of them "
+                  "(25 % beyond SSL 2.8). Not tuned; docs/findings.md, Muscle-driven model.")
+    write_table_atomic(seg[["level", "activity", "compressive_n", "shear_n", "moment_nm", "converged",
+                            "lateral_moment_nm", "axial_moment_nm", "reached", "certified", "kkt_residual"]],
+                       snakemake.output.segment_loads)
+    write_table_atomic(val2, snakemake.output.validation)
+    Path(snakemake.output.metrics).parent.mkdir(parents=True, exist_ok=True)
+    Path(snakemake.output.metrics).write_text(json.dumps(metrics, indent=2, sort_keys=True) + "\n")
+    write_table_atomic(fr, snakemake.output.flexion_relaxation)
+    log.info("in-vivo validation: %s", metrics)
+    plot_in_vivo_validation(val2, metrics, snakemake.output.figure)        # Fig. 3 analog
+    mm.write_baseline(sols, names, snakemake.output.baseline)
+    contact = mm.facet_contact(model, sols, names)
+    contact = contact[contact["activity"].isin(keep)]
+    write_table_atomic(contact, snakemake.output.facet_contact)
+    for lv, d in contact.groupby("level", sort=False):
+        log.info("facets %s (set %s, %.3g N/m): rest gap %.2f mm; contact force per posture %s", lv, p["passive_set"],
+                 d["facet_stiffness_n_per_m"].iat[0], d["rest_min_gap_mm"].min(),
+                 {a: round(float(v), 1) for a, v in d.groupby("activity", sort=False)["contact_n"].sum().items()})
+    fas = model.ms.table()
+    fas["l_ref_m"] = model.props.l_ref_m
+    fas["l_opt_m"] = model.props.l_opt_m
+    write_table_atomic(fas, snakemake.output.fascicles)
+    cap = mm.capacity_table(model, [s for n, s in zip(names, sols) if n in keep], keep)
+    write_table_atomic(cap, snakemake.output.capacity)
+    short = cap[(cap["pose"] == "own solution") & (cap["demand_ratio"] > 1.0)]
+    for _, r in short.iterrows():
+        log.info("%s, %s: external + passive muscle moment %.1f N*m exceeds the active extension capacity %.1f N*m "
+                 "(ratio %.2f; SpT %.0f N/cm2 would be needed)", r["activity"], r["level"],
+                 r["external_moment_nm"] + r["passive_muscle_moment_nm"], r["extension_capacity_nm"],
+                 r["demand_ratio"], r["spt_needed_n_per_cm2"])
+
+if __name__ == "__main__":
+    snakemake, log = _common.start(globals())
+    main(snakemake, log)
