@@ -231,6 +231,7 @@ def doc_template_inputs(wildcards):
 
 REPORT_OPTIONAL = [
     "results/tables/validation_null_models.csv",
+    "results/figures/validation_internal_loads.png",
     "results/load_sharing/reduction_flexion.csv",
     "results/stepwise_reduction/bands_calibrated.csv",
     "results/l2s1/bands_calibrated.csv",

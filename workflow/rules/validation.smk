@@ -91,9 +91,14 @@ rule validation_scoreboard_figure:
     input:
         "results/tables/validation_real_data.csv",
     output:
-        report(
+        scoreboard=report(
             "results/figures/validation_scoreboard.png",
             caption="../report/validation_scoreboard.rst",
+            category="Validation on real data",
+        ),
+        internal_loads=report(
+            "results/figures/validation_internal_loads.png",
+            caption="../report/validation_internal_loads.rst",
             category="Validation on real data",
         ),
     log:

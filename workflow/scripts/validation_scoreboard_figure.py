@@ -13,15 +13,17 @@ import _common  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from lumbar.experiments import validation as V  # noqa: E402
-from lumbar.plots.validation import plot_scoreboard  # noqa: E402
+from lumbar.plots.validation import INTERNAL_ROLES, MAIN_ROLES, plot_scoreboard  # noqa: E402
 
 
 def main(snakemake, log):
     table = pd.read_csv(snakemake.input[0])
-    plot_scoreboard(table, snakemake.output[0])
+    plot_scoreboard(table, snakemake.output.scoreboard, roles=MAIN_ROLES)
+    plot_scoreboard(table, snakemake.output.internal_loads, roles=INTERNAL_ROLES)
     counts = V.role_counts(V.distinct_comparisons(table))
     log.info("validation scoreboard figure: %d rows, %s", len(table),
              "; ".join(f"{role}: {w} of {n} distinct comparisons within" for role, (w, n) in counts.items()))
+
 
 if __name__ == "__main__":
     snakemake, log = _common.start(globals())

@@ -45,7 +45,13 @@ def _row_labels(g: pd.DataFrame) -> list[str]:
     return [condition_label(c) for c in g["condition"]]
 
 
-def plot_scoreboard(df: pd.DataFrame, path) -> None:
+#: the roles of the two scoreboard figures: the report's first figure (ROM, IDP, anatomy: independent checks and
+#: calibration targets) and the internal loads beside it (never fitted, and those the fit holds as constraints)
+MAIN_ROLES = (INDEPENDENT, TARGET)
+INTERNAL_ROLES = (INTERNAL, CONSTRAINT)
+
+
+def plot_scoreboard(df: pd.DataFrame, path, roles=None) -> None:
     """The validation scoreboard as one figure: every distinct comparison of ``df`` (a real-data scoreboard,
     see :func:`distinct_comparisons`) as a row: the measured value (black bar) with the interval a simulated
     value must fall in (grey band), the simulated value (green dot within, red cross outside, red "no value"
@@ -55,12 +61,14 @@ def plot_scoreboard(df: pd.DataFrame, path) -> None:
     from matplotlib.lines import Line2D  # noqa: PLC0415
 
     d = distinct_comparisons(df)
+    if roles is not None and len(d):
+        d = d[d["role"].isin(roles)].reset_index(drop=True)
     roles = [r for r in ROLE_ORDER if (d["role"] == r).any()] if len(d) else []
     roles += [r for r in dict.fromkeys(d.get("role", [])) if r not in roles]
     if not roles:
         fig, ax = subplots(figsize=(7.0, 1.0), dpi=150)
         ax.axis("off")
-        ax.text(0.5, 0.5, "no comparison with real data in this configuration", ha="center", va="center")
+        ax.text(0.5, 0.5, "no comparison of this kind in this configuration", ha="center", va="center")
         save_figure_atomic(fig, path)
         return
     groups = {r: [(q, g) for q, g in d[d["role"] == r].groupby(["quantity", "unit", "sets"], sort=False)]
@@ -108,7 +116,8 @@ def _draw_panel(ax, g: pd.DataFrame) -> None:
     n = len(g)
     y = np.arange(n)[::-1].astype(float)
     vals = np.concatenate([g["measured"].to_numpy(float), g["sim"].to_numpy(float), g["band_low"].to_numpy(float),
-                           g["band_high"].to_numpy(float)])
+                           g["band_high"].to_numpy(float)] +
+                          [g[c].to_numpy(float) for c in ("sim_band_low", "sim_band_high") if c in g])
     vals = vals[np.isfinite(vals)]
     lo, hi = (float(vals.min()), float(vals.max())) if len(vals) else (0.0, 1.0)
     pad = 0.08 * (hi - lo) if hi > lo else max(abs(hi), 1.0) * 0.1
