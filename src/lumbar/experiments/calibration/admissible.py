@@ -205,12 +205,35 @@ class _Objective:
             out.append((float(eq3(phi, (p1 * sc, p2, p3 * sc))) - M) / (self.data_sd_rel * M))
         return np.array(out)
 
+    def reach_directions(self):
+        """(direction, largest moment [N*m], largest angle [rad]) of the disc-only rows per direction."""
+        out = {}
+        for d, M, phi in self.dr:
+            m0, p0 = out.get(d, (0.0, 0.0))
+            out[d] = (max(m0, M), max(p0, phi))
+        return [(d, m, p) for d, (m, p) in out.items()]
+
+    def disc_reach(self, q):
+        """One-sided constraint per direction: the scaled disc law reaches the largest disc-only moment within 1.5 x
+        its measured angle (a law whose torque peaks below it has no disc-only equilibrium there: the paper's
+        flexion law has p3 < 0 and peaks near its 10 N*m row, so a scale below 1 would remove that equilibrium,
+        which the torque-space residual at the measured angle does not see)."""
+        out = []
+        for d, M, phi in self.reach_directions():
+            p1, p2, p3 = self.torque[d]
+            sc = 10.0 ** q[self.torque_idx[d]] if d in self.torque_idx else 1.0
+            grid = np.linspace(0.0, 1.5 * phi, 301)
+            peak = float(np.max(eq3(grid, (p1 * sc, p2, p3 * sc))))
+            out.append(max(0.0, 1.02 * M - peak) / (0.05 * M))
+        return np.array(out)
+
     def from_metrics(self, q, mt):
         """(stacked residuals, penalties) at ``q`` from the probe metrics ``mt``."""
         pen = fit_penalties(mt, self.limit, self.nz) + scale_penalties(self.names, q, mt)
         rel = (rom_of(mt, self.directions) - self.measured) / self.measured
         edge = np.maximum(0.0, np.abs(rel) - FIT_MARGIN["rom_rel"]) / 0.05
         return np.concatenate([rel / self.data_sd_rel, self.disc_residuals(q), PENALTY_WEIGHT * edge,
+                               PENALTY_WEIGHT * self.disc_reach(q),
                                PENALTY_WEIGHT * np.array([v for _, v in pen]),
                                (q - self.prior_q) / self.prior_sd]), pen
 
@@ -218,7 +241,9 @@ class _Objective:
         """Names of the stacked residuals, in order."""
         return [f"ROM {d} (data)" for d in self.directions] + \
             [f"disc-only {d} {M:g} N*m (data)" for d, M, _ in self.dr] + \
-            [f"ROM {d} (25 % band constraint)" for d in self.directions] + [n for n, _ in pen] + \
+            [f"ROM {d} (25 % band constraint)" for d in self.directions] + \
+            [f"disc-only {d} reaches {M:g} N*m (constraint)" for d, M, _ in self.reach_directions()] + \
+            [n for n, _ in pen] + \
             [f"prior {n}" for n in self.names]
 
     def residual(self, q):
@@ -228,7 +253,8 @@ class _Objective:
         x, R, ok = self.probe.run()
         if not ok:
             self.last.clear()
-            return np.full(self.n_res or 2 * len(self.measured) + len(self.dr) + 40 + len(q), PENALTY)
+            n = 2 * len(self.measured) + len(self.dr) + len(self.reach_directions()) + 40 + len(q)
+            return np.full(self.n_res or n, PENALTY)
         mt = self.probe.metrics(x, R)
         r, pen = self.from_metrics(q, mt)
         self.n_res = len(r)
