@@ -40,6 +40,11 @@ def eq3(phi_rad, p):
 #: opposite of a disc (measured: a table with a neutral-zone laxity drove the free fit of flexion to p1 = -7.6 N*m,
 #: p3 = +58 N*m/rad). At the bound (flagged ``at_bound``) the rows show no stiffening and the law is linear.
 P1_MIN_NM = 0.0
+#: largest p1 [N*m] of a disc fit: the characteristic tables' physical range (100 N*m, lumbar.inputs.characteristics)
+#: divided by the largest torque scale of the admissible fit (4, calibration.admissible.DISC_TORQUE_SCALE_BOUNDS), so
+#: that every law the calibration writes passes its own loader; 2.3 x the paper's largest p1 (10.67 N*m, Table 1). Rows
+#: with a neutral-zone laxity can drive a free fit there (a step flagged at_bound)
+P1_MAX_NM = 25.0
 
 
 def fit_disc_direction(phi_rad, torque_nm):
@@ -68,9 +73,9 @@ def fit_disc_direction(phi_rad, torque_nm):
         return eq3(phi, (q[0], 10.0 ** q[1], q[2])) - M
 
     # the variable-projection start is unconstrained in p3 (and p1 above): start inside the fit's bounds
-    x0 = np.clip([p0[0], math.log10(p0[1]), p0[2]], [P1_MIN_NM, -9.0, -1e3], [1e3, 1.0, 1e3])
+    x0 = np.clip([p0[0], math.log10(p0[1]), p0[2]], [P1_MIN_NM, -9.0, -1e3], [P1_MAX_NM, 1.0, 1e3])
     sol = least_squares(res, x0, method="trf",
-                        bounds=([P1_MIN_NM, -9, -1e3], [1e3, 1, 1e3]), x_scale=[1.0, 0.1, 1.0],
+                        bounds=([P1_MIN_NM, -9, -1e3], [P1_MAX_NM, 1, 1e3]), x_scale=[1.0, 0.1, 1.0],
                         xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=2000)
     return float(sol.x[0]), float(10.0 ** sol.x[1]), float(sol.x[2])
 

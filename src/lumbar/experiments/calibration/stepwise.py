@@ -50,7 +50,7 @@ from ..fsu import build_fsu, facet_surfaces, set_ligament_law
 from ..stepwise_reduction import MAIN_DIRECTIONS, StageSolver
 from .admissible import fit_admissible
 from .common import AT_BOUND_FRACTION, IDENTIFIABLE_MIN_DEG, PENALTY, kind_groups, replace_fields, rom_widths, stage_rows
-from .disc import DISC_STAGE, P1_MIN_NM, c_zero, eq3, fit_disc_direction
+from .disc import DISC_STAGE, P1_MAX_NM, P1_MIN_NM, c_zero, eq3, fit_disc_direction
 from .prior import calibration_prior
 from .real_targets import fit_real_targets
 
@@ -119,10 +119,13 @@ def _disc_step(base, reference, steps):
             disc_pts.append({"direction": d, "moment_nm": m, "rom_deg": math.degrees(ph),
                              "torque_fit_nm": float(eq3(ph, p))})
         resid = eq3(phi, p) - M
-        p1_bound = p[0] <= P1_MIN_NM + 1e-9
-        if p1_bound:
+        p1_bound = p[0] <= P1_MIN_NM + 1e-9 or p[0] >= P1_MAX_NM - 1e-9
+        if p1_bound and p[0] <= P1_MIN_NM + 1e-9:
             log.info("calibration step 1 (disc %s): p1 at its bound %g N*m: the rows show no stiffening, the law is "
                      "linear (p3 = %.4g N*m/rad)", d, P1_MIN_NM, p[2])
+        elif p1_bound:
+            log.info("calibration step 1 (disc %s): p1 at its upper bound %g N*m (the rows ask for a step-like law; "
+                     "p2 = %.3g rad^3, p3 = %.4g N*m/rad)", d, P1_MAX_NM, p[1], p[2])
         steps.append({"step": 1, "structure": f"disc:{d}", "stage": DISC_STAGE, "n_scenarios": len(r),
                       "parameters": "p1,p2,p3", "rms_residual": float(np.sqrt(np.mean(resid**2))),
                       "residual_unit": "N*m", "n_not_converged": 0, "n_evaluations": 1,
