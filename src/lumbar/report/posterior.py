@@ -36,10 +36,11 @@ def posterior_sentence(t: pd.DataFrame) -> str:
     moved = t[t["data_moved_it"].astype(bool)]
     stayed = t[~t["data_moved_it"].astype(bool)]
     bound = t[t["at_bound"].astype(bool)]
-    s = (f"The calibration is a MAP estimate over {len(t)} parameters with sourced priors; the four intact ROM values "
-         f"and the admissibility constraints moved {len(moved)} of them, {len(stayed)} stay at their prior "
-         f"({', '.join(stayed['parameter']) or 'none'})")
-    s += f"; {len(bound)} end at a bound ({', '.join(bound['parameter'])})." if len(bound) else "; none ends at a bound."
+    s = (f"The calibration is a MAP estimate over {len(t)} parameters with sourced priors; the data (the intact ROM "
+         f"rows and the disc-only rows) and the admissibility constraints moved {len(moved)} of them, {len(stayed)} "
+         f"stay at their prior ({', '.join(stayed['parameter']) or 'none'})")
+    s += (f"; {len(bound)} {'ends' if len(bound) == 1 else 'end'} at a bound ({', '.join(bound['parameter'])})."
+          if len(bound) else "; none ends at a bound.")
     far = t.loc[t["shift_prior_sd"].abs().idxmax()] if len(t) else None
     if far is not None:
         s += (f" The largest move is {far['parameter']}: {fmt(far['shift_prior_sd'])} prior spreads, moved by "
@@ -56,7 +57,7 @@ def posterior_section(b: ReportBuilder):
     if t.empty:
         b.para("This calibration has no admissible (MAP) fit, hence no posterior (ligament_transfer: strain).")
         return
-    b.para("Four intact range-of-motion values cannot pin down twenty parameters: the calibration therefore gives "
+    b.para(f"A few range-of-motion values cannot pin down {len(t)} parameters: the calibration therefore gives "
            "each parameter a sourced prior (centre and spread) and minimises the data misfit over the data's spread "
            "plus the prior misfit over the prior's spread, with the admissibility criteria as soft penalties (a MAP "
            "estimate). The posterior is the Laplace approximation of that same objective at its optimum. "
