@@ -112,18 +112,25 @@ def _items(geometry, level: str, surfaces):
     )
 
 
-def _views(items):
-    """(camera position, focal point, view-up) of the sagittal and the oblique view [mm]."""
-    pts = np.vstack([v for _, v, _, _ in items["meshes"]])
-    centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))   # bounding-box centre of both vertebrae
+def camera_views(points, oblique=(-0.75, 0.55, 0.37)):
+    """[(label, (camera position, focal point, view-up))] of the sagittal view (from the left) and an oblique view
+    (direction ``oblique``, posterior-left-superior) of ``points`` (n, 3) [mm]: the bounding sphere about the
+    bounding-box centre fits the 600 px wide half-window (view angle 30 deg, aspect 2/3). The one camera rule of the
+    3-D figures (motion segment, L2-S1 spine, a specimen's QA figure)."""
+    pts = np.asarray(points, float)
+    centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
     radius = float(np.max(np.linalg.norm(pts - centre, axis=1)))
-    # the bounding sphere fits the 600 px wide half-window (view angle 30 deg, aspect 2/3)
     d = 1.02 * radius / (np.tan(np.radians(15.0)) * WINDOW_SIZE[0] / 2 / WINDOW_SIZE[1])
     up = (0.0, 0.0, 1.0)
-    sagittal = (tuple(centre + d * np.array([0.0, 1.0, 0.0])), tuple(centre), up)      # from the left
-    obl = np.array([-0.75, 0.55, 0.37])                                                # posterior-left-superior
-    oblique = (tuple(centre + d * obl / np.linalg.norm(obl)), tuple(centre), up)
-    return [("sagittal (from left)", sagittal), ("oblique (posterior-left)", oblique)]
+    sagittal = (tuple(centre + d * np.array([0.0, 1.0, 0.0])), tuple(centre), up)
+    obl = np.asarray(oblique, float)
+    return [("sagittal (from left)", sagittal),
+            ("oblique (posterior-left)", (tuple(centre + d * obl / np.linalg.norm(obl)), tuple(centre), up))]
+
+
+def _views(items):
+    """Camera views of a motion segment's two vertebrae (:func:`camera_views`)."""
+    return camera_views(np.vstack([v for _, v, _, _ in items["meshes"]]))
 
 
 def _atomic_png(path: Path, rgb: np.ndarray) -> None:

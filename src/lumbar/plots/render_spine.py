@@ -14,7 +14,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-from .render import (LIGAMENT_COLOUR, MM, WINDOW_SIZE, check_backend, mpl_view, pyvista_views, render_with,
+from .render import (camera_views, LIGAMENT_COLOUR, MM, WINDOW_SIZE, check_backend, mpl_view, pyvista_views, render_with,
                      save_png_closing)
 
 __all__ = ["render_spine"]
@@ -46,14 +46,7 @@ def _items(geometry, levels, cables, cable_draw_m):
 
 
 def _views(items):
-    pts = np.vstack([v for _, v, _ in items["meshes"]])
-    centre = 0.5 * (pts.min(0) + pts.max(0))
-    radius = float(np.max(np.linalg.norm(pts - centre, axis=1)))
-    d = 1.02 * radius / (np.tan(np.radians(15.0)) * WINDOW_SIZE[0] / 2 / WINDOW_SIZE[1])
-    up = (0.0, 0.0, 1.0)
-    obl = np.array([-0.6, 0.7, 0.25])
-    return [("sagittal (from left)", (tuple(centre + d * np.array([0.0, 1.0, 0.0])), tuple(centre), up)),
-            ("oblique (posterior-left)", (tuple(centre + d * obl / np.linalg.norm(obl)), tuple(centre), up))]
+    return camera_views(np.vstack([v for _, v, _ in items["meshes"]]), oblique=(-0.6, 0.7, 0.25))
 
 
 def _lines(pairs):

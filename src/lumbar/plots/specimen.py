@@ -22,7 +22,7 @@ from matplotlib.figure import Figure
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
 from ..geometry.core import GeometryError
-from .render import MM, WINDOW_SIZE, check_backend, mpl_view, pyvista_views, render_with, save_png_closing
+from .render import MM, camera_views, WINDOW_SIZE, check_backend, mpl_view, pyvista_views, render_with, save_png_closing
 
 __all__ = ["render_landmarks", "main", "STRUCTURE_COLOURS"]
 
@@ -53,14 +53,7 @@ def _items(geometry, level):
 
 
 def _views(items):
-    pts = np.vstack([v for _, v, _, _ in items["meshes"]])
-    centre = 0.5 * (pts.min(0) + pts.max(0))
-    radius = float(np.max(np.linalg.norm(pts - centre, axis=1)))
-    d = 1.02 * radius / (np.tan(np.radians(15.0)) * WINDOW_SIZE[0] / 2 / WINDOW_SIZE[1])
-    up = (0.0, 0.0, 1.0)
-    obl = np.array([-0.75, 0.55, 0.37])
-    return [("sagittal (from left)", (tuple(centre + d * np.array([0.0, 1.0, 0.0])), tuple(centre), up)),
-            ("oblique (posterior-left)", (tuple(centre + d * obl / np.linalg.norm(obl)), tuple(centre), up))]
+    return camera_views(np.vstack([v for _, v, _, _ in items["meshes"]]))
 
 
 def _render_pyvista(items, path):
