@@ -5,30 +5,20 @@
 rule admissibility:
     input:
         geometry_inputs,
-        prior="results/calibration/calibration_prior.csv",
-        curves="results/load_sharing/curves_calibrated.csv",
-        compression="results/load_sharing/compression_calibrated.csv",
-        characteristics=CALIBRATION_CHARACTERISTICS,
-        real_fit="results/calibration/calibration_real_fit.csv",
+        prior=out("calibration", "prior"),
+        curves=out("load_sharing", "curves", set="calibrated"),
+        compression=out("load_sharing", "compression", set="calibrated"),
+        characteristics=outs("calibration", "characteristics"),
+        real_fit=out("calibration", "real_fit"),
         published=characteristic_tables(
             config["characteristics"]["data_dir"], ["calibrated"]
         ),
         literature="data/load_sharing/load_sharing_literature.csv",
         yamamoto="data/experiments/yamamoto1989_levels_original_text.csv",
     output:
-        table=report(
-            "results/calibration/admissibility.csv",
-            caption="../report/admissibility.rst",
-            category="Load sharing",
-        ),
-        limits="results/calibration/pretension_limits.csv",
-        remus=report(
-            "results/calibration/remus2021_comparison.csv",
-            caption="../report/remus2021_comparison.rst",
-            category="Load sharing",
-        ),
+        **stage_outputs("admissibility", "admissibility"),
     log:
-        "logs/admissibility.log",
+        log_file("admissibility"),
     conda:
         "../envs/lumbar.yaml"
     params:

@@ -1,16 +1,3 @@
-CALIBRATION_CHARACTERISTICS = [
-    f"results/calibration/characteristics/{n}"
-    for n in (
-        "disc.csv",
-        "facet.csv",
-        "ligament_prestrain.csv",
-        "ligaments_softplus.csv",
-        "ligaments_rupp2015.csv",
-        "rupp2015_shape_check.csv",
-    )
-]
-
-
 rule calibrate:
     input:
         geometry_inputs,
@@ -22,38 +9,13 @@ rule calibrate:
             config["characteristics"]["data_dir"]
         ),
         # the surrogate generator's anchoring: the start of the calibration's own real-target fit
-        generator_fit="results/experiments/stepwise_reduction_generator_fit.csv",
+        generator_fit=out("virtual_experiment", "generator_fit"),
     output:
-        characteristics=CALIBRATION_CHARACTERISTICS,
-        summary="results/calibration/calibration_summary.csv",
-        real_fit="results/calibration/calibration_real_fit.csv",
-        targets="results/calibration/calibration_targets.csv",
-        prior="results/calibration/calibration_prior.csv",
-        penalties="results/calibration/calibration_penalties.csv",
-        posterior="results/calibration/posterior.csv",
-        covariance="results/calibration/posterior_covariance.csv",
-        rom_fit="results/calibration/calibration_rom_fit.csv",
-        disc_points="results/calibration/fig4_points.csv",
-        ligament_points="results/calibration/fig5_points.csv",
-        table1=report(
-            "results/tables/table1_disc_calibrated.csv",
-            caption="../report/table1_disc_calibrated.rst",
-            category="Stepwise reduction",
-        ),
-        table2=report(
-            "results/tables/table2_facet_surfaces.csv",
-            caption="../report/table2_facet_surfaces.rst",
-            category="Stepwise reduction",
-        ),
-        table3=report(
-            "results/tables/table3_ligaments_calibrated.csv",
-            caption="../report/table3_ligaments_calibrated.rst",
-            category="Stepwise reduction",
-        ),
+        **stage_outputs("calibration", "calibrate"),
     log:
-        "logs/calibrate.log",
+        log_file("calibrate"),
     benchmark:
-        "results/benchmarks/calibrate.tsv"
+        benchmark_file("calibrate")
     conda:
         "../envs/lumbar.yaml"
     params:
@@ -67,16 +29,12 @@ rule calibrate:
 
 rule fig4_disc_torque_angle:
     input:
-        points="results/calibration/fig4_points.csv",
-        table="results/tables/table1_disc_calibrated.csv",
+        points=out("calibration", "disc_points"),
+        table=out("calibration", "table1"),
     output:
-        report(
-            "results/figures/fig4_disc_torque_angle.png",
-            caption="../report/fig4_disc_torque_angle.rst",
-            category="Stepwise reduction",
-        ),
+        **stage_outputs("calibration", "fig4_disc_torque_angle"),
     log:
-        "logs/fig4_disc_torque_angle.log",
+        log_file("fig4_disc_torque_angle"),
     conda:
         "../envs/lumbar.yaml"
     script:
@@ -85,16 +43,12 @@ rule fig4_disc_torque_angle:
 
 rule fig5_ligament_characteristics:
     input:
-        points="results/calibration/fig5_points.csv",
-        table="results/tables/table3_ligaments_calibrated.csv",
+        points=out("calibration", "ligament_points"),
+        table=out("calibration", "table3"),
     output:
-        report(
-            "results/figures/fig5_ligament_characteristics.png",
-            caption="../report/fig5_ligament_characteristics.rst",
-            category="Stepwise reduction",
-        ),
+        **stage_outputs("calibration", "fig5_ligament_characteristics"),
     log:
-        "logs/fig5_ligament_characteristics.log",
+        log_file("fig5_ligament_characteristics"),
     conda:
         "../envs/lumbar.yaml"
     script:
@@ -104,15 +58,11 @@ rule fig5_ligament_characteristics:
 # What the data told us: every calibrated parameter's prior and posterior (Laplace) 90 % interval.
 rule posterior_figure:
     input:
-        posterior="results/calibration/posterior.csv",
+        posterior=out("calibration", "posterior"),
     output:
-        report(
-            "results/figures/calibration_posterior.png",
-            caption="../report/calibration_posterior.rst",
-            category="Stepwise reduction",
-        ),
+        **stage_outputs("calibration", "posterior_figure"),
     log:
-        "logs/posterior_figure.log",
+        log_file("posterior_figure"),
     conda:
         "../envs/lumbar.yaml"
     script:

@@ -1,8 +1,9 @@
 from glob import glob
 from pathlib import Path
 
+from lumbar.inputs import manifests
 from lumbar.inputs.characteristics import CHARACTERISTIC_TABLES
-from lumbar.inputs.config import ConfigError, check_unique_keys
+from lumbar.inputs.config import ConfigError, check_unique_keys, schema_defaults
 from lumbar.inputs.tables import (
     IDP_FIXTURE_PARTS,
     MUSCLE_SENSITIVITY_PARAMETERS,
@@ -21,7 +22,67 @@ for _cf in workflow.configfiles:
                 f"Error in config file {_cf}, {_e.errors[0][1]}"
             ) from None
 
+# the run prefix (config run.name) is checked first: its message names the key and the form expected
+try:
+    manifests.run_name(config)
+except ValueError as _e:
+    raise WorkflowError(str(_e)) from None
+
 validate(config, schema="../schemas/config.schema.yaml")
+
+# ---- the run's roots and the stage manifests (lumbar.inputs.manifests: every output declared once)
+RESULTS = manifests.results_root(config)  # results, or results/<run.name>
+LOGS = manifests.logs_root(config)  # logs, or logs/<run.name>
+if RESULTS != manifests.RESULTS_DIR:
+    # a configuration default naming a result of the run (calibrated_dir, ...) names this run's own
+    for _keys, _default in manifests.results_defaults(schema_defaults()).items():
+        _section = config
+        for _k in _keys[:-1]:
+            _section = _section[_k]
+        if _section.get(_keys[-1]) == _default:
+            _section[_keys[-1]] = manifests.reroot(_default, RESULTS)
+
+
+def out(stage, role, **fill):
+    """The path of an output role of a stage under the run's results root (wildcards not filled are kept)."""
+    return manifests.path(stage, role, RESULTS, **fill)
+
+
+def outs(stage, role, **fill):
+    """Every file of an output role (a role declared with ``expand``: one per value)."""
+    return manifests.paths(stage, role, RESULTS, **fill)
+
+
+def stage_outputs(stage, rule, **fill):
+    """The named outputs of ``rule`` as its stage manifest declares them (``output: **stage_outputs(...)``):
+    paths under the run's root, report items with their caption and category, folders as directory().
+    """
+    res = {}
+    for name, o in manifests.rule_outputs(stage, rule).items():
+        ps = o.paths(RESULTS, **fill)
+        item = ps if o.expand else ps[0]
+        if o.directory:
+            item = directory(item)
+        if o.caption:
+            extra = {"subcategory": o.subcategory} if o.subcategory else {}
+            item = report(
+                item,
+                caption=f"../report/{o.caption}.rst",
+                category=o.category,
+                **extra,
+            )
+        res[name] = item
+    return res
+
+
+def log_file(name):
+    """A rule's log file under the run's logs root."""
+    return f"{LOGS}/{name}.log"
+
+
+def benchmark_file(name):
+    """A rule's benchmark file (Snakemake's benchmark:) under the run's results root."""
+    return f"{RESULTS}/benchmarks/{name}.tsv"
 
 
 def _sorted_keys(x):
@@ -41,69 +102,16 @@ config.update(_canonical_config)
 
 
 def final_outputs():
-    """Every result the default target builds; rules of later stages add theirs here."""
-    return [
-        "results/tables/fsu_geometry.csv",
-        "results/figures/fig1_l4l5_model.png",
-        "results/tables/fsu_rom_intact.csv",
-        # stepwise reduction: calibration (Tables 1-3, Figs. 4-5), forward (Table 4, Fig. 6)
-        "results/tables/table1_disc_calibrated.csv",
-        "results/tables/table2_facet_surfaces.csv",
-        "results/tables/table3_ligaments_calibrated.csv",
-        "results/figures/fig4_disc_torque_angle.png",
-        "results/figures/fig5_ligament_characteristics.png",
-        "results/tables/table4_rom_synopsis.csv",
-        "results/tables/table4_outlier_counts.csv",
-        # validation on real data (workflow/rules/validation.smk): the report opens with it
-        "results/tables/validation_real_data.csv",
-        # load sharing, physical admissibility, other levels (workflow/rules/load_sharing.smk, admissibility.smk)
-        "results/load_sharing/load_sharing_summary.csv",
-        "results/load_sharing/l2s1_cables_l4l5.csv",
-        "results/figures/load_sharing_curves.png",
-        "results/figures/load_sharing_shares.png",
-        "results/calibration/admissibility.csv",
-        # the calibration's posterior (MAP + Laplace) and the bands of the intact curves
-        "results/calibration/posterior.csv",
-        "results/figures/calibration_posterior.png",
-        "results/load_sharing/bands_calibrated.csv",
-        "results/tables/multilevel_rom.csv",
-        "results/figures/multilevel_rom.png",
-        "results/figures/validation_scoreboard.png",
-        "results/tables/table4_vs_paper.csv",
-        "results/figures/table4_grid.png",
-        "results/figures/fig6_rom_stepwise_reduction.png",
-        # L2-S1 with wire cables, L4-L5 IDP: Table 5, Figs. 3 and 7
-        "results/figures/fig3_l2s1_cables.png",
-        "results/tables/table5_idp_synopsis.csv",
-        "results/tables/table5_outlier_counts.csv",
-        "results/tables/table5_vs_paper.csv",
-        "results/tables/l2s1_internal_loads.csv",
-        "results/figures/table5_grid.png",
-        "results/figures/fig7_idp.png",
-        # muscle-driven model (workflow/rules/muscle_model.smk): validation, sensitivity, Sobol
-        "results/tables/muscle_model_segment_loads.csv",
-        "results/tables/in_vivo_validation.csv",
-        "results/muscle_model/in_vivo_metrics.json",
-        "results/tables/flexion_relaxation.csv",
-        "results/figures/muscle_in_vivo_validation.png",
-        "results/tables/muscle_capacity.csv",
-        "results/tables/sensitivity_idp.csv",
-        "results/tables/sensitivity_directions.csv",
-        "results/figures/muscle_sensitivity_ssl_um.png",
-        "results/figures/muscle_sensitivity_k_n_per_cm2.png",
-        "results/figures/muscle_sensitivity_in_situ_sl_um.png",
-        "results/figures/muscle_sensitivity_spt_n_per_cm2.png",
-        "results/figures/muscle_sensitivity_pennation_deg.png",
-        "results/tables/sobol_indices.csv",
-        "results/figures/muscle_sobol.png",
-        # discrepancy discovery (workflow/rules/discover.smk)
-        *discovery_final_outputs(),
-        # paper-style report (workflow/rules/report.smk): reads every output above
-        "results/report/paper.html",
-        "results/report/paper.pdf",
-        # documents whose numbers are read from the results (rule docs_numbers)
-        *[f"results/report/{Path(t).name}" for t in DOC_TEMPLATES],
-    ]
+    """Every result the default target builds: the stage manifests' final outputs, the discovery runs of this
+    configuration, and the documents whose numbers are read from the results (rule docs_numbers).
+    """
+    return (
+        manifests.final_outputs(
+            RESULTS, [s for s in manifests.MANIFESTS if s != "discovery"]
+        )
+        + discovery_final_outputs()
+        + doc_outputs()
+    )
 
 
 def geometry_inputs(wildcards):
@@ -154,7 +162,7 @@ def discovery_model_bands():
     """
     if config["discovery"]["characteristic_set"] != "calibrated":
         return []
-    return ["results/stepwise_reduction/bands_calibrated.csv"]
+    return [out("stepwise_reduction", "bands")]
 
 
 def muscle_passive_tables():
@@ -203,84 +211,63 @@ def stepwise_reduction_derived(wildcards):
 def stepwise_reduction_characteristics(wildcards):
     """The calibrated set comes from the calibration; the literature sets from the data directory."""
     if wildcards.set == "calibrated":
-        return "results/calibration/characteristics/disc.csv"
+        return out("calibration", "characteristics", name="disc.csv")
     return characteristics_dir()
 
 
 def stepwise_reduction_tables(wildcards):
     """The characteristic tables rule stepwise_reduction_sim reads for its set (see characteristic_tables)."""
     if wildcards.set == "calibrated":
-        return characteristic_tables(
-            "results/calibration/characteristics", ["calibrated"]
-        )
+        return characteristic_tables(calibrated_dir(), ["calibrated"])
     return characteristic_tables(config["characteristics"]["data_dir"], [wildcards.set])
+
+
+def calibrated_dir():
+    """The folder of the calibrated characteristic set the calibration writes (under the run's root)."""
+    return str(Path(outs("calibration", "characteristics")[0]).parent)
 
 
 # ---- paper-style report (workflow/rules/report.smk)
 DOC_TEMPLATES = sorted(glob("docs/templates/*.md"))
 
 
+def doc_outputs():
+    """docs/templates/<name>.md rendered into the run's report folder."""
+    return [out("report", "doc", name=Path(t).name) for t in DOC_TEMPLATES]
+
+
 def doc_template_inputs(wildcards):
-    """The result files the placeholders of the doc templates read (lumbar.inputs.templates.template_files)."""
+    """The result files the placeholders of the doc templates read (lumbar.inputs.templates.template_files),
+    under the run's results root."""
     from lumbar.inputs.templates import template_files
 
     return sorted(
-        {f for t in DOC_TEMPLATES for f in template_files(Path(t).read_text())}
+        {
+            manifests.reroot(f, RESULTS)
+            for t in DOC_TEMPLATES
+            for f in template_files(Path(t).read_text())
+        }
     )
 
 
-REPORT_OPTIONAL = [
-    "results/tables/validation_null_models.csv",
-    "results/figures/validation_internal_loads.png",
-    "results/load_sharing/reduction_flexion.csv",
-    "results/stepwise_reduction/bands_calibrated.csv",
-    "results/l2s1/bands_calibrated.csv",
-    "results/calibration/calibration_summary.csv",
-    "results/load_sharing/compression_summary.csv",
-    "results/calibration/remus2021_comparison.csv",
-    "results/tables/multilevel_admissibility.csv",
-    "results/tables/multilevel_transfer_readings.csv",
-    "results/calibration/calibration_real_fit.csv",
-    "results/calibration/calibration_targets.csv",
-    "results/muscle_model/in_vivo_metrics.json",
-    "results/tables/muscle_model_segment_loads.csv",
-    "results/tables/in_vivo_validation.csv",
-    "results/tables/flexion_relaxation.csv",
-    "results/tables/sensitivity_idp.csv",
-    "results/tables/sensitivity_directions.csv",
-    "results/tables/muscle_capacity.csv",
-    "results/tables/sobol_indices.csv",
-    "results/figures/muscle_in_vivo_validation.png",
-    "results/figures/muscle_sobol.png",
-    "results/discrepancy/benchmark.csv",
-    "results/discrepancy/benchmark_summary.json",
-    "results/figures/discrepancy_benchmark.png",
-    "results/discrepancy/real_data_summary.csv",
-] + [
-    f"results/discrepancy/{case}/{name}"
-    for case in ("default", "in_vivo", "va_artefact", "intact_rom")
-    for name in (
-        "discovery.json",
-        "disagreement_map.png",
-        "ranking.png",
-        "before_after.png",
-        "section.md",
-    )
-]
+# the files the paper-style report reads wherever a rule of this configuration makes them (stage manifests)
+REPORT_OPTIONAL = manifests.report_optional(RESULTS)
 
 
 def report_inputs(wildcards):
     """Every final output except the report itself, the reference tables, and those of the files the report
     reads (REPORT_OPTIONAL) that some rule of this workflow produces; a file absent here is reported as
     "not built in this configuration"."""
-    results = [p for p in final_outputs() if not p.startswith("results/report/")]
+    report_dir = str(Path(out("report", "html")).parent) + "/"
+    discovery_files = set(manifests.report_optional(RESULTS, ["discovery"]))
+    results = [p for p in final_outputs() if not p.startswith(report_dir)]
     extra = [stepwise_reduction_experiment(wildcards), l2s1_idp_reference(wildcards)]
     extra += [
         p
         for p in REPORT_OPTIONAL
         if any(r.is_producer(p) for r in workflow.rules)
         # discovery runs whose inputs no rule makes (in vivo before the muscle model) are not requested
-        and (not p.startswith("results/discrepancy/") or p in discovery_final_outputs())
+        and (p not in discovery_files or p in discovery_final_outputs())
     ]
     return results + [p for p in dict.fromkeys(extra) if p not in results]
 
@@ -302,7 +289,7 @@ def l2s1_characteristics(wildcards):
         return ancient(data_dir)
     cal_dir = Path(cal)
     produced = any(r.name == "calibrate" for r in workflow.rules) and cal_dir == Path(
-        "results", "calibration", "characteristics"
+        calibrated_dir()
     )
     if produced:
         return str(cal_dir.joinpath("disc.csv"))
@@ -317,13 +304,8 @@ def l2s1_tables(wildcards):
 
 
 # ---- discrepancy discovery (workflow/rules/discover.smk)
-DISCOVERY_FILES = (
-    "discovery.json",
-    "disagreement_map.png",
-    "ranking.png",
-    "before_after.png",
-    "section.md",
-)
+# the report items of one discovery run (roles "<case>.<item>" of the discovery manifest)
+DISCOVERY_ITEMS = [role for role, _, _ in manifests.DISCOVERY_CASE_FILES]
 
 
 def discovery_config(wildcards):
@@ -348,25 +330,7 @@ def discovery_config(wildcards):
 
 def discovery_case_outputs(case):
     """Named outputs of one discovery run: report items (category Discrepancy) + the per-scenario table."""
-    d = f"results/discrepancy/{case}"
-    caption = {
-        "discovery.json": "discovery_json",
-        "section.md": "discovery_json",
-        "disagreement_map.png": "discovery_disagreement_map",
-        "ranking.png": "discovery_ranking",
-        "before_after.png": "discovery_before_after",
-    }
-    out = {
-        f.split(".")[0]: report(
-            f"{d}/{f}",
-            caption=f"../report/{caption[f]}.rst",
-            category="Discrepancy",
-            subcategory=case,
-        )
-        for f in DISCOVERY_FILES
-    }
-    out["scenarios"] = f"{d}/scenarios.csv"
-    return out
+    return stage_outputs("discovery", f"discovery_{case}")
 
 
 # the in-vitro IDP effects (lumbar.experiments.effects: kind "idp") and the out-of-library causes of each experiment
@@ -405,7 +369,7 @@ def discovery_benchmark_idp_model(wildcards):
     """The nominal L2-S1 model table, for the benchmark jobs with in-vitro IDP cases."""
     if "idp_invitro" not in discovery_job_experiments(wildcards.job):
         return []
-    return ["results/discrepancy/model/idp_invitro_model.csv"]
+    return [out("discovery", "idp_model")]
 
 
 def discovery_specimen_bank(experiment):
@@ -414,20 +378,20 @@ def discovery_specimen_bank(experiment):
     if config["discovery"]["null_specimens"] == 0:
         return []
     name = {"stepwise_rom": "rom", "idp_invitro": "idp"}[experiment]
-    return [f"results/discrepancy/model/specimen_bank_{name}.csv"]
+    return [out("discovery", "specimen_bank", experiment=name)]
 
 
 def discovery_benchmark_banks(wildcards):
     """The null banks and fixture specimens a benchmark job reads."""
     exps = discovery_job_experiments(wildcards.job)
-    out = [p for x in sorted(exps) for p in discovery_specimen_bank(x)]
+    files = [p for x in sorted(exps) for p in discovery_specimen_bank(x)]
     b = config["discovery"]["benchmark"]
     if "idp_invitro" in exps and b["generator"] == "virtual_specimens":
-        out += [
-            f"results/discrepancy/model/fixture_specimens_idp_{k}.csv"
+        files += [
+            out("discovery", "fixture_specimens_idp", part=k)
             for k in range(IDP_FIXTURE_PARTS)
         ]
-    return out
+    return files
 
 
 def discovery_final_outputs():
@@ -438,7 +402,7 @@ def discovery_final_outputs():
         ["intact_rom"] if config["discovery"]["intact_rom"] else []
     )
     muscle = (
-        "results/tables/in_vivo_validation.csv",
+        out("muscle_model", "validation"),
         config["discovery"]["in_vivo_segment_loads"],
     )
     if all(
@@ -446,14 +410,8 @@ def discovery_final_outputs():
         for p in muscle
     ):
         cases.append("in_vivo")
-    out = [f"results/discrepancy/{c}/{f}" for c in cases for f in DISCOVERY_FILES]
-    return out + [
-        "results/discrepancy/real_data_summary.csv",
-        "results/discrepancy/benchmark.csv",
-        "results/discrepancy/benchmark_summary.json",
-        "results/discrepancy/benchmark_section.md",
-        "results/figures/discrepancy_benchmark.png",
-    ]
+    runs = [out("discovery", f"{c}.{f}") for c in cases for f in DISCOVERY_ITEMS]
+    return runs + manifests.final_outputs(RESULTS, ["discovery"])
 
 
 def discovery_real_data_runs(wildcards):
@@ -463,6 +421,6 @@ def discovery_real_data_runs(wildcards):
     cases = ["va_artefact"] + (
         ["intact_rom"] if config["discovery"]["intact_rom"] else []
     )
-    if "results/discrepancy/in_vivo/discovery.json" in discovery_final_outputs():
+    if out("discovery", "in_vivo.discovery") in discovery_final_outputs():
         cases.append("in_vivo")
-    return [f"results/discrepancy/{c}/discovery.json" for c in cases]
+    return [out("discovery", f"{c}.discovery") for c in cases]

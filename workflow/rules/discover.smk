@@ -15,11 +15,11 @@ rule discovery_specimen_bank:
         calibrated=discovery_calibrated_tables(),
         cables=config["l2s1"]["cables"],
     output:
-        "results/discrepancy/model/specimen_bank_{experiment}.csv",
+        **stage_outputs("discovery", "discovery_specimen_bank"),
     log:
-        "logs/discovery_specimen_bank_{experiment}.log",
+        log_file("discovery_specimen_bank_{experiment}"),
     benchmark:
-        "results/benchmarks/discovery_specimen_bank_{experiment}.tsv"
+        benchmark_file("discovery_specimen_bank_{experiment}")
     wildcard_constraints:
         experiment="rom|idp",
     conda:
@@ -42,11 +42,11 @@ rule discovery_fixture_specimens_idp:
         calibrated=discovery_calibrated_tables(),
         cables=config["l2s1"]["cables"],
     output:
-        "results/discrepancy/model/fixture_specimens_idp_{part}.csv",
+        **stage_outputs("discovery", "discovery_fixture_specimens_idp"),
     log:
-        "logs/discovery_fixture_specimens_idp_{part}.log",
+        log_file("discovery_fixture_specimens_idp_{part}"),
     benchmark:
-        "results/benchmarks/discovery_fixture_specimens_idp_{part}.tsv"
+        benchmark_file("discovery_fixture_specimens_idp_{part}")
     wildcard_constraints:
         part="[0-9]+",
     conda:
@@ -67,11 +67,11 @@ rule discovery_idp_model:
         calibrated=discovery_calibrated_tables(),
         cables=config["l2s1"]["cables"],
     output:
-        "results/discrepancy/model/idp_invitro_model.csv",
+        **stage_outputs("discovery", "discovery_idp_model"),
     log:
-        "logs/discovery_idp_model.log",
+        log_file("discovery_idp_model"),
     benchmark:
-        "results/benchmarks/discovery_idp_model.tsv"
+        benchmark_file("discovery_idp_model")
     conda:
         "../envs/lumbar.yaml"
     params:
@@ -93,9 +93,9 @@ rule discovery_default:
     output:
         **discovery_case_outputs("default"),
     log:
-        "logs/discovery_default.log",
+        log_file("discovery_default"),
     benchmark:
-        "results/benchmarks/discovery_default.tsv"
+        benchmark_file("discovery_default")
     conda:
         "../envs/lumbar.yaml"
     params:
@@ -116,9 +116,9 @@ rule discovery_va_artefact:
     output:
         **discovery_case_outputs("va_artefact"),
     log:
-        "logs/discovery_va_artefact.log",
+        log_file("discovery_va_artefact"),
     benchmark:
-        "results/benchmarks/discovery_va_artefact.tsv"
+        benchmark_file("discovery_va_artefact")
     conda:
         "../envs/lumbar.yaml"
     params:
@@ -142,9 +142,9 @@ rule discovery_intact_rom:
     output:
         **discovery_case_outputs("intact_rom"),
     log:
-        "logs/discovery_intact_rom.log",
+        log_file("discovery_intact_rom"),
     benchmark:
-        "results/benchmarks/discovery_intact_rom.tsv"
+        benchmark_file("discovery_intact_rom")
     conda:
         "../envs/lumbar.yaml"
     params:
@@ -158,13 +158,9 @@ rule discovery_real_data_summary:
     input:
         runs=discovery_real_data_runs,
     output:
-        report(
-            "results/discrepancy/real_data_summary.csv",
-            caption="../report/discovery_real_data_summary.rst",
-            category="Discrepancy",
-        ),
+        **stage_outputs("discovery", "discovery_real_data_summary"),
     log:
-        "logs/discovery_real_data_summary.log",
+        log_file("discovery_real_data_summary"),
     conda:
         "../envs/lumbar.yaml"
     params:
@@ -176,14 +172,14 @@ rule discovery_real_data_summary:
 # chains on the muscle model by path: its rules produce these two tables
 rule discovery_in_vivo:
     input:
-        measured="results/tables/in_vivo_validation.csv",
+        measured=out("muscle_model", "validation"),
         segment_loads=config["discovery"]["in_vivo_segment_loads"],
     output:
         **discovery_case_outputs("in_vivo"),
     log:
-        "logs/discovery_in_vivo.log",
+        log_file("discovery_in_vivo"),
     benchmark:
-        "results/benchmarks/discovery_in_vivo.tsv"
+        benchmark_file("discovery_in_vivo")
     conda:
         "../envs/lumbar.yaml"
     params:
@@ -203,12 +199,11 @@ rule discovery_benchmark_job:
         idp_model=discovery_benchmark_idp_model,
         banks=discovery_benchmark_banks,
     output:
-        table="results/discrepancy/benchmark/{job}.csv",
-        fixtures=directory("results/discrepancy/benchmark/{job}_fixtures"),
+        **stage_outputs("discovery", "discovery_benchmark_job"),
     log:
-        "logs/discovery_benchmark_job_{job}.log",
+        log_file("discovery_benchmark_job_{job}"),
     benchmark:
-        "results/benchmarks/discovery_benchmark_job_{job}.tsv"
+        benchmark_file("discovery_benchmark_job_{job}")
     wildcard_constraints:
         job="[a-z_]+",
     conda:
@@ -221,28 +216,11 @@ rule discovery_benchmark_job:
 
 rule discovery_benchmark:
     input:
-        jobs=expand(
-            "results/discrepancy/benchmark/{job}.csv", job=discovery_benchmark_jobs()
-        ),
+        jobs=expand(out("discovery", "benchmark_job"), job=discovery_benchmark_jobs()),
     output:
-        table=report(
-            "results/discrepancy/benchmark.csv",
-            caption="../report/discrepancy_benchmark_table.rst",
-            category="Discrepancy",
-        ),
-        summary=report(
-            "results/discrepancy/benchmark_summary.json",
-            caption="../report/discrepancy_benchmark_table.rst",
-            category="Discrepancy",
-        ),
-        figure=report(
-            "results/figures/discrepancy_benchmark.png",
-            caption="../report/discrepancy_benchmark.rst",
-            category="Discrepancy",
-        ),
-        paragraph="results/discrepancy/benchmark_section.md",
+        **stage_outputs("discovery", "discovery_benchmark"),
     log:
-        "logs/discovery_benchmark.log",
+        log_file("discovery_benchmark"),
     conda:
         "../envs/lumbar.yaml"
     params:

@@ -6,22 +6,16 @@ rule fsu_rom:
             config["characteristics"]["data_dir"], config["characteristics"]["sets"]
         ),
         calibrated=(
-            characteristic_tables(
-                "results/calibration/characteristics", ["calibrated"]
-            )
+            characteristic_tables(calibrated_dir(), ["calibrated"])
             if "calibrated" in config["characteristics"]["sets"]
             else []
         ),
     output:
-        report(
-            "results/tables/fsu_rom_intact.csv",
-            caption="../report/fsu_rom_intact.rst",
-            category="Functional spinal unit",
-        ),
+        **stage_outputs("fsu", "fsu_rom"),
     log:
-        "logs/fsu_rom.log",
+        log_file("fsu_rom"),
     benchmark:
-        "results/benchmarks/fsu_rom.tsv"
+        benchmark_file("fsu_rom")
     conda:
         "../envs/lumbar.yaml"
     params:

@@ -2,13 +2,9 @@ rule fsu_geometry:
     input:
         geometry_inputs,
     output:
-        report(
-            "results/tables/fsu_geometry.csv",
-            caption="../report/fsu_geometry.rst",
-            category="Geometry",
-        ),
+        **stage_outputs("geometry", "fsu_geometry"),
     log:
-        "logs/fsu_geometry.log",
+        log_file("fsu_geometry"),
     conda:
         "../envs/lumbar.yaml"
     params:
@@ -21,15 +17,11 @@ rule fig1_l4l5_model:
     input:
         geometry_inputs,
     output:
-        report(
-            "results/figures/fig1_l4l5_model.png",
-            caption="../report/fig1_l4l5_model.rst",
-            category="Geometry",
-        ),
+        **stage_outputs("geometry", "fig1_l4l5_model"),
     log:
-        "logs/fig1_l4l5_model.log",
+        log_file("fig1_l4l5_model"),
     benchmark:
-        "results/benchmarks/fig1_l4l5_model.tsv"
+        benchmark_file("fig1_l4l5_model")
     conda:
         "../envs/lumbar.yaml"
     params:

@@ -9,11 +9,11 @@ rule l2s1_idp:
         characteristic_tables=l2s1_tables,
         cables=config["l2s1"]["cables"],
     output:
-        "results/l2s1/idp_{set}.csv",
+        **stage_outputs("l2s1", "l2s1_idp"),
     log:
-        "logs/l2s1_idp_{set}.log",
+        log_file("l2s1_idp_{set}"),
     benchmark:
-        "results/benchmarks/l2s1_idp_{set}.tsv"
+        benchmark_file("l2s1_idp_{set}")
     wildcard_constraints:
         set="calibrated|chazal1985|shirazi_adl1986|white_panjabi1990|nolte1990|rupp2015",
     conda:
@@ -32,16 +32,16 @@ rule l2s1_idp:
 rule l2s1_bands:
     input:
         geometry_inputs,
-        characteristics=CALIBRATION_CHARACTERISTICS,
-        posterior="results/calibration/posterior.csv",
-        covariance="results/calibration/posterior_covariance.csv",
+        characteristics=outs("calibration", "characteristics"),
+        posterior=out("calibration", "posterior"),
+        covariance=out("calibration", "covariance"),
         cables=config["l2s1"]["cables"],
     output:
-        "results/l2s1/bands_calibrated.csv",
+        **stage_outputs("l2s1", "l2s1_bands"),
     log:
-        "logs/l2s1_bands.log",
+        log_file("l2s1_bands"),
     benchmark:
-        "results/benchmarks/l2s1_bands.tsv"
+        benchmark_file("l2s1_bands")
     conda:
         "../envs/lumbar.yaml"
     params:
@@ -55,43 +55,14 @@ rule l2s1_bands:
 
 rule table5:
     input:
-        sims=expand("results/l2s1/idp_{set}.csv", set=config["l2s1"]["sets"]),
+        sims=expand(out("l2s1", "idp"), set=config["l2s1"]["sets"]),
         reference=l2s1_idp_reference,
         published=published_model_results,
-        bands="results/l2s1/bands_calibrated.csv",
+        bands=out("l2s1", "bands"),
     output:
-        synopsis=report(
-            "results/tables/table5_idp_synopsis.csv",
-            caption="../report/table5_idp_synopsis.rst",
-            category="IDP (L2-S1)",
-        ),
-        counts=report(
-            "results/tables/table5_outlier_counts.csv",
-            caption="../report/table5_outlier_counts.rst",
-            category="IDP (L2-S1)",
-        ),
-        vs_paper=report(
-            "results/tables/table5_vs_paper.csv",
-            caption="../report/table5_vs_paper.rst",
-            category="IDP (L2-S1)",
-        ),
-        internal=report(
-            "results/tables/l2s1_internal_loads.csv",
-            caption="../report/l2s1_internal_loads.rst",
-            category="IDP (L2-S1)",
-        ),
-        grid=report(
-            "results/figures/table5_grid.png",
-            caption="../report/table5_grid.rst",
-            category="IDP (L2-S1)",
-        ),
-        fig7=report(
-            "results/figures/fig7_idp.png",
-            caption="../report/fig7_idp.rst",
-            category="IDP (L2-S1)",
-        ),
+        **stage_outputs("l2s1", "table5"),
     log:
-        "logs/table5.log",
+        log_file("table5"),
     conda:
         "../envs/lumbar.yaml"
     params:
@@ -106,15 +77,11 @@ rule fig3_l2s1_cables:
         geometry_inputs,
         cables=config["l2s1"]["cables"],
     output:
-        report(
-            "results/figures/fig3_l2s1_cables.png",
-            caption="../report/fig3_l2s1_cables.rst",
-            category="IDP (L2-S1)",
-        ),
+        **stage_outputs("l2s1", "fig3_l2s1_cables"),
     log:
-        "logs/fig3_l2s1_cables.log",
+        log_file("fig3_l2s1_cables"),
     benchmark:
-        "results/benchmarks/fig3_l2s1_cables.tsv"
+        benchmark_file("fig3_l2s1_cables")
     conda:
         "../envs/lumbar.yaml"
     params:

@@ -8,12 +8,11 @@ rule load_sharing_curves:
         characteristics=stepwise_reduction_characteristics,
         characteristic_tables=stepwise_reduction_tables,
     output:
-        curves="results/load_sharing/curves_{set}.csv",
-        compression="results/load_sharing/compression_{set}.csv",
+        **stage_outputs("load_sharing", "load_sharing_curves"),
     log:
-        "logs/load_sharing_curves_{set}.log",
+        log_file("load_sharing_curves_{set}"),
     benchmark:
-        "results/benchmarks/load_sharing_curves_{set}.tsv"
+        benchmark_file("load_sharing_curves_{set}")
     wildcard_constraints:
         set="calibrated|chazal1985|shirazi_adl1986|white_panjabi1990|nolte1990|rupp2015",
     conda:
@@ -32,15 +31,15 @@ rule load_sharing_curves:
 rule load_sharing_bands:
     input:
         geometry_inputs,
-        characteristics=CALIBRATION_CHARACTERISTICS,
-        posterior="results/calibration/posterior.csv",
-        covariance="results/calibration/posterior_covariance.csv",
+        characteristics=outs("calibration", "characteristics"),
+        posterior=out("calibration", "posterior"),
+        covariance=out("calibration", "covariance"),
     output:
-        bands="results/load_sharing/bands_calibrated.csv",
+        **stage_outputs("load_sharing", "load_sharing_bands"),
     log:
-        "logs/load_sharing_bands.log",
+        log_file("load_sharing_bands"),
     benchmark:
-        "results/benchmarks/load_sharing_bands.tsv"
+        benchmark_file("load_sharing_bands")
     conda:
         "../envs/lumbar.yaml"
     params:
@@ -55,49 +54,20 @@ rule load_sharing_bands:
 rule load_sharing_summary:
     input:
         curves=expand(
-            "results/load_sharing/curves_{set}.csv",
+            out("load_sharing", "curves"),
             set=config["characteristics"]["sets"],
         ),
         compression=expand(
-            "results/load_sharing/compression_{set}.csv",
+            out("load_sharing", "compression"),
             set=config["characteristics"]["sets"],
         ),
-        l2s1="results/l2s1/idp_calibrated.csv",
+        l2s1=out("l2s1", "idp", set="calibrated"),
         yamamoto="data/experiments/yamamoto1989_levels_original_text.csv",
-        bands="results/load_sharing/bands_calibrated.csv",
+        bands=out("load_sharing", "bands"),
     output:
-        summary=report(
-            "results/load_sharing/load_sharing_summary.csv",
-            caption="../report/load_sharing_summary.rst",
-            category="Load sharing",
-        ),
-        reduction=report(
-            "results/load_sharing/reduction_flexion.csv",
-            caption="../report/load_sharing_reduction.rst",
-            category="Load sharing",
-        ),
-        compression=report(
-            "results/load_sharing/compression_summary.csv",
-            caption="../report/load_sharing_compression.rst",
-            category="Load sharing",
-        ),
-        cables=report(
-            "results/load_sharing/l2s1_cables_l4l5.csv",
-            caption="../report/load_sharing_cables.rst",
-            category="Load sharing",
-        ),
-        curves_figure=report(
-            "results/figures/load_sharing_curves.png",
-            caption="../report/load_sharing_curves.rst",
-            category="Load sharing",
-        ),
-        shares_figure=report(
-            "results/figures/load_sharing_shares.png",
-            caption="../report/load_sharing_shares.rst",
-            category="Load sharing",
-        ),
+        **stage_outputs("load_sharing", "load_sharing_summary"),
     log:
-        "logs/load_sharing_summary.log",
+        log_file("load_sharing_summary"),
     conda:
         "../envs/lumbar.yaml"
     params:

@@ -39,39 +39,11 @@ rule muscle_validation:
         ],
         published=published_model_results,
     output:
-        segment_loads=report(
-            "results/tables/muscle_model_segment_loads.csv",
-            caption="../report/muscle_model_segment_loads.rst",
-            category="Muscle model",
-        ),
-        validation=report(
-            "results/tables/in_vivo_validation.csv",
-            caption="../report/in_vivo_validation.rst",
-            category="Muscle model",
-        ),
-        metrics="results/muscle_model/in_vivo_metrics.json",
-        flexion_relaxation=report(
-            "results/tables/flexion_relaxation.csv",
-            caption="../report/flexion_relaxation.rst",
-            category="Muscle model",
-        ),
-        figure=report(
-            "results/figures/muscle_in_vivo_validation.png",
-            caption="../report/muscle_in_vivo_validation.rst",
-            category="Muscle model",
-        ),
-        baseline="results/muscle_model/baseline.npz",
-        fascicles="results/tables/muscle_fascicles.csv",
-        facet_contact="results/tables/muscle_facet_contact.csv",
-        capacity=report(
-            "results/tables/muscle_capacity.csv",
-            caption="../report/muscle_capacity.rst",
-            category="Muscle model",
-        ),
+        **stage_outputs("muscle_model", "muscle_validation"),
     log:
-        "logs/muscle_validation.log",
+        log_file("muscle_validation"),
     benchmark:
-        "results/benchmarks/muscle_validation.tsv"
+        benchmark_file("muscle_validation")
     conda:
         "../envs/lumbar.yaml"
     params:
@@ -83,14 +55,16 @@ rule muscle_validation:
 
 rule muscle_sensitivity:
     input:
-        baseline="results/muscle_model/baseline.npz",
+        baseline=out("muscle_model", "baseline"),
         passive=muscle_passive_tables(),
     output:
-        f"results/muscle_model/sensitivity/{MUSCLE_CHUNKS.wildcard_pattern}.csv",
+        **stage_outputs(
+            "muscle_model", "muscle_sensitivity", chunk=MUSCLE_CHUNKS.wildcard_pattern
+        ),
     log:
-        f"logs/muscle_sensitivity/{MUSCLE_CHUNKS.wildcard_pattern}.log",
+        log_file(f"muscle_sensitivity/{MUSCLE_CHUNKS.wildcard_pattern}"),
     benchmark:
-        f"results/benchmarks/muscle_sensitivity/{MUSCLE_CHUNKS.wildcard_pattern}.tsv"
+        benchmark_file(f"muscle_sensitivity/{MUSCLE_CHUNKS.wildcard_pattern}")
     # leaves of the DAG (only muscle_sensitivity_table and the report wait for them): below the default priority 0,
     # so that the jobs heading longer chains (calibration -> forward sets -> tables; the discovery's specimen banks ->
     # benchmark jobs) start first and these short jobs fill both cores at the end (lowest: the shortest jobs)
@@ -106,31 +80,14 @@ rule muscle_sensitivity:
 rule muscle_sensitivity_table:
     input:
         chunks=expand(
-            "results/muscle_model/sensitivity/{params}.csv",
+            out("muscle_model", "sensitivity_chunk", chunk="{params}"),
             params=MUSCLE_CHUNKS.instance_patterns,
         ),
-        baseline_table="results/tables/in_vivo_validation.csv",
+        baseline_table=out("muscle_model", "validation"),
     output:
-        table=report(
-            "results/tables/sensitivity_idp.csv",
-            caption="../report/sensitivity_idp.rst",
-            category="Muscle model",
-        ),
-        figures=report(
-            expand(
-                "results/figures/muscle_sensitivity_{parameter}.png",
-                parameter=MUSCLE_SENSITIVITY_PARAMETERS,
-            ),
-            caption="../report/muscle_sensitivity.rst",
-            category="Muscle model",
-        ),
-        directions=report(
-            "results/tables/sensitivity_directions.csv",
-            caption="../report/sensitivity_directions.rst",
-            category="Muscle model",
-        ),
+        **stage_outputs("muscle_model", "muscle_sensitivity_table"),
     log:
-        "logs/muscle_sensitivity_table.log",
+        log_file("muscle_sensitivity_table"),
     conda:
         "../envs/lumbar.yaml"
     params:
@@ -141,14 +98,14 @@ rule muscle_sensitivity_table:
 
 rule muscle_sobol_chunk:
     input:
-        baseline="results/muscle_model/baseline.npz",
+        baseline=out("muscle_model", "baseline"),
         passive=muscle_passive_tables(),
     output:
-        "results/muscle_model/sobol/{posture}_{chunk}.csv",
+        **stage_outputs("muscle_model", "muscle_sobol_chunk"),
     log:
-        "logs/muscle_sobol_chunk/{posture}_{chunk}.log",
+        log_file("muscle_sobol_chunk/{posture}_{chunk}"),
     benchmark:
-        "results/benchmarks/muscle_sobol_chunk/{posture}_{chunk}.tsv"
+        benchmark_file("muscle_sobol_chunk/{posture}_{chunk}")
     wildcard_constraints:
         posture="standing|flexion",
         chunk=r"\d+",
@@ -166,23 +123,14 @@ rule muscle_sobol_chunk:
 rule muscle_sobol:
     input:
         chunks=expand(
-            "results/muscle_model/sobol/{posture}_{chunk}.csv",
+            out("muscle_model", "sobol_chunk"),
             posture=config["muscle_model"]["sensitivity"]["postures"],
             chunk=range(config["muscle_model"]["sobol"]["chunks"]),
         ),
     output:
-        table=report(
-            "results/tables/sobol_indices.csv",
-            caption="../report/sobol_indices.rst",
-            category="Muscle model",
-        ),
-        figure=report(
-            "results/figures/muscle_sobol.png",
-            caption="../report/muscle_sobol.rst",
-            category="Muscle model",
-        ),
+        **stage_outputs("muscle_model", "muscle_sobol"),
     log:
-        "logs/muscle_sobol.log",
+        log_file("muscle_sobol"),
     conda:
         "../envs/lumbar.yaml"
     params:

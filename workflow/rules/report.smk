@@ -1,4 +1,4 @@
-# Paper-style report: results/report/paper.html (self-contained) and paper.pdf, from every final
+# Paper-style report: <results root>/report/paper.html (self-contained) and paper.pdf, from every final
 # output. A file that is not among the inputs (a stage not in this configuration) becomes a one-line
 # "not built in this configuration" note in the report, not an error.
 
@@ -11,20 +11,11 @@ rule paper_report:
         captions=sorted(glob("workflow/report/*.rst")),
         published=published_model_results,
     output:
-        html=report(
-            "results/report/paper.html",
-            caption="../report/paper_report.rst",
-            category="Paper-style report",
-        ),
-        pdf=report(
-            "results/report/paper.pdf",
-            caption="../report/paper_report.rst",
-            category="Paper-style report",
-        ),
+        **stage_outputs("report", "paper_report"),
     log:
-        "logs/paper_report.log",
+        log_file("paper_report"),
     benchmark:
-        "results/benchmarks/paper_report.tsv"
+        benchmark_file("paper_report")
     conda:
         "../envs/lumbar.yaml"
     params:
@@ -32,22 +23,22 @@ rule paper_report:
         published=config["paths"]["published_model_results"],
         # read when the report is built (every rule before it has finished): their WARNING lines are the
         # report's "Flags" section; not inputs (a log is no rule's output file)
-        logs_dir="logs",
+        logs_dir=LOGS,
     script:
         "../scripts/paper_report.py"
 
 
 # Documents whose numbers are read from the results (lumbar.report.docs): docs/templates/<name>.md rendered into
-# results/report/<name>.md. The files a template's placeholders read are the rule's inputs, so a template that
+# <results root>/report/<name>.md. The files a template's placeholders read are the rule's inputs, so a template that
 # names a file no rule makes fails the dry run.
 rule docs_numbers:
     input:
         templates=DOC_TEMPLATES,
         results=doc_template_inputs,
     output:
-        [f"results/report/{Path(t).name}" for t in DOC_TEMPLATES],
+        doc_outputs(),
     log:
-        "logs/docs_numbers.log",
+        log_file("docs_numbers"),
     conda:
         "../envs/lumbar.yaml"
     script:

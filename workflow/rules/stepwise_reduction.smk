@@ -4,11 +4,11 @@ rule stepwise_reduction_sim:
         characteristics=stepwise_reduction_characteristics,
         characteristic_tables=stepwise_reduction_tables,
     output:
-        "results/stepwise_reduction/rom_{set}.csv",
+        **stage_outputs("stepwise_reduction", "stepwise_reduction_sim"),
     log:
-        "logs/stepwise_reduction_sim_{set}.log",
+        log_file("stepwise_reduction_sim_{set}"),
     benchmark:
-        "results/benchmarks/stepwise_reduction_sim_{set}.tsv"
+        benchmark_file("stepwise_reduction_sim_{set}")
     wildcard_constraints:
         set="calibrated|chazal1985|shirazi_adl1986|white_panjabi1990|nolte1990|rupp2015",
     conda:
@@ -27,15 +27,15 @@ rule stepwise_reduction_sim:
 rule stepwise_reduction_bands:
     input:
         geometry_inputs,
-        characteristics=CALIBRATION_CHARACTERISTICS,
-        posterior="results/calibration/posterior.csv",
-        covariance="results/calibration/posterior_covariance.csv",
+        characteristics=outs("calibration", "characteristics"),
+        posterior=out("calibration", "posterior"),
+        covariance=out("calibration", "covariance"),
     output:
-        "results/stepwise_reduction/bands_calibrated.csv",
+        **stage_outputs("stepwise_reduction", "stepwise_reduction_bands"),
     log:
-        "logs/stepwise_reduction_bands.log",
+        log_file("stepwise_reduction_bands"),
     benchmark:
-        "results/benchmarks/stepwise_reduction_bands.tsv"
+        benchmark_file("stepwise_reduction_bands")
     conda:
         "../envs/lumbar.yaml"
     params:
@@ -50,37 +50,18 @@ rule stepwise_reduction_bands:
 rule table4:
     input:
         sims=expand(
-            "results/stepwise_reduction/rom_{set}.csv",
+            out("stepwise_reduction", "rom"),
             set=config["characteristics"]["sets"],
         ),
         experiment=stepwise_reduction_experiment,
         derived=stepwise_reduction_derived,
         real_targets=config["stepwise_reduction"]["real_targets"],
         published=published_model_results,
-        bands="results/stepwise_reduction/bands_calibrated.csv",
+        bands=out("stepwise_reduction", "bands"),
     output:
-        synopsis=report(
-            "results/tables/table4_rom_synopsis.csv",
-            caption="../report/table4_rom_synopsis.rst",
-            category="Stepwise reduction",
-        ),
-        counts=report(
-            "results/tables/table4_outlier_counts.csv",
-            caption="../report/table4_outlier_counts.rst",
-            category="Stepwise reduction",
-        ),
-        vs_paper=report(
-            "results/tables/table4_vs_paper.csv",
-            caption="../report/table4_vs_paper.rst",
-            category="Stepwise reduction",
-        ),
-        grid=report(
-            "results/figures/table4_grid.png",
-            caption="../report/table4_grid.rst",
-            category="Stepwise reduction",
-        ),
+        **stage_outputs("stepwise_reduction", "table4"),
     log:
-        "logs/table4.log",
+        log_file("table4"),
     conda:
         "../envs/lumbar.yaml"
     params:
@@ -92,15 +73,11 @@ rule table4:
 
 rule fig6_rom_stepwise_reduction:
     input:
-        "results/tables/table4_rom_synopsis.csv",
+        out("stepwise_reduction", "synopsis"),
     output:
-        report(
-            "results/figures/fig6_rom_stepwise_reduction.png",
-            caption="../report/fig6_rom_stepwise_reduction.rst",
-            category="Stepwise reduction",
-        ),
+        **stage_outputs("stepwise_reduction", "fig6_rom_stepwise_reduction"),
     log:
-        "logs/fig6_rom_stepwise_reduction.log",
+        log_file("fig6_rom_stepwise_reduction"),
     conda:
         "../envs/lumbar.yaml"
     script:

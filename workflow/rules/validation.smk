@@ -1,34 +1,25 @@
 rule validation_real_data:
     input:
         geometry_inputs,
-        synopsis="results/tables/table4_rom_synopsis.csv",
-        idp_synopsis="results/tables/table5_idp_synopsis.csv",
+        synopsis=out("stepwise_reduction", "synopsis"),
+        idp_synopsis=out("l2s1", "synopsis"),
         real_targets=config["stepwise_reduction"]["real_targets"],
         # the rows the calibration's final fit was pinned to: those are calibration targets, the rest independent
-        fitted="results/calibration/calibration_targets.csv",
-        calibrated=CALIBRATION_CHARACTERISTICS,
+        fitted=out("calibration", "targets"),
+        calibrated=outs("calibration", "characteristics"),
         va_artefact=config["discovery"]["va_artefact"],
         anatomy="data/anatomy/l4l5_magnitudes_original_text.csv",
-        in_vivo="results/tables/in_vivo_validation.csv",
-        multilevel="results/tables/multilevel_rom.csv",
-        curves="results/load_sharing/curves_calibrated.csv",
-        compression="results/load_sharing/compression_calibrated.csv",
+        in_vivo=out("muscle_model", "validation"),
+        multilevel=out("validation", "multilevel_rom"),
+        curves=out("load_sharing", "curves", set="calibrated"),
+        compression=out("load_sharing", "compression", set="calibrated"),
         literature="data/load_sharing/load_sharing_literature.csv",
-        bands="results/load_sharing/bands_calibrated.csv",
+        bands=out("load_sharing", "bands"),
         yamamoto="data/experiments/yamamoto1989_levels_original_text.csv",
     output:
-        table=report(
-            "results/tables/validation_real_data.csv",
-            caption="../report/validation_real_data.rst",
-            category="Validation on real data",
-        ),
-        null_models=report(
-            "results/tables/validation_null_models.csv",
-            caption="../report/validation_null_models.rst",
-            category="Validation on real data",
-        ),
+        **stage_outputs("validation", "validation_real_data"),
     log:
-        "logs/validation_real_data.log",
+        log_file("validation_real_data"),
     conda:
         "../envs/lumbar.yaml"
     params:
@@ -43,37 +34,21 @@ rule validation_real_data:
 rule multilevel_validation:
     input:
         geometry_inputs,
-        prior="results/calibration/calibration_prior.csv",
-        posterior="results/calibration/posterior.csv",
-        covariance="results/calibration/posterior_covariance.csv",
-        characteristics=CALIBRATION_CHARACTERISTICS,
+        prior=out("calibration", "prior"),
+        posterior=out("calibration", "posterior"),
+        covariance=out("calibration", "covariance"),
+        characteristics=outs("calibration", "characteristics"),
         published=characteristic_tables(
             config["characteristics"]["data_dir"], ["calibrated"]
         ),
         literature="data/load_sharing/load_sharing_literature.csv",
         yamamoto="data/experiments/yamamoto1989_levels_original_text.csv",
     output:
-        rom=report(
-            "results/tables/multilevel_rom.csv",
-            caption="../report/multilevel_rom.rst",
-            category="Validation on real data",
-        ),
-        admissibility="results/tables/multilevel_admissibility.csv",
-        curves="results/load_sharing/multilevel_curves.csv",
-        readings=report(
-            "results/tables/multilevel_transfer_readings.csv",
-            caption="../report/multilevel_transfer_readings.rst",
-            category="Validation on real data",
-        ),
-        figure=report(
-            "results/figures/multilevel_rom.png",
-            caption="../report/multilevel_rom_figure.rst",
-            category="Validation on real data",
-        ),
+        **stage_outputs("validation", "multilevel_validation"),
     log:
-        "logs/multilevel_validation.log",
+        log_file("multilevel_validation"),
     benchmark:
-        "results/benchmarks/multilevel_validation.tsv"
+        benchmark_file("multilevel_validation")
     conda:
         "../envs/lumbar.yaml"
     params:
@@ -89,20 +64,11 @@ rule multilevel_validation:
 # targets; one panel per quantity, whatever rows the table holds.
 rule validation_scoreboard_figure:
     input:
-        "results/tables/validation_real_data.csv",
+        out("validation", "scoreboard_table"),
     output:
-        scoreboard=report(
-            "results/figures/validation_scoreboard.png",
-            caption="../report/validation_scoreboard.rst",
-            category="Validation on real data",
-        ),
-        internal_loads=report(
-            "results/figures/validation_internal_loads.png",
-            caption="../report/validation_internal_loads.rst",
-            category="Validation on real data",
-        ),
+        **stage_outputs("validation", "validation_scoreboard_figure"),
     log:
-        "logs/validation_scoreboard_figure.log",
+        log_file("validation_scoreboard_figure"),
     conda:
         "../envs/lumbar.yaml"
     script:

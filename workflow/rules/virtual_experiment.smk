@@ -10,13 +10,11 @@ rule stepwise_reduction_surrogate:
         # the disc-only rows: data of the anchoring fit as of the calibration's final fit (same MAP problem)
         derived=stepwise_reduction_derived,
     output:
-        table="results/experiments/stepwise_reduction_surrogate.csv",
-        generator_fit="results/experiments/stepwise_reduction_generator_fit.csv",
-        generator_targets="results/experiments/stepwise_reduction_generator_targets.csv",
+        **stage_outputs("virtual_experiment", "stepwise_reduction_surrogate"),
     log:
-        "logs/stepwise_reduction_surrogate.log",
+        log_file("stepwise_reduction_surrogate"),
     benchmark:
-        "results/benchmarks/stepwise_reduction_surrogate.tsv"
+        benchmark_file("stepwise_reduction_surrogate")
     conda:
         "../envs/lumbar.yaml"
     params:
@@ -47,11 +45,11 @@ rule idp_surrogate:
         ),
         cables=config["l2s1"]["cables"],
     output:
-        "results/experiments/idp_wilke1996_surrogate.csv",
+        **stage_outputs("virtual_experiment", "idp_surrogate"),
     log:
-        "logs/idp_surrogate.log",
+        log_file("idp_surrogate"),
     benchmark:
-        "results/benchmarks/idp_surrogate.tsv"
+        benchmark_file("idp_surrogate")
     conda:
         "../envs/lumbar.yaml"
     params:

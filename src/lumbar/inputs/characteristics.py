@@ -54,6 +54,7 @@ DISC_DIRECTIONS = ("flexion", "extension", "lateral_bending", "axial_rotation")
 # the files of a characteristic directory that load_characteristic_set reads
 DISC_TABLE, FACET_TABLE = "disc.csv", "facet.csv"
 PRESTRAIN_TABLE, SOFTPLUS_TABLE, RUPP2015_TABLE = "ligament_prestrain.csv", "ligaments_softplus.csv", "ligaments_rupp2015.csv"
+RUPP2015_SHAPE_TABLE = "rupp2015_shape_check.csv"     # the paper's calculated Rupp shape parameters (a check)
 #: the tables load_characteristic_set reads for a softplus set (every set but rupp2015) and for rupp2015: the workflow
 #: declares them as the inputs of a rule that loads a set (workflow/rules/common.smk, characteristic_tables)
 CHARACTERISTIC_TABLES = {"softplus": (DISC_TABLE, FACET_TABLE, PRESTRAIN_TABLE, SOFTPLUS_TABLE),
@@ -590,7 +591,7 @@ def load_characteristic_set(name: str, data_dir=None,
 def load_shape_check(data_dir=None):
     """The paper's calculated Rupp shape parameters (rupp2015_shape_check.csv) as a DataFrame."""
     d = Path(data_dir) if data_dir is not None else default_data_dir()
-    return _read(d / "rupp2015_shape_check.csv", tables.RUPP2015_SHAPE_CHECK)
+    return _read(d / RUPP2015_SHAPE_TABLE, tables.RUPP2015_SHAPE_CHECK)
 
 
 # ------------------------------------------------------------------ one resolver of a characteristic set
