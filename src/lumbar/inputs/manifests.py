@@ -44,7 +44,7 @@ LOGS_DIR = "logs"
 CALIBRATED_CHARACTERISTIC_FILES = (DISC_TABLE, FACET_TABLE, PRESTRAIN_TABLE, SOFTPLUS_TABLE, RUPP2015_TABLE,
                                    RUPP2015_SHAPE_TABLE)
 #: the discovery runs and the files each writes (role -> file name, caption)
-DISCOVERY_CASES = ("default", "va_artefact", "intact_rom", "in_vivo")
+DISCOVERY_CASES = ("default", "in_vivo", "va_artefact", "intact_rom")
 DISCOVERY_CASE_FILES = (("discovery", "discovery.json", "discovery_json"),
                         ("disagreement_map", "disagreement_map.png", "discovery_disagreement_map"),
                         ("ranking", "ranking.png", "discovery_ranking"),

@@ -9,17 +9,18 @@ say "surrogate" in their caption and table title.
 Usage (the workflow's rule ``paper_report`` calls it with the rule's inputs)::
 
     from lumbar.report import build_report
-    build_report(inputs, config, "results/report/paper.html", "results/report/paper.pdf",
-                 captions_dir="workflow/report")
+    build_report(inputs, config, html_path, pdf_path, captions_dir="workflow/report")
 
 The HTML embeds every figure as base64 (``<img data-source="../figures/x.png" src="data:image/png;base64,...">``;
 ``data-source`` is the figure file relative to the HTML file) and every table carries ``data-source`` with the
 CSV it was drawn from. The PDF is drawn with reportlab (pure Python) with ``invariant=1``: no time stamp, a fixed
 document id, so the same inputs give the same bytes.
 
-Modules: :mod:`.document` (the document model), :mod:`.sections` (:class:`~.sections.ReportBuilder`: the sections,
-read from the result files and the configuration), :mod:`.html_renderer`, :mod:`.pdf_renderer`; this module holds
-the entry points.
+Modules: :mod:`.document` (the document model), :mod:`.sections` (:class:`~.sections.ReportBuilder` and the
+registry of sections), the sections (:mod:`.front_sections`, :mod:`.paper_sections`, :mod:`.load_sharing_section`,
+:mod:`.posterior`, :mod:`.discrepancy_section`, :mod:`.appendix_sections`; each finds its files by their roles in
+the stage manifests, :mod:`lumbar.inputs.manifests`, under the run's results root), :mod:`.html_renderer`,
+:mod:`.pdf_renderer`; this module holds the entry points.
 """
 from __future__ import annotations
 
@@ -31,8 +32,13 @@ from .document import Doc, Para
 from .html_renderer import render_html
 from .pdf_renderer import render_pdf
 from .sections import NOT_BUILT, SECTIONS, ReportBuilder, fmt, report_section
-from . import load_sharing_section as _load_sharing_section  # noqa: F401, E402 - registers its report section
-from . import posterior as _posterior_section  # noqa: F401, E402 - registers its report section
+# the modules of the sections register them on import, in this order (a section placed after= another goes there)
+from . import front_sections as _front_sections  # noqa: F401, E402
+from . import paper_sections as _paper_sections  # noqa: F401, E402
+from . import discrepancy_section as _discrepancy_section  # noqa: F401, E402
+from . import appendix_sections as _appendix_sections  # noqa: F401, E402
+from . import load_sharing_section as _load_sharing_section  # noqa: F401, E402
+from . import posterior as _posterior_section  # noqa: F401, E402
 
 __all__ = ["build_document", "build_report", "render_html", "render_pdf", "NOT_BUILT", "ReportBuilder", "Doc", "fmt",
            "SECTIONS", "report_section"]

@@ -11,15 +11,12 @@ import pandas as pd
 
 from .sections import ReportBuilder, fmt, report_section
 
-ADM = "results/calibration/admissibility.csv"
-SUMMARY = "results/load_sharing/load_sharing_summary.csv"
-COMPRESSION = "results/load_sharing/compression_summary.csv"
-REDUCTION = "results/load_sharing/reduction_flexion.csv"
-CABLES = "results/load_sharing/l2s1_cables_l4l5.csv"
-REMUS = "results/calibration/remus2021_comparison.csv"
-MULTI = "results/tables/multilevel_rom.csv"
-MULTI_ADM = "results/tables/multilevel_admissibility.csv"
-READINGS = "results/tables/multilevel_transfer_readings.csv"
+#: the files this section reads, by their roles in the stage manifests (lumbar.inputs.manifests)
+FILES = {"adm": ("admissibility", "table"), "summary": ("load_sharing", "summary"),
+         "compression": ("load_sharing", "compression_summary"), "reduction": ("load_sharing", "reduction"),
+         "cables": ("load_sharing", "cables"), "remus": ("admissibility", "remus"),
+         "multi": ("validation", "multilevel_rom"), "multi_adm": ("validation", "multilevel_admissibility"),
+         "readings": ("validation", "multilevel_readings")}
 READING_NAMES = {"as_calibrated": "adopted: laws unchanged", "ligaments_on_strain": "ligament laws on strain",
                  "size_scaled": "disc and facet stiffness scaled with size",
                  "disc_frame_loading": "moments about each disc's own axes"}
@@ -30,25 +27,31 @@ DIRECTION_NAMES = {"flexion": "flexion", "extension": "extension", "lateral_bend
                    "axial_rotation_right": "axial rotation right"}
 
 
+def _files(b: ReportBuilder) -> dict[str, str]:
+    """This section's files under the run's results root."""
+    return {k: b.out(*role) for k, role in FILES.items()}
+
+
 def human_direction(d: str) -> str:
     return d.replace("_one_side", " (one side)").replace("_", " ")
 
 
 def _summary_sentence(b: ReportBuilder) -> str:
+    files = _files(b)
     parts = []
-    if b.has(ADM):
-        a = pd.read_csv(b.path(ADM))
+    if b.has(files["adm"]):
+        a = pd.read_csv(b.path(files["adm"]))
         failed = a[~a["passed"].astype(bool)]
         parts.append(f"The calibrated unit passes {len(a) - len(failed)} of {len(a)} admissibility criteria"
                      + (f" (not: {'; '.join(sorted(set(failed['criterion'])))})" if len(failed) else "") + ".")
-    if b.has(MULTI):
-        m = pd.read_csv(b.path(MULTI))
+    if b.has(files["multi"]):
+        m = pd.read_csv(b.path(files["multi"]))
         jump = m["largest_jump_deg"].max()
         parts.append(f"With its characteristics unchanged, {int(m['within'].sum())} of {len(m)} ROM values of the "
                      f"other levels lie within 25 % of Yamamoto et al. (1989); the largest rotation jump between two "
                      f"load steps at any level is {fmt(jump)} deg.")
-    if b.has(CABLES):
-        c = pd.read_csv(b.path(CABLES))
+    if b.has(files["cables"]):
+        c = pd.read_csv(b.path(files["cables"]))
         n = c[(c["load_case"] == "neutral") & (c["muscle_setup"] == "all")]
         if len(n):
             r = n.iloc[0]
@@ -60,17 +63,19 @@ def _summary_sentence(b: ReportBuilder) -> str:
 
 @report_section("load_sharing", "Load sharing and physical admissibility", after="calibration")
 def load_sharing_section(b: ReportBuilder):
+    files = _files(b)
     b.para("Reaching the range of motion is not enough: the unit must reach it for the reasons real segments have "
            "(no clamped facets at rest, no ligament switched off, no snap-through, the disc carrying most of a "
            "compression). Method and criteria: docs/load_sharing.md. " + _summary_sentence(b))
     b.heading("Admissibility of the calibrated set")
-    b.csv_table(ADM, "Physical admissibility criteria of the calibrated set (value, limit, passed, source)", False,
+    b.csv_table(files["adm"],
+                "Physical admissibility criteria of the calibrated set (value, limit, passed, source)", False,
                 columns=["criterion", "direction", "value", "limit", "unit", "passed", "source"])
-    b.figure("results/figures/load_sharing_curves.png", "Moment-rotation curves of the intact unit.")
-    b.figure("results/figures/load_sharing_shares.png", "Moment carried by each structure, calibrated unit.")
+    b.figure(b.out("load_sharing", "curves_figure"), "Moment-rotation curves of the intact unit.")
+    b.figure(b.out("load_sharing", "shares_figure"), "Moment carried by each structure, calibrated unit.")
     b.heading("How the calibrated unit shares the moment")
-    if b.has(SUMMARY):
-        s = pd.read_csv(b.path(SUMMARY))
+    if b.has(files["summary"]):
+        s = pd.read_csv(b.path(files["summary"]))
         cal = s[(s["set"] == "calibrated") & (s["stage"] == "intact")]
         top = cal[cal["moment_nm"] == cal["moment_nm"].max()]
         cols = [c for c in (f"{k}_share" for k in STRUCTURES) if c in top.columns]
@@ -78,7 +83,7 @@ def load_sharing_section(b: ReportBuilder):
         rows = [[DIRECTION_NAMES.get(r["direction"], r["direction"]), fmt(r["rotation_deg"])] +
                 [fmt(100 * r[c]) for c in cols] for _, r in top.iterrows()]
         b.table_block(f"Share of the applied {fmt(top['moment_nm'].max())} N*m carried by each structure "
-                      "(calibrated, intact)", header, rows, source=SUMMARY,
+                      "(calibrated, intact)", header, rows, source=files["summary"],
                       note="Moments about the disc centre; a negative share pushes with the applied moment.")
         rest = cal[cal["moment_nm"] == 0.0].head(1)
         if len(rest):
@@ -88,11 +93,11 @@ def load_sharing_section(b: ReportBuilder):
                           "compression [N]", ["structure", "force [N]"],
                           [[c.replace("_contact_n", " facet contact").replace("_tension_n", " tension")
                             .replace("disc_axial_force_n", "disc compression").replace("facet_", ""),
-                            fmt(r[c])] for c in forces], source=SUMMARY)
+                            fmt(r[c])] for c in forces], source=files["summary"])
     else:
-        b.missing(f"Load-sharing summary ({Path(SUMMARY).name})")
-    if b.has(REDUCTION):
-        r = pd.read_csv(b.path(REDUCTION))
+        b.missing(f"Load-sharing summary ({Path(files['summary']).name})")
+    if b.has(files["reduction"]):
+        r = pd.read_csv(b.path(files["reduction"]))
         c = r[r["set"] == "calibrated"]
         if len(c):
             b.table_block("What removing the posterior ligaments does to flexion at 10 N*m (calibrated unit)",
@@ -103,14 +108,16 @@ def load_sharing_section(b: ReportBuilder):
                            for st, a, f, i1, i2 in zip(c["stage"], c["rom_from_stage_rest_deg"],
                                                        c["rotation_from_intact_rest_deg"],
                                                        c["increases_from_stage_rest"], c["increases_from_intact_rest"])],
-                          source=REDUCTION, note="A removed pre-tensioned ligament moves the stage's rest state, "
+                          source=files["reduction"],
+                          note="A removed pre-tensioned ligament moves the stage's rest state, "
                                                  "from which the stepwise-reduction tables measure the ROM; the "
                                                  "rotation from the intact unit's rest shows the structure's own "
                                                  "share.")
-    b.csv_table(COMPRESSION, "Pure axial (follower) load: shares of disc and facets per characteristic set", False,
+    b.csv_table(files["compression"],
+                "Pure axial (follower) load: shares of disc and facets per characteristic set", False,
                 columns=None)
-    if b.has(CABLES):
-        c = pd.read_csv(b.path(CABLES))
+    if b.has(files["cables"]):
+        c = pd.read_csv(b.path(files["cables"]))
         n = c[c["load_case"] == "neutral"]
         b.table_block("Where the wire-cable forces go at L4-L5 (neutral position, calibrated set, L2-S1 model)",
                       ["muscle set-up", "cable total [N]", "disc [N]", "facets [N]", "ligaments [N]", "disc share [%]",
@@ -118,16 +125,18 @@ def load_sharing_section(b: ReportBuilder):
                       [[r["muscle_setup"].replace("_", " "), fmt(r["cable_total_n"]), fmt(r["disc_n"]),
                         fmt(r["facets_n"]), fmt(r["ligaments_n"]), fmt(100 * r["disc_share"]),
                         fmt(100 * r["facets_share"]), fmt(r["idp_mpa"])] for _, r in n.iterrows()],
-                      source=CABLES, note="Forces along the disc normal on L4 (ligaments pull: negative); shares of "
+                      source=files["cables"],
+                      note="Forces along the disc normal on L4 (ligaments pull: negative); shares of "
                                           "the compression crossing the joint (disc + facets). Every load case: "
-                                          + CABLES + ".")
+                                          + files["cables"] + ".")
     else:
-        b.missing(f"Cable load paths ({Path(CABLES).name})")
-    b.csv_table(REMUS, "The calibrated ligaments beside the Remus et al. (2021) model of the same fibres (tension "
+        b.missing(f"Cable load paths ({Path(files['cables']).name})")
+    b.csv_table(files["remus"],
+                "The calibrated ligaments beside the Remus et al. (2021) model of the same fibres (tension "
                        "under both laws at the same deformation)", False)
     b.heading("Other lumbar levels, calibrated characteristics unchanged")
-    if b.has(MULTI):
-        m = pd.read_csv(b.path(MULTI))
+    if b.has(files["multi"]):
+        m = pd.read_csv(b.path(files["multi"]))
         per = m.groupby("level", sort=False)["within"].agg(["sum", "count"])
         b.para("Within 25 % of Yamamoto et al. (1989), per level: "
                + "; ".join(f"{lv} {int(r['sum'])} of {int(r['count'])}" for lv, r in per.iterrows())
@@ -152,17 +161,18 @@ def load_sharing_section(b: ReportBuilder):
                                              if pd.notna(r.get("sim_band_low")) else ""),
                         fmt(r["measured_deg"]), fmt(r["ratio"]), "yes" if r["within"] else "no"]
                        + [fmt(100 * r[c]) for c in share] + [fmt(r["largest_jump_deg"])] for _, r in m.iterrows()],
-                      source=MULTI, note="Lateral bending and axial rotation: the mean of both sides (the abstract "
+                      source=files["multi"],
+                      note="Lateral bending and axial rotation: the mean of both sides (the abstract "
                                          "gives one-side values). Shares of the applied moment about the disc "
                                          "centre; largest step: the largest rotation change between two 0.25 N*m "
                                          "load steps (a snap-through shows here).")
     else:
-        b.missing(f"Other levels ({Path(MULTI).name})")
-    b.figure("results/figures/multilevel_rom.png", "Other levels with the L4-L5 characteristics unchanged.")
-    if b.has(READINGS):
+        b.missing(f"Other levels ({Path(files['multi']).name})")
+    b.figure(b.out("validation", "multilevel_figure"), "Other levels with the L4-L5 characteristics unchanged.")
+    if b.has(files["readings"]):
         from ..experiments.level_transfer import readings_summary  # noqa: PLC0415
 
-        s = readings_summary(pd.read_csv(b.path(READINGS)))
+        s = readings_summary(pd.read_csv(b.path(files["readings"])))
         b.para("Is a miss the transfer rule's doing? The same levels under three other readings of \"the calibrated "
                "characteristics at another level\", every factor taken from the geometry (docs/load_sharing.md, "
                "\"Other levels\"): a reading that removed a miss for a physical reason would show it here.")
@@ -173,20 +183,21 @@ def load_sharing_section(b: ReportBuilder):
                       [[READING_NAMES.get(r["reading"], r["reading"]), f"{r['other_within']} of {r['other_n']}",
                         f"{r['calibrated_within']} of {r['calibrated_n']}", str(r["snap_or_not_converged"]),
                         r["misses"] or "none"] for _, r in s.iterrows()],
-                      source=READINGS, note="Readings: " + "; ".join(
+                      source=files["readings"],
+                      note="Readings: " + "; ".join(
                           f"{READING_NAMES.get(k, k)}: {v}" for k, v in
                           zip(s["reading"], s["reading_note"])) + ".")
     else:
-        b.missing(f"Transfer readings ({Path(READINGS).name})")
-    if b.has(MULTI_ADM):
-        a = pd.read_csv(b.path(MULTI_ADM))
+        b.missing(f"Transfer readings ({Path(files['readings']).name})")
+    if b.has(files["multi_adm"]):
+        a = pd.read_csv(b.path(files["multi_adm"]))
         per = a.groupby("level", sort=False)["passed"].agg(["sum", "count"])
         failed = a[~a["passed"].astype(bool)]
         b.table_block("Admissibility criteria per level (calibrated characteristics unchanged)",
                       ["level", "criteria passed", "criteria", "failed"],
                       [[lv, int(r["sum"]), int(r["count"]),
                         "; ".join(sorted(set(failed[failed["level"] == lv]["criterion"]))) or "none"]
-                       for lv, r in per.iterrows()], source=MULTI_ADM)
+                       for lv, r in per.iterrows()], source=files["multi_adm"])
 
 
 __all__ = ["load_sharing_section"]

@@ -9,9 +9,6 @@ import pandas as pd
 
 from .sections import ReportBuilder, fmt, report_section
 
-POSTERIOR = "results/calibration/posterior.csv"
-BANDS = "results/load_sharing/bands_calibrated.csv"
-FIGURE = "results/figures/calibration_posterior.png"
 #: the rows of the band table shown in the report: (direction, moment, quantity, label)
 BAND_ROWS = (("flexion", 10.0, "rotation_deg", "flexion ROM, 10 N*m [deg]"),
              ("extension", 10.0, "rotation_deg", "extension ROM, 10 N*m [deg]"),
@@ -50,10 +47,11 @@ def posterior_sentence(t: pd.DataFrame) -> str:
 
 @report_section("posterior", "What the data told us: priors, posterior and bands", after="calibration")
 def posterior_section(b: ReportBuilder):
-    if not b.has(POSTERIOR):
+    posterior, bands = b.out("calibration", "posterior"), b.out("load_sharing", "bands")
+    if not b.has(posterior):
         b.missing("Calibration posterior (posterior.csv)")
         return
-    t = pd.read_csv(b.path(POSTERIOR))
+    t = pd.read_csv(b.path(posterior))
     if t.empty:
         b.para("This calibration has no admissible (MAP) fit, hence no posterior (ligament_transfer: strain).")
         return
@@ -75,14 +73,14 @@ def posterior_section(b: ReportBuilder):
                      ("yes: " + str(r.bound_reason)) if bool(r.at_bound) else "no"])
     b.table_block("Prior and posterior of every calibrated parameter", [
         "parameter", "unit", "prior centre (90 %)", "MAP (posterior 90 %)", "posterior / prior spread",
-        "shift [prior spreads]", "moved by (share of the pull)", "at a bound"], rows, source=POSTERIOR,
+        "shift [prior spreads]", "moved by (share of the pull)", "at a bound"], rows, source=posterior,
         label="Table P",
         note="Prior sources per parameter: the CSV's prior_source column. A spread ratio near 1 with a shift near 0: "
              "the data did not inform the parameter.")
-    b.figure(FIGURE, "Prior (grey) and posterior (blue) 90 % interval of every calibrated parameter, in prior "
+    b.figure(b.out("calibration", "posterior_figure"), "Prior (grey) and posterior (blue) 90 % interval of every calibrated parameter, in prior "
              "spreads from the prior centre.", label="Fig. P")
-    if b.has(BANDS):
-        bd = pd.read_csv(b.path(BANDS))
+    if b.has(bands):
+        bd = pd.read_csv(b.path(bands))
         rows = []
         for d, M, q, label in BAND_ROWS:
             g = bd[(bd["direction"] == d) & np.isclose(bd["moment_nm"], M) & (bd["quantity"] == q)]
@@ -90,7 +88,7 @@ def posterior_section(b: ReportBuilder):
                 r = g.iloc[0]
                 rows.append([label, fmt(r["map"]), f"{fmt(r['low90'])} to {fmt(r['high90'])}"])
         b.table_block("The calibrated unit's predictions with their 90 % posterior band (intact)",
-                      ["prediction", "MAP", "90 % band"], rows, source=BANDS,
+                      ["prediction", "MAP", "90 % band"], rows, source=bands,
                       note="Linearisation of the posterior (one finite-difference step per parameter); every "
                            "direction and moment of the curves is in the CSV.")
     else:

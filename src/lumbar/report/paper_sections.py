@@ -1,0 +1,187 @@
+"""Report sections of the results of the two papers: the models (Figs. 1 and 3), the calibration on the stepwise
+reduction (Tables 1-3, Figs. 4-5), its forward simulation (Table 4, Fig. 6), the L2-S1 intradiscal pressure (Table 5,
+Fig. 7) and the muscle-driven model of paper 2. Every file is found by its role in the stage manifests
+(``b.out(stage, role)``); registered after the methods, in this order."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+
+from .document import CHECK, CROSS, NC, Para
+from .front_sections import muscle_sentence
+from .sections import (
+    DIRECTION_ABBR,
+    NOT_BUILT,
+    SET_LABELS,
+    norm_path,
+    read_csv,
+    fmt,
+    human_value,
+    report_section,
+)
+
+
+def model_section(b):
+    b.figure(b.out("geometry", "figure"), "L4-L5 functional spinal unit (Fig. 1 analog).", label="Fig. 1")
+    b.figure(b.out("l2s1", "fig3"), "L2-S1 lumbar spine with wire cables (Fig. 3 analog).",
+                label="Fig. 3")
+    b.csv_table(b.out("geometry", "table"), "Geometry of the motion segments (disc, facets, ligament fibres)")
+
+
+def calibration_section(b):
+    s = b.sr_surrogate
+    b.csv_table(b.out("calibration", "table1"), "Disc torque-angle parameters, Eq. 3 (Table 1 analog)", s,
+                   label="Table 1")
+    b.figure(b.out("calibration", "fig4"), "Disc torque-angle characteristics (Fig. 4 analog).", s,
+                label="Fig. 4")
+    b.csv_table(b.out("calibration", "table2"), "Facet joint regression surfaces, Eq. 4 (Table 2 analog)",
+                   label="Table 2")
+    b.csv_table(b.out("calibration", "table3"),
+                   "Ligament force-strain parameters, Eq. 7 (Table 3 analog)",
+                   s, label="Table 3")
+    b.figure(b.out("calibration", "fig5"), "Ligament force-strain characteristics (Fig. 5 analog).",
+                s, label="Fig. 5")
+    b.csv_table(b.out("calibration", "summary"),
+                   "Calibration steps and RMS residuals (identifiable: the stage's ROM responds to the structure; "
+                   "at_bound: a fitted parameter ends within 1 % of its bound)", s)
+    targets = b.out("calibration", "targets")
+    origin = ""
+    if b.has(targets):
+        t = read_csv(b.path(targets))
+        origin = "; ".join(dict.fromkeys(str(v).split(",")[0] for v in t["source"])) if len(t) else ""
+    b.csv_table(b.out("calibration", "real_fit"),
+                   f"Final fit on the real targets (intact ROM at 10 N*m{', ' + origin if origin else ''}) and "
+                   "the admissibility criteria: force scales, facet stiffness, disc shear stiffness within its "
+                   "sourced range", False)
+
+
+def forward_section(b):
+    s = b.sr_surrogate
+    b.figure(b.out("stepwise_reduction", "fig6"), "Range of motion per reduction stage (Fig. 6 analog).", s,
+                label="Fig. 6")
+    b.csv_table(b.out("stepwise_reduction", "vs_paper"), "ROM outlier counts per characteristic set beside the paper's", s)
+    grid_table4(b, s)
+    b.figure(b.out("stepwise_reduction", "grid"), "Table 4 as a figure.", s)
+
+
+def idp_section(b):
+    s = b.idp_surrogate
+    internal = b.out("l2s1", "internal")
+    b.figure(b.out("l2s1", "fig7"), "L4-L5 intradiscal pressure per muscle set-up and load case (Fig. 7 analog).",
+                s, label="Fig. 7")
+    b.csv_table(b.out("l2s1", "vs_paper"), "IDP outlier counts per characteristic set beside the paper's", s)
+    grid_table5(b, s)
+    b.figure(b.out("l2s1", "grid"), "Table 5 as a figure.", s)
+    if b.has(internal):
+        df = read_csv(b.path(internal))
+        num = [c for c in df.columns if c.endswith(("_n", "_nm", "_mpa"))
+               and not c.startswith("residual") and pd.api.types.is_numeric_dtype(df[c])]
+        agg = df.groupby("set", sort=False)[num].agg(["min", "max"]) if "set" in df and num else None
+        if agg is not None:
+            rows = [[c] + [f"{fmt(agg.loc[st, (c, 'min')])} to {fmt(agg.loc[st, (c, 'max')])}"
+                           if fmt(agg.loc[st, (c, "max")]) else "" for st in agg.index] for c in num]
+            b.table_block("Internal loads at L4-L5 over the 49 scenarios (min to max per set)",
+                             ["quantity"] + [SET_LABELS.get(st, st) for st in agg.index], rows,
+                             source=internal,
+                             note=b.caption(internal, ""), surrogate=s)
+    else:
+        b.missing("Internal loads (l2s1_internal_loads.csv)")
+
+
+def grid_table4(b, surrogate):
+    rel = b.out("stepwise_reduction", "synopsis")
+    if not b.has(rel):
+        b.missing("Table 4 synopsis (table4_rom_synopsis.csv)")
+        return
+    df = read_csv(b.path(rel))
+    sets = list(dict.fromkeys(df["set"]))
+    dirs = [d for d in DIRECTION_ABBR if d in set(df["direction"])] + \
+        [d for d in dict.fromkeys(df["direction"]) if d not in DIRECTION_ABBR]
+    keyed = {(r.set, r.stage, r.moment_nm, r.direction): r for r in df.itertuples(index=False)}
+    rows = []
+    for stage in dict.fromkeys(df["stage"]):
+        for m in sorted(set(df.loc[df["stage"] == stage, "moment_nm"])):
+            row = [human_value(stage), f"{fmt(m)} N\u00b7m"]
+            for st in sets:
+                for d in dirs:
+                    r = keyed.get((st, stage, m, d))
+                    row.append("" if r is None else NC if not bool(r.converged) else
+                               CROSS if bool(r.outlier) else CHECK)
+            rows.append(row)
+    header = ["stage", "moment"] + [DIRECTION_ABBR.get(d, d) for _ in sets for d in dirs]
+    group = [("", 2)] + [(SET_LABELS.get(s, s), len(dirs)) for s in sets]
+    b.table_block("Synopsis of the forward-simulated stepwise reduction (Table 4 analog): "
+                     f"{CHECK} within the reference range, {CROSS} outlier, {NC} no equilibrium",
+                     header, rows, source=rel, note=b.caption(rel, ""), surrogate=surrogate,
+                     group_header=group, marks=True, label="Table 4")
+
+
+def grid_table5(b, surrogate):
+    rel = b.out("l2s1", "synopsis")
+    if not b.has(rel):
+        b.missing("Table 5 synopsis (table5_idp_synopsis.csv)")
+        return
+    df = read_csv(b.path(rel))
+    sets = list(dict.fromkeys(df["set"]))
+    keyed = {(r.set, r.muscle_setup, r.load_case): r for r in df.itertuples(index=False)}
+    rows = []
+    for mu in dict.fromkeys(df["muscle_setup"]):
+        for lc in dict.fromkeys(df.loc[df["muscle_setup"] == mu, "load_case"]):
+            row = [human_value(mu), human_value(lc)]
+            for st in sets:
+                r = keyed.get((st, mu, lc))
+                row.append("" if r is None else NC if not bool(r.converged) else
+                           CROSS if bool(r.outlier) else CHECK)
+            rows.append(row)
+    b.table_block("Synopsis of the forward-simulated IDP experiment (Table 5 analog): "
+                     f"{CHECK} within mean +- SD, {CROSS} outlier, {NC} no equilibrium",
+                     ["muscle set-up", "load case"] + [SET_LABELS.get(s, s) for s in sets], rows, source=rel,
+                     note=b.caption(rel, ""), surrogate=surrogate, marks=True, label="Table 5")
+
+
+def muscle_section(b):
+    metrics = b.out("muscle_model", "metrics")
+    files = [b.out("muscle_model", "segment_loads"), b.out("muscle_model", "validation"), metrics,
+             b.out("muscle_model", "flexion_relaxation"), b.out("muscle_model", "capacity"), b.out("muscle_model", "sensitivity"),
+             b.out("muscle_model", "directions"), b.out("muscle_model", "sobol")]
+    figs = sorted(p for p in b.inputs if p.startswith(b.out_dir("muscle_model", "figure") + "muscle_") and p.endswith(".png"))
+    if not any(b.has(f) for f in files) and not figs:
+        b.doc.add(Para(f"Muscle study: {NOT_BUILT}.", "note"))
+        return
+    if b.has(metrics):
+        b.doc.add(Para(muscle_sentence(b)))
+        b.shown.add(norm_path(metrics))
+    else:
+        b.missing("In-vivo validation metrics (in_vivo_metrics.json)")
+    b.figure(b.out("muscle_model", "figure"), "Predicted vs in-vivo L4-L5 intradiscal pressure.")
+    b.csv_table(b.out("muscle_model", "validation"), "In-vivo validation: predicted and measured IDP per activity")
+    b.csv_table(b.out("muscle_model", "segment_loads"), "Segmental loads of the musculoskeletal model")
+    b.csv_table(b.out("muscle_model", "flexion_relaxation"), "Flexion-relaxation: active and passive muscle forces")
+    b.csv_table(b.out("muscle_model", "capacity"), "Muscle capacity: sagittal moments about each level and the "
+                   "largest extension moment of the active fascicles")
+    b.csv_table(b.out("muscle_model", "sensitivity"), "Sensitivity of L4-L5 IDP to the muscle parameters")
+    b.csv_table(b.out("muscle_model", "directions"), "The paper's sensitivity statements: stated and simulated "
+                   "direction of the L4-L5 IDP change")
+    sobol, cols = b.out("muscle_model", "sobol"), ["posture", "parameter", "S1", "S1_lo", "S1_hi", "ST", "ST_lo", "ST_hi",
+                                            "q2_loo", "n_train", "stable"]   # the rest: caption and CSV
+    try:
+        have = list(pd.read_csv(b.path(sobol), nrows=0).columns) if b.has(sobol) else []
+    except (ValueError, pd.errors.ParserError):
+        have = []
+    b.csv_table(sobol, "Sobol indices of L4-L5 IDP (polynomial chaos expansion; S1/ST_lo-hi: bootstrap 95 % "
+                   "intervals)", columns=cols if set(cols) <= set(have) else None)
+    for f in figs:
+        if norm_path(f) not in b.shown:
+            name = Path(f).stem.replace("muscle_", "").replace("_", " ")
+            b.figure(f, f"Muscle study: {name}.")
+
+
+
+for _anchor, _title, _function in (
+        ("models", "Models", model_section),
+        ("calibration", "Calibration on the stepwise reduction (backwards)", calibration_section),
+        ("forward", "Forward simulation of the stepwise reduction", forward_section),
+        ("idp", "Intradiscal pressure in the L2-S1 spine with wire cables", idp_section),
+        ("muscles", "Paraspinal muscles and spinal loading (paper 2)", muscle_section)):
+    report_section(_anchor, _title, after="methods" if _anchor == "models" else None)(_function)
