@@ -224,7 +224,7 @@ def stepwise_reduction_tables(wildcards):
 
 def calibrated_dir():
     """The folder of the calibrated characteristic set the calibration writes (under the run's root)."""
-    return str(Path(outs("calibration", "characteristics")[0]).parent)
+    return manifests.calibrated_dir(RESULTS)
 
 
 # ---- paper-style report (workflow/rules/report.smk)

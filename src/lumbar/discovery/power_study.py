@@ -1,5 +1,5 @@
 """The power study of the discovery, called the discrepancy benchmark in the configuration (``discovery.benchmark``)
-and the workflow (rules ``discovery_benchmark*``, results/discrepancy/benchmark*); a statistical study, not a timing
+and the workflow (rules ``discovery_benchmark*``, roles discovery.benchmark_* of the stage manifests); a statistical study, not a timing
 benchmark (those are in benchmarks/). Test fixtures, never data: tables the discovery did not make, discovery on
 each, and the summary (false positives on nulls, library effects named, out-of-library causes left unnamed, power
 curve).

@@ -150,7 +150,7 @@ def rom_problem(df, config, solver_kw=None, bank=None) -> Problem:
 
 def model_band_sd(keys: pd.DataFrame, path) -> np.ndarray:
     """The nominal model's own posterior spread [deg] at each scenario of ``keys`` (stage, direction, moment_nm), from
-    the calibration's band table (results/stepwise_reduction/bands_calibrated.csv, column ``sd``; setting
+    the calibration's band table (role stepwise_reduction.bands of the stage manifests, column ``sd``; setting
     ``discovery.model_bands``, set by the workflow for the calibrated set): part of a row's spread, added in quadrature
     to the measurement's. Zeros without a table (a set without a posterior); NaN-free."""
     if not path:

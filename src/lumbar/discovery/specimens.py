@@ -10,7 +10,7 @@ measurement noise, summarised as the table is":
 * a **bank** (:class:`SpecimenBank`) holds the response of K virtual specimens (no noise) in every compared
   scenario: :func:`rom_bank` (L4-L5 ROM, ``lumbar.experiments.virtual_experiment.rom_specimens``), :func:`idp_bank`
   (L2-S1 IDP, ``idp_specimens``); it is built once per configuration and scenario set (seeded, cached in the
-  process; the workflow writes it to ``results/discrepancy/model/specimen_bank_<experiment>.csv``, config
+  process; the workflow writes it to the role ``discovery.specimen_bank`` of the stage manifests, config
   ``discovery.specimen_bank_rom`` / ``specimen_bank_idp``);
 * :func:`null_datasets` draws B null tables: per table the row's ``n_specimens`` distinct specimens of the bank
   (without replacement), their deviation from the bank mean scaled by the variation scale ``lam``, measurement noise
@@ -199,7 +199,7 @@ BANK_SCHEMAS = {
 
 def bank_table(config, experiment, n_specimens, stream=NULL_STREAM) -> pd.DataFrame:
     """The null bank of ``experiment`` as a long table (one row per specimen and scenario; the workflow's
-    ``results/discrepancy/model/specimen_bank_<experiment>.csv``)."""
+    role ``discovery.specimen_bank`` of the stage manifests)."""
     src = (f"virtual specimens of the nominal model (lumbar.discovery.specimens, seed {bank_seed(config, stream)}, "
            f"{int(n_specimens)} specimens, no measurement noise): the discrepancy discovery's null hypothesis; "
            f"SURROGATE, not data")

@@ -23,6 +23,7 @@ import numpy as np
 import pandas as pd
 
 from ..mechanics import so3
+from ..inputs import manifests
 from ..inputs.characteristics import CHARACTERISTIC_SETS, resolve_characteristic_set
 from ..inputs.config import default_geometry_path
 from ..mechanics.elements.facet import fit_surface
@@ -324,7 +325,7 @@ def main(argv=None, prog: str = "python -m lumbar.experiments.fsu") -> int:
                    help="folder of the Visible Human set (--geometry visible_human; default: the configuration's "
                         "geometry.path)")
     p.add_argument("--set", default="calibrated", choices=CHARACTERISTIC_SETS, help="characteristic set")
-    p.add_argument("--calibrated-dir", default="results/calibration/characteristics",
+    p.add_argument("--calibrated-dir", default=manifests.calibrated_dir(),
                    help="where --set calibrated comes from: the workflow's calibration output (used when it holds "
                         "disc.csv; else the paper's published set in data/characteristics)")
     p.add_argument("--stage", default="intact", help="all | comma list of " + ", ".join(STAGES))

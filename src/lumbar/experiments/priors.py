@@ -3,7 +3,7 @@
 
 Every fitted parameter of the calibrated unit gets a prior from a source, so that what the data (four intact range-of-
 motion values and the admissibility criteria) cannot move stays where a source put it, and the results say so
-(``results/calibration/posterior.csv``):
+(the posterior table, role ``calibration.posterior`` of the stage manifests):
 
 - **ligament laws** (``prior: remus2021``, the default): the Remus et al. (2021) calibration of *the same fibres*
   (the ``*_UWMat.lig`` files of the embedded Visible Human set; Blankevoort/UW law per fibre), expressed as the
@@ -177,7 +177,7 @@ def ligament_spreads(disagreement: pd.DataFrame) -> dict:
 
 
 def prior_sources(names, prior: str) -> dict:
-    """{fit parameter: where its prior centre and spread come from} (a column of results/calibration/posterior.csv)."""
+    """{fit parameter: where its prior centre and spread come from} (a column of the posterior table, role calibration.posterior)."""
     centre = {"remus2021": "Remus et al. (2021) law of the same fibres",
               "table3": "paper 1 Table 3 on elongation (Rupp et al. 2015 where Table 3 has none)"}[prior]
     out = {}

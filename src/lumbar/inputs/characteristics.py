@@ -598,8 +598,8 @@ def load_shape_check(data_dir=None):
 def resolve_characteristic_set(name: str, data_dir=None, calibrated_dir=None, overrides=None) -> CharacteristicSet:
     """The one place that decides where a characteristic set comes from (every stage asks it).
 
-    ``"calibrated"`` comes from ``calibrated_dir`` (the workflow's calibration output,
-    results/calibration/characteristics, fitted on the geometry it runs on) when that directory holds a
+    ``"calibrated"`` comes from ``calibrated_dir`` (the workflow's calibration output, role
+    calibration.characteristics of the stage manifests, fitted on the geometry it runs on) when that directory holds a
     disc.csv, else from ``data_dir`` (data/characteristics: the paper's published Table 3 set, as printed).
     Every other name (the literature sets) comes from ``data_dir``. The facet stiffness and the disc shear
     stiffness are the set's own values (facet.csv / disc.csv); a caller overrides them only explicitly

@@ -376,6 +376,11 @@ def rule_outputs(stage: str, rule: str) -> dict[str, Output]:
     return out
 
 
+def calibrated_dir(root: str = RESULTS_DIR) -> str:
+    """The folder of the calibrated characteristic set the calibration writes (role calibration.characteristics)."""
+    return paths("calibration", "characteristics", root)[0].rsplit("/", 1)[0]
+
+
 def final_outputs(root: str = RESULTS_DIR, stages: Iterable[str] | None = None) -> list[str]:
     """Every output the default target builds (``final``), in manifest order."""
     return [p for s in (stages or MANIFESTS) for o in MANIFESTS[s].outputs.values() if o.final

@@ -19,7 +19,7 @@ muscle_groups         data/muscles/muscle_groups.csv                    MUSCLE_G
 anthropometry         data/anthropometry/upper_body_segments.csv        ANTHROPOMETRY
 in_vivo_idp           data/in_vivo/wilke_idp_l4l5.csv                   IN_VIVO_IDP
 neutral_angle         data/experiments/heuer2007_va_artefact_*.csv      NEUTRAL_ANGLE (discovery)
-in_vivo               results/tables/in_vivo_validation.csv             IN_VIVO (discovery)
+in_vivo               stage manifest role muscle_model.validation       IN_VIVO (discovery)
 ====================  ================================================  =====================================
 
 :data:`MEASURED` says which of them the discrepancy discovery reads and by which columns it recognises each;
@@ -58,7 +58,7 @@ LIGAMENT_KINDS = ("ALL", "PLL", "FL", "CL", "ISL", "SSL", "ITL")
 CHARACTERISTIC_KINDS = frozenset({"original_text", "original_figure", "third_party", "derived_from_published_fit",
                                   "surrogate",
                                   # written by lumbar.experiments.calibration.write_characteristics
-                                  # (results/calibration/characteristics)
+                                  # (role calibration.characteristics of the stage manifests)
                                   "calibrated_on_surrogate", "calibrated_on_measured"})
 #: reduction stages of the stepwise-reduction experiment (Heuer et al. 2007), in removal order
 STAGES = ("intact", "wo_ssl", "wo_isl", "wo_fl", "wo_cl", "wo_va", "wo_pll", "wo_all")

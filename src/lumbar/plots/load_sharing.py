@@ -17,7 +17,7 @@ def plot_curves(curves_by_set: dict, reference: pd.DataFrame | None, path, stage
                 bands: pd.DataFrame | None = None) -> None:
     """Moment-rotation curves of the unit (one panel per direction, one line per characteristic set) with the
     in-vitro ROM at 10 N*m (and its +-25 % band) of ``reference`` (columns direction, value_deg) and, shaded, the
-    calibrated set's 90 % posterior band of the rotation (``bands``: results/load_sharing/bands_calibrated.csv)."""
+    calibrated set's 90 % posterior band of the rotation (``bands``: the role load_sharing.bands of the stage manifests)."""
     fig, axes = subplots(2, 3, figsize=(12, 7))
     ref = {} if reference is None else dict(zip(reference["direction"], reference["value_deg"]))
     for ax, d in zip(axes.ravel(), CURVE_DIRECTIONS):

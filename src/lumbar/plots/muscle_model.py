@@ -22,7 +22,7 @@ POSTURE_TITLES = {"standing": "upright standing", "flexion": "36 deg flexion"}
 def plot_in_vivo_validation(validation: pd.DataFrame, metrics: dict, path) -> None:
     """L4-L5 IDP per activity, model (compressive-force part and sagittal-moment part stacked) beside in vivo
     (Wilke et al.), a red star over an activity whose posture did not converge; the title gives R2 and n of
-    ``metrics`` (results/muscle_model/in_vivo_metrics.json). ``validation``: results/tables/in_vivo_validation.csv."""
+    ``metrics`` (role muscle_model.metrics of the stage manifests). ``validation``: role muscle_model.validation."""
     val2 = validation
     fig, ax = subplots(figsize=(6.5, 4))
     xs = np.arange(len(val2))
@@ -47,7 +47,7 @@ def plot_in_vivo_validation(validation: pd.DataFrame, metrics: dict, path) -> No
 
 
 def plot_sensitivity(table: pd.DataFrame, parameter: str, scopes, postures, path) -> None:
-    """L4-L5 IDP against the values of ``parameter`` (rows of results/tables/sensitivity_idp.csv), one panel per fixed
+    """L4-L5 IDP against the values of ``parameter`` (rows of the table of role muscle_model.sensitivity), one panel per fixed
     SSL and posture, bars per muscle-group scope (``scopes``, in this order): the compressive-force part solid, the
     sagittal-moment part hatched, the baseline dashed; a red star over a posture not reached, an open circle over a
     reached posture whose optimum is not certified."""
@@ -105,7 +105,7 @@ def plot_sensitivity(table: pd.DataFrame, parameter: str, scopes, postures, path
 def plot_sobol(df: pd.DataFrame, path) -> None:
     """S1 and ST per parameter with their bootstrap 95 % intervals (whiskers), one panel per posture; the panel
     title gives the method (PCE degree, model solves, leave-one-out Q2). Indices and intervals lie in [0, 1].
-    ``df``: results/tables/sobol_indices.csv."""
+    ``df``: the table of role muscle_model.sobol (stage manifests)."""
     posts = list(dict.fromkeys(df["posture"]))
     fig, axes = subplots(1, len(posts), figsize=(4.6 * len(posts), 4.2), sharey=True, layout="constrained")
     axes = np.asarray(axes, dtype=object).reshape(1, len(posts))

@@ -12,7 +12,7 @@ Z90 = 1.6448536269514722
 
 
 def plot_prior_posterior(table: pd.DataFrame, path) -> None:
-    """One row per parameter of results/calibration/posterior.csv: the prior's 90 % interval (grey, -1.645 to +1.645
+    """One row per parameter of the calibration's posterior table (stage manifest role calibration.posterior): the prior's 90 % interval (grey, -1.645 to +1.645
     prior spreads about its centre) and the posterior's (blue bar, MAP dot), both in prior spreads from the prior
     centre, so that a shift and a narrowing read alike for every unit; a parameter at a bound is marked red."""
     t = table.reset_index(drop=True)

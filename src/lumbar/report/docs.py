@@ -1,11 +1,12 @@
 """Documents whose numbers are read from result files (showyourwork's rule: no number in prose is typed).
 
 A template is Markdown with placeholders ``{{ path | filter | ... | value }}``; rule ``docs_numbers``
-(workflow/rules/report.smk) renders every ``docs/templates/*.md`` into ``results/report/<name>.md`` after the
+(workflow/rules/report.smk) renders every ``docs/templates/*.md`` into the run's ``report/<name>.md`` (role report.doc) after the
 run, so the rendered text always matches the results it sits beside. A placeholder:
 
 * ``path``: a result file, relative to the working directory (a ``.csv`` or ``.tsv`` table, e.g. a job's
-  Snakemake benchmark file, or a ``.json`` file);
+  Snakemake benchmark file, or a ``.json`` file); a path under the default results root is read from the run's
+  own root (``results_root``: config ``run.name``, :func:`lumbar.inputs.manifests.reroot`);
 * ``key=value; key=value`` (CSV, zero or more segments): keep the rows whose columns equal these values (text
   comparison; ``True``/``False`` match boolean columns);
 * the last segment, the value: a column name (the one row left; several rows: their values joined by ", "),
@@ -24,6 +25,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..inputs import manifests
 from ..inputs.templates import PLACEHOLDER, template_files  # noqa: F401 - template_files: part of this API
 from .sections import fmt
 
@@ -84,11 +86,11 @@ def _json_value(obj, key: str) -> str:
     return fmt(obj)
 
 
-def render_placeholder(expr: str, root: Path = Path(".")) -> str:
+def render_placeholder(expr: str, root: Path = Path("."), results_root: str = manifests.RESULTS_DIR) -> str:
     segments = [s.strip() for s in expr.split("|")]
     if len(segments) < 2:
         raise ValueError(f"placeholder {{{{ {expr} }}}}: expected 'path | ... | value'")
-    path = root / segments[0]
+    path = root / manifests.reroot(segments[0], results_root)
     if path.suffix == ".json":
         return _json_value(json.loads(path.read_text()), segments[-1])
     try:
@@ -97,16 +99,17 @@ def render_placeholder(expr: str, root: Path = Path(".")) -> str:
         raise KeyError(f"placeholder {{{{ {expr} }}}}: no column {e} in {segments[0]}") from None
 
 
-def render(text: str, root=".") -> str:
-    """A template with every placeholder replaced by its value read from the files under ``root``. A missing
-    file or column is an error naming the placeholder; rows that do not exist render as ``(not in this run)``."""
+def render(text: str, root=".", results_root: str = manifests.RESULTS_DIR) -> str:
+    """A template with every placeholder replaced by its value read from the files under ``root`` (result files
+    from the run's ``results_root``). A missing file or column is an error naming the placeholder; rows that do
+    not exist render as ``(not in this run)``."""
     root = Path(root)
-    return PLACEHOLDER.sub(lambda m: render_placeholder(m.group(1), root), text)
+    return PLACEHOLDER.sub(lambda m: render_placeholder(m.group(1), root, results_root), text)
 
 
-def render_file(template, output, root=".") -> Path:
+def render_file(template, output, root=".", results_root: str = manifests.RESULTS_DIR) -> Path:
     from lumbar.inputs.io import write_text_atomic  # noqa: PLC0415
     text = Path(template).read_text()
     head = (f"<!-- rendered from {Path(template).as_posix()} by rule docs_numbers (lumbar.report.docs); "
             "do not edit: edit the template -->\n")
-    return write_text_atomic(head + render(text, root), output)
+    return write_text_atomic(head + render(text, root, results_root), output)

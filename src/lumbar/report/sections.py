@@ -181,7 +181,7 @@ class ReportBuilder:
 
     def __init__(self, inputs, config, html_path, captions_dir=None, published=None, logs_dir=None):
         self.config = config
-        #: the run's results root (results, or results/<run.name>): where :meth:`out` finds a role's file
+        #: the run's results root (config run.name, lumbar.inputs.manifests.results_root): where :meth:`out` finds a role's file
         self.root = manifests.results_root(config)
         self.logs_dir = Path(logs_dir) if logs_dir else None
         self.html_dir = Path(html_path).resolve().parent

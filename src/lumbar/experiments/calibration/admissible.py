@@ -29,7 +29,7 @@ log = logging.getLogger(__name__)
 
 PENALTY_WEIGHT = 3.0
 #: spread of a real ROM row when its source gives none (Yamamoto et al. 1989's abstract gives means only): 25 % of the
-#: measured value, the validation's acceptance band (an assumption, stated in results/calibration/posterior.csv)
+#: measured value, the validation's acceptance band (an assumption, stated in the posterior table, role calibration.posterior)
 DATA_SD_REL = 0.25
 #: bounds of the disc torque-law scales (p1 and p3 of Eq. 3 of one direction scaled together) of the admissible fit;
 #: their prior is the disc-only fit (step 1) with the spread of a measured row (DATA_SD_REL)
@@ -431,7 +431,7 @@ POSTERIOR_COLUMNS = ("parameter", "unit", "fit_unit", "prior_centre", "prior_90_
 
 
 def posterior_tables(fit: AdmissibleFit | None, prior_name: str = "") -> tuple[pd.DataFrame, pd.DataFrame]:
-    """(results/calibration/posterior.csv, posterior_covariance.csv) of the final admissible fit: per parameter the
+    """(posterior, posterior covariance: roles calibration.posterior and calibration.covariance) of the final admissible fit: per parameter the
     prior (centre, spread, source), the MAP, the Laplace 90 % interval, posterior/prior spread, which rows moved it
     and the at-bound flag with its reason (:func:`lumbar.experiments.posterior.posterior_table`); empty tables with
     the columns when there was no admissible fit (a strain-transfer calibration)."""
@@ -451,7 +451,7 @@ def posterior_tables(fit: AdmissibleFit | None, prior_name: str = "") -> tuple[p
 
 def read_fit_start(path) -> dict | None:
     """{parameter: fit value} of a :func:`fit_admissible` parameter table (e.g. the surrogate generator's anchoring,
-    results/experiments/stepwise_reduction_generator_fit.csv), to start another fit from; None when the file is
+    role virtual_experiment.generator_fit of the stage manifests), to start another fit from; None when the file is
     missing, empty or from another fit (no ``fit_value`` column)."""
     if not path or not Path(path).is_file():
         return None

@@ -1,6 +1,6 @@
 """The calibration's prior: the ligament laws on elongation it starts from (paper 1 Table 3 and the Rupp et al. 2015
 laws of its Appendix 1, or the Remus et al. 2021 laws of the same fibres) with their spreads, and the prior set as the
-calibration recorded it (results/calibration/calibration_prior.csv)."""
+calibration recorded it (role calibration.prior of the stage manifests)."""
 from __future__ import annotations
 
 import dataclasses
@@ -113,7 +113,7 @@ def calibration_prior(published=None, geometry=None, level="L4-L5", geometry_pat
 
 def read_prior_set(path, published):
     """The prior characteristic set the calibration used, rebuilt from its provenance table
-    (results/calibration/calibration_prior.csv: ligament, a_n, b_pct, c_n, d_pct, prestrain_pct, law_length_mm) on
+    (role calibration.prior: ligament, a_n, b_pct, c_n, d_pct, prestrain_pct, law_length_mm) on
     ``published`` (disc and facet): the one record of the prior, read by the admissibility and the other levels (the
     force-scale criterion is relative to it)."""
     df = pd.read_csv(path)

@@ -1,4 +1,4 @@
-"""The calibration's output: the calibrated characteristic directory (results/calibration/characteristics) and the
+"""The calibration's output: the calibrated characteristic directory (role calibration.characteristics of the stage manifests) and the
 analogs of paper 1's Tables 1-3 beside the paper's values."""
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ...inputs import manifests
 from ...inputs.io import write_table_atomic
 from ..stepwise_reduction import MAIN_DIRECTIONS
 from .disc import DISC_STAGE
@@ -38,8 +39,8 @@ def write_characteristics(result: CalibrationResult, src_dir, out_dir, reference
             disc.loc[i, "value"] = repr(float(result.disc[r["direction"]][k]))
             disc.loc[i, ["kind", "source"]] = [kind, src_note]
             disc.loc[i, "note"] = f"Eq. 3 fitted (trf) to T(ROM_mean) = M on stage {DISC_STAGE}" + (
-                "; p1 and p3 then scaled by the admissible fit (disc_torque posterior, results/calibration/"
-                "posterior.csv)" if result.info.get("final_fit") is not None and
+                f"; p1 and p3 then scaled by the admissible fit (disc_torque posterior, "
+                f"{manifests.path('calibration', 'posterior')})" if result.info.get("final_fit") is not None and
                 result.info["final_fit"].posterior is not None else "")
     ks = getattr(result.charset.disc, "k_shear", None)
     if ks is not None and "real_fit" in result.info:
