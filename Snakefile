@@ -12,18 +12,13 @@ report: "workflow/report/workflow.rst"
 
 
 include: "workflow/rules/common.smk"
-include: "workflow/rules/geometry.smk"
-include: "workflow/rules/fsu.smk"
-include: "workflow/rules/virtual_experiment.smk"
-include: "workflow/rules/calibration.smk"
-include: "workflow/rules/load_sharing.smk"
-include: "workflow/rules/admissibility.smk"
-include: "workflow/rules/stepwise_reduction.smk"
-include: "workflow/rules/l2s1.smk"
-include: "workflow/rules/muscle_model.smk"
-include: "workflow/rules/validation.smk"
-include: "workflow/rules/discover.smk"
-include: "workflow/rules/report.smk"
+
+
+# every stage's rule file, in the order of the stage manifests (lumbar.inputs.manifests: a new stage is a
+# manifest entry naming its rule file, not a line here)
+for _rule_file in manifests.rule_files():
+
+    include: _rule_file
 
 
 rule all:

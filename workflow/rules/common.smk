@@ -80,6 +80,23 @@ def log_file(name):
     return f"{LOGS}/{name}.log"
 
 
+def other_runs_logs(wildcards):
+    """Sub-folders of the logs folder that hold other runs' logs (logs/<name>/) rather than a rule's own
+    (logs/muscle_sensitivity/...): the report's Flags list this run's warnings only. [] for a named run.
+    """
+    if LOGS != manifests.LOGS_DIR or not Path(LOGS).is_dir():
+        return []
+    own = {
+        Path(str(f)).parts[1]
+        for r in workflow.rules
+        for f in r.log
+        if len(Path(str(f)).parts) > 2
+    }
+    return sorted(
+        d.name for d in Path(LOGS).iterdir() if d.is_dir() and d.name not in own
+    )
+
+
 def benchmark_file(name):
     """A rule's benchmark file (Snakemake's benchmark:) under the run's results root."""
     return f"{RESULTS}/benchmarks/{name}.tsv"

@@ -24,6 +24,8 @@ rule paper_report:
         # read when the report is built (every rule before it has finished): their WARNING lines are the
         # report's "Flags" section; not inputs (a log is no rule's output file)
         logs_dir=LOGS,
+        # the default run's logs folder also holds the named runs' (logs/<name>/): not this run's warnings
+        logs_exclude=other_runs_logs,
     script:
         "../scripts/paper_report.py"
 

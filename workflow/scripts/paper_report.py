@@ -18,7 +18,8 @@ def main(snakemake, log):
     captions = [str(c) for c in snakemake.input.captions]
     summary = build_report(inputs, snakemake.params.config, snakemake.output.html, snakemake.output.pdf,
                            captions_dir=Path(captions[0]).parent if captions else None,
-                           published=snakemake.params.published, logs_dir=snakemake.params.logs_dir)
+                           published=snakemake.params.published, logs_dir=snakemake.params.logs_dir,
+                           logs_exclude=snakemake.params.logs_exclude)
     log.info("report: %d figures, %d tables; surrogate reference: %s; %d warning(s) of the workflow's logs listed "
              "under Flags", summary["figures"], summary["tables"], summary["surrogate"], len(summary["warnings"]))
     for note in summary["not_built"]:

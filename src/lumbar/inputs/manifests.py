@@ -88,9 +88,18 @@ class Output:
 
 @dataclass(frozen=True)
 class Manifest:
-    """A stage's outputs by role (declaration order = the rule outputs' order)."""
+    """A stage: its outputs by role (declaration order = the rule outputs' order), the rule file that makes them
+    (``workflow/rules/<rule_file>``, default ``<stage>.smk``; the Snakefile includes the stages' rule files in
+    manifest order) and the module of its report section (imported by :mod:`lumbar.report`, where it registers
+    itself with ``report_section``), if it has one of its own."""
     stage: str
     outputs: Mapping[str, Output] = field(default_factory=dict)
+    rule_file: str | None = None
+    report_module: str | None = None
+
+    @property
+    def rules_path(self) -> str:
+        return f"workflow/rules/{self.rule_file or self.stage + '.smk'}"
 
     def rules(self) -> list[str]:
         return list(dict.fromkeys(o.rule for o in self.outputs.values()))
@@ -184,7 +193,7 @@ MANIFESTS: dict[str, Manifest] = {m.stage: m for m in (
                    "fig5_ligament_characteristics", _CAL, final=True),
         "posterior_figure": _o("figures/calibration_posterior.png", "posterior_figure", "calibration_posterior",
                                _CAL, final=True),
-    }),
+    }, report_module="lumbar.report.posterior"),
     Manifest("load_sharing", {
         "curves": _o("load_sharing/curves_{set}.csv", "load_sharing_curves"),
         "compression": _o("load_sharing/compression_{set}.csv", "load_sharing_curves"),
@@ -201,7 +210,7 @@ MANIFESTS: dict[str, Manifest] = {m.stage: m for m in (
                             final=True),
         "shares_figure": _o("figures/load_sharing_shares.png", "load_sharing_summary", "load_sharing_shares", _LS,
                             final=True),
-    }),
+    }, report_module="lumbar.report.load_sharing_section"),
     Manifest("admissibility", {
         "table": _o("calibration/admissibility.csv", "admissibility", "admissibility", _LS, final=True),
         "limits": _o("calibration/pretension_limits.csv", "admissibility"),
@@ -278,7 +287,7 @@ MANIFESTS: dict[str, Manifest] = {m.stage: m for m in (
         "internal_loads": _o("figures/validation_internal_loads.png", "validation_scoreboard_figure",
                              "validation_internal_loads", _VAL, report="optional"),
     }),
-    Manifest("discovery", _discovery_outputs()),
+    Manifest("discovery", _discovery_outputs(), rule_file="discover.smk"),
     Manifest("report", {
         "html": _o("report/paper.html", "paper_report", "paper_report", "Paper-style report", final=True),
         "pdf": _o("report/paper.pdf", "paper_report", "paper_report", "Paper-style report", final=True),
@@ -340,6 +349,16 @@ def results_defaults(defaults: Mapping, prefix: tuple = ()) -> dict[tuple, str]:
 
 
 # ----------------------------------------------------------------------------------------------- look-ups
+def rule_files() -> list[str]:
+    """The rule files of the stages, in manifest order (the Snakefile includes them after common.smk)."""
+    return [m.rules_path for m in MANIFESTS.values()]
+
+
+def report_modules() -> list[str]:
+    """The modules of the stages' own report sections, in manifest order."""
+    return [m.report_module for m in MANIFESTS.values() if m.report_module]
+
+
 def manifest(stage: str) -> Manifest:
     if stage not in MANIFESTS:
         raise KeyError(f"no stage manifest {stage!r}; stages: {sorted(MANIFESTS)}")

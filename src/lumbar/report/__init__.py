@@ -24,7 +24,10 @@ the stage manifests, :mod:`lumbar.inputs.manifests`, under the run's results roo
 """
 from __future__ import annotations
 
+import importlib
 from typing import Iterable, Mapping
+
+from lumbar.inputs import manifests
 
 from lumbar.inputs.io import atomic_writer, write_text_atomic
 
@@ -37,32 +40,38 @@ from . import front_sections as _front_sections  # noqa: F401, E402
 from . import paper_sections as _paper_sections  # noqa: F401, E402
 from . import discrepancy_section as _discrepancy_section  # noqa: F401, E402
 from . import appendix_sections as _appendix_sections  # noqa: F401, E402
-from . import load_sharing_section as _load_sharing_section  # noqa: F401, E402
-from . import posterior as _posterior_section  # noqa: F401, E402
+
+# a stage's own section: the module its stage manifest names (lumbar.inputs.manifests, report_module), imported in
+# manifest order; it registers itself (report_section, placed with after=)
+for _module in manifests.report_modules():
+    importlib.import_module(_module)
 
 __all__ = ["build_document", "build_report", "render_html", "render_pdf", "NOT_BUILT", "ReportBuilder", "Doc", "fmt",
            "SECTIONS", "report_section"]
 
 
-def build_document(inputs: Iterable, config: Mapping, html_path, captions_dir=None, published=None, logs_dir=None):
+def build_document(inputs: Iterable, config: Mapping, html_path, captions_dir=None, published=None, logs_dir=None,
+                   logs_exclude=()):
     """The report as a document model (``Doc``) and its builder, without writing anything."""
-    b = ReportBuilder(inputs, config, html_path, captions_dir=captions_dir, published=published, logs_dir=logs_dir)
+    b = ReportBuilder(inputs, config, html_path, captions_dir=captions_dir, published=published, logs_dir=logs_dir,
+                      logs_exclude=logs_exclude)
     return b.build(), b
 
 
 def build_report(inputs: Iterable, config: Mapping, html_path, pdf_path, captions_dir=None,
-                 published=None, logs_dir=None) -> dict:
+                 published=None, logs_dir=None, logs_exclude=()) -> dict:
     """Write the paper-style report as HTML (self-contained) and PDF.
 
     ``inputs``: paths (relative to the working directory, or absolute) of every result and data file the report
     may show; a file that is not among them is reported as "not built in this configuration".
     ``config``: the validated workflow configuration (methods, labels). ``captions_dir``: directory of the
     ``<output stem>.rst`` captions (workflow/report). ``published``: the published-results CSV (paper values,
-    optional). ``logs_dir``: the workflow's logs (``logs/``); their WARNING lines make the "Flags" section.
+    optional). ``logs_dir``: the workflow's logs (``logs/``, a named run's ``logs/<name>/``); their WARNING lines
+    make the "Flags" section, except those in the sub-folders ``logs_exclude`` (other runs' logs).
     Returns a summary: figure and table counts, which inputs were not built and the warnings listed.
     """
     inputs = list(inputs)
-    doc, b = build_document(inputs, config, html_path, captions_dir, published, logs_dir)
+    doc, b = build_document(inputs, config, html_path, captions_dir, published, logs_dir, logs_exclude)
     write_text_atomic(render_html(doc, b), html_path)
     pdf = render_pdf(doc, b)
     with atomic_writer(pdf_path, "wb") as f:

@@ -2,7 +2,7 @@
 facets and ligaments, whether it reaches its range of motion for the reasons real segments have (the admissibility
 criteria), where the wire-cable forces go at L4-L5, and the other lumbar levels with the calibrated characteristics
 unchanged. Every number is read from the result files (workflow/rules/load_sharing.smk, admissibility.smk,
-validation.smk); registered after the calibration section."""
+validation.smk); registered after the posterior section (stage manifest load_sharing, report_module)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -61,7 +61,7 @@ def _summary_sentence(b: ReportBuilder) -> str:
     return " ".join(parts)
 
 
-@report_section("load_sharing", "Load sharing and physical admissibility", after="calibration")
+@report_section("load_sharing", "Load sharing and physical admissibility", after="posterior")
 def load_sharing_section(b: ReportBuilder):
     files = _files(b)
     b.para("Reaching the range of motion is not enough: the unit must reach it for the reasons real segments have "

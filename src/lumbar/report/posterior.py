@@ -1,7 +1,8 @@
 """Report section "What the data told us": the calibration as a regularised inverse problem. Every fitted parameter's
 sourced prior beside its posterior (MAP and Laplace 90 % interval), which rows moved it, and the 90 % posterior
 bands of the calibrated unit's range of motion and internal loads. Every number is read from the result files
-(workflow/rules/calibration.smk, load_sharing.smk); registered after the calibration section."""
+(workflow/rules/calibration.smk, load_sharing.smk); registered after the calibration section (stage manifest
+calibration, report_module)."""
 from __future__ import annotations
 
 import numpy as np

@@ -179,11 +179,12 @@ class ReportBuilder:
     """Reads the result files and writes the report's sections into a :class:`~lumbar.report.document.Doc`
     (prose from the configuration and the files, figure and table numbering, what was not built)."""
 
-    def __init__(self, inputs, config, html_path, captions_dir=None, published=None, logs_dir=None):
+    def __init__(self, inputs, config, html_path, captions_dir=None, published=None, logs_dir=None, logs_exclude=()):
         self.config = config
         #: the run's results root (config run.name, lumbar.inputs.manifests.results_root): where :meth:`out` finds a role's file
         self.root = manifests.results_root(config)
         self.logs_dir = Path(logs_dir) if logs_dir else None
+        self.logs_exclude = set(logs_exclude)      # sub-folders of logs_dir holding other runs' logs
         self.html_dir = Path(html_path).resolve().parent
         self.inputs = {}
         for p in inputs:
@@ -481,13 +482,14 @@ class ReportBuilder:
 
     def warnings(self) -> list[tuple[str, str]] | None:
         """(log, message) of every WARNING line in the workflow's logs (``logs_dir``), time stamps removed, in
-        file order; None when no logs directory was given or it does not exist."""
+        file order (not those under a sub-folder of ``logs_exclude``: another run's); None when no logs directory
+        was given or it does not exist."""
         if self.logs_dir is None or not self.logs_dir.is_dir():
             return None
         out = []
         for p in sorted(self.logs_dir.rglob("*.log")):
-            if p.name == "paper_report.log":          # this report's own log, being written
-                continue
+            if p.name == "paper_report.log" or p.relative_to(self.logs_dir).parts[0] in self.logs_exclude:
+                continue                              # this report's own log (being written), another run's
             for line in p.read_text(errors="replace").splitlines():
                 m = re.match(r"^(?:\d{4}-\d\d-\d\d[ T][\d:,.]+\s+)?WARNING\s+(.*)$", line)
                 if m:
