@@ -31,7 +31,7 @@ except ValueError as _e:
 validate(config, schema="../schemas/config.schema.yaml")
 
 # ---- the run's roots and the stage manifests (lumbar.inputs.manifests: every output declared once)
-RESULTS = manifests.results_root(config)  # results, or results/<run.name>
+RESULTS = manifests.results_root(config)  # the run's results root (config run.name)
 LOGS = manifests.logs_root(config)  # logs, or logs/<run.name>
 if RESULTS != manifests.RESULTS_DIR:
     # a configuration default naming a result of the run (calibrated_dir, ...) names this run's own

@@ -1,6 +1,6 @@
 """Load-sharing stage, rule load_sharing_bands: the 90 % posterior bands of the calibrated unit's intact
 moment-rotation curves and internal loads, by linearisation (the calibration's Laplace posterior,
-results/calibration/posterior_covariance.csv; lumbar.experiments.posterior.curve_bands).
+role calibration.covariance of the stage manifests; lumbar.experiments.posterior.curve_bands).
 
 By hand: python workflow/scripts/load_sharing_bands.py load_sharing_bands --configfile config/test/config.yaml
 """

@@ -1,5 +1,5 @@
 """Calibration stage, rule posterior_figure: the prior and posterior 90 % interval of every calibrated parameter
-(results/calibration/posterior.csv; lumbar.plots.posterior).
+(input: role calibration.posterior of the stage manifests; lumbar.plots.posterior).
 
 By hand: python workflow/scripts/posterior_figure.py posterior_figure --configfile config/test/config.yaml
 """

@@ -3,7 +3,7 @@
 Passive intervertebral behaviour: the project's disc, facet and ligament elements at every level
 (:func:`lumbar.experiments.fsu.add_level`), from the passive set named by ``passive_set`` (config
 ``muscle_model.passive_set``, :func:`passive_characteristics`): ``workflow_calibrated`` = the workflow's own
-calibration output (results/calibration/characteristics, fitted on the passive models' geometry) applied unchanged at
+calibration output (role calibration.characteristics, fitted on the passive models' geometry) applied unchanged at
 every level (ligament laws on elongation, the same facet and disc shear stiffness: the adopted "as_calibrated" rule of
 :mod:`lumbar.experiments.level_transfer`), ``published_table3`` = paper 1's published Table 3 set as printed
 (data/characteristics, set "calibrated" there), or a literature set by name. With ``symmetric_passive`` (default, config
@@ -112,7 +112,7 @@ class PointForces:
 
 #: the passive sets of the muscle model that are not a literature set's own name (config muscle_model.passive_set)
 PASSIVE_SETS = {
-    "workflow_calibrated": "the workflow's calibrated set (results/calibration/characteristics: fitted on the passive "
+    "workflow_calibrated": "the workflow's calibrated set (role calibration.characteristics: fitted on the passive "
                            "models' geometry), applied unchanged at every level (laws on elongation)",
     "published_table3": "paper 1's published Table 3 set as printed (data/characteristics, set 'calibrated' there)",
 }
