@@ -42,7 +42,7 @@ def provenance_section(b):
             rows.append([role + ", disc-only stage", str(derived), "derived_from_published_fit",
                          kinds_of(b, derived)])
     b.table_block("Experiment tables: measured, derived from a published fit, or surrogate",
-                     ["role", "table", "class", "kinds in the file"], rows)
+                  ["role", "table", "class", "kinds in the file"], rows)
     drows = []
     for rel in sorted(p for p in b.inputs if p.startswith("data/") and p.endswith(".csv")):
         if not b.has(rel):
@@ -64,13 +64,13 @@ def provenance_section(b):
         drows.append([rel, str(len(df)), kind_txt, src_txt])
     if drows:
         b.table_block("Hand-curated inputs (data/): rows per kind and their sources",
-                         ["file", "rows", "kind", "source"], drows)
+                      ["file", "rows", "kind", "source"], drows)
     else:
         b.doc.add(Para(f"Data tables: {NOT_BUILT} (no data/*.csv among the inputs).", "note"))
     pub = b.cfg("paths", "published_model_results")
     b.doc.add(Para(f"Published model results (the paper's counts beside ours) are read at run time from "
-                      f"{pub} (not redistributed): "
-                      + ("present." if b.published else "not present in this run, paper columns empty.")))
+                   f"{pub} (not redistributed): "
+                   + ("present." if b.published else "not present in this run, paper columns empty.")))
 
 
 def kinds_of(b, rel) -> str:
@@ -84,7 +84,7 @@ def kinds_of(b, rel) -> str:
 
 def config_appendix(b):
     b.table_block("Configuration used (every key)", ["key", "value"],
-                     [[k, fmt(v, 8)] for k, v in flatten(b.config)])
+                  [[k, fmt(v, 8)] for k, v in flatten(b.config)])
     rows = []
     for rel in sorted(b.inputs):
         p = b.inputs[rel]
@@ -95,7 +95,7 @@ def config_appendix(b):
         else:
             rows.append([rel, f"({NOT_BUILT})", ""])
     b.table_block("Input files of this report (SHA-256, first 16 hex digits)", ["file", "bytes", "sha256"],
-                     rows)
+                  rows)
 
 
 

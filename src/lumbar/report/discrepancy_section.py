@@ -41,11 +41,11 @@ def discrepancy_section(b):
                 "decision", "measured")
         rows = [[k, fmt(d[k])] for k in keys if k in d]
         b.table_block(f"Discovery, case '{case}'", ["quantity", "value"], rows,
-                         source=found, surrogate=sur)
+                      source=found, surrogate=sur)
         if b.has(section):
             b.shown.add(norm_path(section))
             markdown(b, b.path(section).read_text(), f"case '{case}'", sur,
-                           section)
+                     section)
         else:
             ranking = d.get("ranking")
             if isinstance(ranking, list) and ranking:
@@ -57,7 +57,7 @@ def discrepancy_section(b):
                     rows = [[str(i)] + [fmt(x) for x in (r if isinstance(r, (list, tuple)) else [r])]
                             for i, r in enumerate(ranking[:20], 1)]
                 b.table_block(f"Ranking of candidate effects, case '{case}'", keys, rows,
-                                 source=found, surrogate=sur)
+                              source=found, surrogate=sur)
         for name, cap in (("disagreement_map", "Where the model disagrees with the experiment"),
                           ("ranking", "Candidate effects ranked by how much of the gap they explain"),
                           ("before_after", "Model vs experiment before and after adding the named effect")):
@@ -65,13 +65,13 @@ def discrepancy_section(b):
                 b.figure(b.out("discovery", f"{case}.{name}"), f"{cap} (case '{case}').", sur)
     b.doc.add(Heading("Benchmark: planted effects on SURROGATE data", 2))
     b.figure(b.out("discovery", "benchmark_figure"), "Discrepancy benchmark: recovery of planted effects "
-                "(SURROGATE data).", True)
+             "(SURROGATE data).", True)
     summary = b.out("discovery", "benchmark_summary")
     if b.has(summary):
         d = json.loads(b.path(summary).read_text())
         b.table_block("Discrepancy benchmark summary", ["quantity", "value"],
-                         [[k, fmt(v)] for k, v in flatten(d)], source=summary,
-                         surrogate=True)
+                      [[k, fmt(v)] for k, v in flatten(d)], source=summary,
+                      surrogate=True)
     else:
         b.missing("Benchmark summary (benchmark_summary.json)")
     b.csv_table(b.out("discovery", "benchmark_table"), "Discrepancy benchmark cases", surrogate=True)
@@ -97,7 +97,7 @@ def real_data_section(b):
         text += "On none of them is a missing effect named at the configured level. "
     if len(few):
         text += ("Too few rows to name anything: " + ", ".join(f"{r.dataset} ({r.n_rows} row(s))"
-                                                              for r in few.itertuples()) + ". ")
+                                                               for r in few.itertuples()) + ". ")
     rest = t[(t["named_effect"].astype(str) == "") & ~t.index.isin(few.index)]
     dec = rest["decision"].astype(str)
     for label, sel in (("Tested, nothing named (consistent with the model and specimen variation, or a nuisance "
@@ -149,7 +149,7 @@ def markdown(b, text: str, where: str, surrogate: bool, source: str):
                 i += 1
             if rows:
                 b.table_block(f"Discrepancy table, {where}", rows[0], rows[1:], source=source,
-                                 surrogate=surrogate)
+                              surrogate=surrogate)
             continue
         else:
             if bullets:

@@ -1,8 +1,8 @@
 """Documents whose numbers are read from result files (showyourwork's rule: no number in prose is typed).
 
 A template is Markdown with placeholders ``{{ path | filter | ... | value }}``; rule ``docs_numbers``
-(workflow/rules/report.smk) renders every ``docs/templates/*.md`` into the run's ``report/<name>.md`` (role report.doc) after the
-run, so the rendered text always matches the results it sits beside. A placeholder:
+(workflow/rules/report.smk) renders every ``docs/templates/*.md`` into the run's ``report/<name>.md`` (role
+report.doc) after the run, so the rendered text always matches the results it sits beside. A placeholder:
 
 * ``path``: a result file, relative to the working directory (a ``.csv`` or ``.tsv`` table, e.g. a job's
   Snakemake benchmark file, or a ``.json`` file); a path under the default results root is read from the run's

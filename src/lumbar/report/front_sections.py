@@ -34,10 +34,10 @@ def scoreboard_section(b):
         b.missing("Validation on real data (validation_real_data.csv)")
         return
     b.doc.add(Para("One row per distinct comparison: rows that several characteristic sets share (the "
-                      "disc-only stage, for which every set uses the paper's disc) are shown once, with the "
-                      "number of sets. Acceptance interval: the published range, else the tolerance named in "
-                      f"the CSV's tolerance_rule. Every row, with its source: {rel}. Agreement with the "
-                      "SURROGATE tables further below is a method check, not a validation."))
+                   "disc-only stage, for which every set uses the paper's disc) are shown once, with the "
+                   "number of sets. Acceptance interval: the published range, else the tolerance named in "
+                   f"the CSV's tolerance_rule. Every row, with its source: {rel}. Agreement with the "
+                   "SURROGATE tables further below is a method check, not a validation."))
     titles = {V.INDEPENDENT: ("R1", "Independent checks (validation)"),
               V.TARGET: ("R2", "Calibration targets (fit quality, not validation)"),
               V.INTERNAL: ("R3", "Internal loads, independent checks (judged, never fitted)"),
@@ -55,10 +55,10 @@ def scoreboard_section(b):
             rows.append([q if q != last else "", V.condition_label(r.condition), sim, post, fmt(r.measured), band,
                          CHECK if r.within else CROSS, V.sets_label(r.sets)])
             last = q
-        b.table_block(f"{title}: {w} of {n} distinct comparisons within", ["quantity [unit]", "condition",
-                         "simulated", "90 % band", "measured", "acceptance interval", "within",
-                         "simulated by"], rows,
-                         source=rel, label=f"Table {label}" if label else None, marks=True, key_cols=2)
+        b.table_block(f"{title}: {w} of {n} distinct comparisons within",
+                      ["quantity [unit]", "condition", "simulated", "90 % band", "measured", "acceptance interval",
+                       "within", "simulated by"], rows,
+                      source=rel, label=f"Table {label}" if label else None, marks=True, key_cols=2)
 
 
 def flags_section(b):
@@ -81,15 +81,15 @@ def flags_section(b):
         note = (f"First {MAX_WARNINGS} of {len(warn)}; every one is in its rule's log under logs/."
                 if len(warn) > MAX_WARNINGS else "")
         b.table_block(f"Warnings in the workflow's logs ({len(warn)})", ["rule log", "warning"],
-                         [[name, msg] for name, msg in warn[:MAX_WARNINGS]], note=note, key_cols=0)
+                      [[name, msg] for name, msg in warn[:MAX_WARNINGS]], note=note, key_cols=0)
 
 
 def summary(b):
     paras = [
         counts_sentence(b, b.out("stepwise_reduction", "vs_paper"), b.out("stepwise_reduction", "counts"),
-                              "Stepwise reduction, forward simulation (Table 4 analog)", b.sr_surrogate),
+                        "Stepwise reduction, forward simulation (Table 4 analog)", b.sr_surrogate),
         counts_sentence(b, b.out("l2s1", "vs_paper"), b.out("l2s1", "counts"),
-                              "L2-S1 intradiscal pressure (Table 5 analog)", b.idp_surrogate),
+                        "L2-S1 intradiscal pressure (Table 5 analog)", b.idp_surrogate),
         calibration_sentence(b),
         muscle_sentence(b),
         discrepancy_sentence(b),
@@ -199,7 +199,7 @@ def methods(b):
     c = b.cfg
     g = c("geometry", default={}) or {}
     geo = f"Geometry: '{fmt(g.get('kind'))}'" + (f" read from {g.get('path')}" if g.get("kind") ==
-                                                  "visible_human" else " (myo-sim meshes with project landmarks)")
+                                                 "visible_human" else " (myo-sim meshes with project landmarks)")
     b.doc.add(Para(
         f"{geo}; motion segment {fmt(c('fsu', 'level'))}. Characteristic sets: "
         f"{', '.join(SET_LABELS.get(s, s) for s in c('characteristics', 'sets', default=[]))} "
@@ -251,9 +251,9 @@ def which_set_text(b):
     ps = c("muscle_model", "passive_set")
     if ps:
         what = {"workflow_calibrated": f"the workflow's calibrated set ({cal}) applied unchanged at every myo-sim "
-                                       "level (ligament laws on elongation, its facet and disc shear stiffness)",
+                "level (ligament laws on elongation, its facet and disc shear stiffness)",
                 "published_table3": f"paper 1's published Table 3 set as printed "
-                                    f"({fmt(c('characteristics', 'data_dir'))}), not the workflow's calibration"}
+                f"({fmt(c('characteristics', 'data_dir'))}), not the workflow's calibration"}
         out.append(f"The muscle-driven model's passive spine (muscle_model.passive_set = {fmt(ps)}): "
                    f"{what.get(ps, 'the literature set ' + SET_LABELS.get(ps, ps))}.")
     return " ".join(out)

@@ -110,9 +110,9 @@ def load_sharing_section(b: ReportBuilder):
                                                        c["increases_from_stage_rest"], c["increases_from_intact_rest"])],
                           source=files["reduction"],
                           note="A removed pre-tensioned ligament moves the stage's rest state, "
-                                                 "from which the stepwise-reduction tables measure the ROM; the "
-                                                 "rotation from the intact unit's rest shows the structure's own "
-                                                 "share.")
+                          "from which the stepwise-reduction tables measure the ROM; the "
+                          "rotation from the intact unit's rest shows the structure's own "
+                          "share.")
     b.csv_table(files["compression"],
                 "Pure axial (follower) load: shares of disc and facets per characteristic set", False,
                 columns=None)
@@ -127,13 +127,13 @@ def load_sharing_section(b: ReportBuilder):
                         fmt(100 * r["facets_share"]), fmt(r["idp_mpa"])] for _, r in n.iterrows()],
                       source=files["cables"],
                       note="Forces along the disc normal on L4 (ligaments pull: negative); shares of "
-                                          "the compression crossing the joint (disc + facets). Every load case: "
-                                          + files["cables"] + ".")
+                      "the compression crossing the joint (disc + facets). Every load case: "
+                      + files["cables"] + ".")
     else:
         b.missing(f"Cable load paths ({Path(files['cables']).name})")
     b.csv_table(files["remus"],
                 "The calibrated ligaments beside the Remus et al. (2021) model of the same fibres (tension "
-                       "under both laws at the same deformation)", False)
+                "under both laws at the same deformation)", False)
     b.heading("Other lumbar levels, calibrated characteristics unchanged")
     if b.has(files["multi"]):
         m = pd.read_csv(b.path(files["multi"]))
@@ -141,8 +141,8 @@ def load_sharing_section(b: ReportBuilder):
         b.para("Within 25 % of Yamamoto et al. (1989), per level: "
                + "; ".join(f"{lv} {int(r['sum'])} of {int(r['count'])}" for lv, r in per.iterrows())
                + ". The shares say how each level reaches its rotation: the levels differ only in their geometry, "
-                 "so a level whose real segments are more mobile than the others (or stiffer) in one direction "
-                 "shows it here as a ratio far from 1 with the same structures resisting.")
+               "so a level whose real segments are more mobile than the others (or stiffer) in one direction "
+               "shows it here as a ratio far from 1 with the same structures resisting.")
         from ..experiments.validation import near_limit  # noqa: PLC0415
 
         edge = near_limit(m)
@@ -163,9 +163,9 @@ def load_sharing_section(b: ReportBuilder):
                        + [fmt(100 * r[c]) for c in share] + [fmt(r["largest_jump_deg"])] for _, r in m.iterrows()],
                       source=files["multi"],
                       note="Lateral bending and axial rotation: the mean of both sides (the abstract "
-                                         "gives one-side values). Shares of the applied moment about the disc "
-                                         "centre; largest step: the largest rotation change between two 0.25 N*m "
-                                         "load steps (a snap-through shows here).")
+                      "gives one-side values). Shares of the applied moment about the disc "
+                      "centre; largest step: the largest rotation change between two 0.25 N*m "
+                      "load steps (a snap-through shows here).")
     else:
         b.missing(f"Other levels ({Path(files['multi']).name})")
     b.figure(b.out("validation", "multilevel_figure"), "Other levels with the L4-L5 characteristics unchanged.")

@@ -25,42 +25,43 @@ from .sections import (
 def model_section(b):
     b.figure(b.out("geometry", "figure"), "L4-L5 functional spinal unit (Fig. 1 analog).", label="Fig. 1")
     b.figure(b.out("l2s1", "fig3"), "L2-S1 lumbar spine with wire cables (Fig. 3 analog).",
-                label="Fig. 3")
+             label="Fig. 3")
     b.csv_table(b.out("geometry", "table"), "Geometry of the motion segments (disc, facets, ligament fibres)")
 
 
 def calibration_section(b):
     s = b.sr_surrogate
     b.csv_table(b.out("calibration", "table1"), "Disc torque-angle parameters, Eq. 3 (Table 1 analog)", s,
-                   label="Table 1")
+                label="Table 1")
     b.figure(b.out("calibration", "fig4"), "Disc torque-angle characteristics (Fig. 4 analog).", s,
-                label="Fig. 4")
+             label="Fig. 4")
     b.csv_table(b.out("calibration", "table2"), "Facet joint regression surfaces, Eq. 4 (Table 2 analog)",
-                   label="Table 2")
+                label="Table 2")
     b.csv_table(b.out("calibration", "table3"),
-                   "Ligament force-strain parameters, Eq. 7 (Table 3 analog)",
-                   s, label="Table 3")
+                "Ligament force-strain parameters, Eq. 7 (Table 3 analog)",
+                s, label="Table 3")
     b.figure(b.out("calibration", "fig5"), "Ligament force-strain characteristics (Fig. 5 analog).",
-                s, label="Fig. 5")
+             s, label="Fig. 5")
     b.csv_table(b.out("calibration", "summary"),
-                   "Calibration steps and RMS residuals (identifiable: the stage's ROM responds to the structure; "
-                   "at_bound: a fitted parameter ends within 1 % of its bound)", s)
+                "Calibration steps and RMS residuals (identifiable: the stage's ROM responds to the structure; "
+                "at_bound: a fitted parameter ends within 1 % of its bound)", s)
     targets = b.out("calibration", "targets")
     origin = ""
     if b.has(targets):
         t = read_csv(b.path(targets))
         origin = "; ".join(dict.fromkeys(str(v).split(",")[0] for v in t["source"])) if len(t) else ""
     b.csv_table(b.out("calibration", "real_fit"),
-                   f"Final fit on the real targets (intact ROM at 10 N*m{', ' + origin if origin else ''}) and "
-                   "the admissibility criteria: force scales, facet stiffness, disc shear stiffness within its "
-                   "sourced range", False)
+                f"Final fit on the real targets (intact ROM at 10 N*m{', ' + origin if origin else ''}) and "
+                "the admissibility criteria: force scales, facet stiffness, disc shear stiffness within its "
+                "sourced range", False)
 
 
 def forward_section(b):
     s = b.sr_surrogate
     b.figure(b.out("stepwise_reduction", "fig6"), "Range of motion per reduction stage (Fig. 6 analog).", s,
-                label="Fig. 6")
-    b.csv_table(b.out("stepwise_reduction", "vs_paper"), "ROM outlier counts per characteristic set beside the paper's", s)
+             label="Fig. 6")
+    b.csv_table(b.out("stepwise_reduction", "vs_paper"),
+                "ROM outlier counts per characteristic set beside the paper's", s)
     grid_table4(b, s)
     b.figure(b.out("stepwise_reduction", "grid"), "Table 4 as a figure.", s)
 
@@ -69,7 +70,7 @@ def idp_section(b):
     s = b.idp_surrogate
     internal = b.out("l2s1", "internal")
     b.figure(b.out("l2s1", "fig7"), "L4-L5 intradiscal pressure per muscle set-up and load case (Fig. 7 analog).",
-                s, label="Fig. 7")
+             s, label="Fig. 7")
     b.csv_table(b.out("l2s1", "vs_paper"), "IDP outlier counts per characteristic set beside the paper's", s)
     grid_table5(b, s)
     b.figure(b.out("l2s1", "grid"), "Table 5 as a figure.", s)
@@ -82,9 +83,9 @@ def idp_section(b):
             rows = [[c] + [f"{fmt(agg.loc[st, (c, 'min')])} to {fmt(agg.loc[st, (c, 'max')])}"
                            if fmt(agg.loc[st, (c, "max")]) else "" for st in agg.index] for c in num]
             b.table_block("Internal loads at L4-L5 over the 49 scenarios (min to max per set)",
-                             ["quantity"] + [SET_LABELS.get(st, st) for st in agg.index], rows,
-                             source=internal,
-                             note=b.caption(internal, ""), surrogate=s)
+                          ["quantity"] + [SET_LABELS.get(st, st) for st in agg.index], rows,
+                          source=internal,
+                          note=b.caption(internal, ""), surrogate=s)
     else:
         b.missing("Internal loads (l2s1_internal_loads.csv)")
 
@@ -112,9 +113,9 @@ def grid_table4(b, surrogate):
     header = ["stage", "moment"] + [DIRECTION_ABBR.get(d, d) for _ in sets for d in dirs]
     group = [("", 2)] + [(SET_LABELS.get(s, s), len(dirs)) for s in sets]
     b.table_block("Synopsis of the forward-simulated stepwise reduction (Table 4 analog): "
-                     f"{CHECK} within the reference range, {CROSS} outlier, {NC} no equilibrium",
-                     header, rows, source=rel, note=b.caption(rel, ""), surrogate=surrogate,
-                     group_header=group, marks=True, label="Table 4")
+                  f"{CHECK} within the reference range, {CROSS} outlier, {NC} no equilibrium",
+                  header, rows, source=rel, note=b.caption(rel, ""), surrogate=surrogate,
+                  group_header=group, marks=True, label="Table 4")
 
 
 def grid_table5(b, surrogate):
@@ -135,17 +136,17 @@ def grid_table5(b, surrogate):
                            CROSS if bool(r.outlier) else CHECK)
             rows.append(row)
     b.table_block("Synopsis of the forward-simulated IDP experiment (Table 5 analog): "
-                     f"{CHECK} within mean +- SD, {CROSS} outlier, {NC} no equilibrium",
-                     ["muscle set-up", "load case"] + [SET_LABELS.get(s, s) for s in sets], rows, source=rel,
-                     note=b.caption(rel, ""), surrogate=surrogate, marks=True, label="Table 5")
+                  f"{CHECK} within mean +- SD, {CROSS} outlier, {NC} no equilibrium",
+                  ["muscle set-up", "load case"] + [SET_LABELS.get(s, s) for s in sets], rows, source=rel,
+                  note=b.caption(rel, ""), surrogate=surrogate, marks=True, label="Table 5")
 
 
 def muscle_section(b):
     metrics = b.out("muscle_model", "metrics")
-    files = [b.out("muscle_model", "segment_loads"), b.out("muscle_model", "validation"), metrics,
-             b.out("muscle_model", "flexion_relaxation"), b.out("muscle_model", "capacity"), b.out("muscle_model", "sensitivity"),
-             b.out("muscle_model", "directions"), b.out("muscle_model", "sobol")]
-    figs = sorted(p for p in b.inputs if p.startswith(b.out_dir("muscle_model", "figure") + "muscle_") and p.endswith(".png"))
+    files = [b.out("muscle_model", role) for role in ("segment_loads", "validation", "metrics", "flexion_relaxation",
+                                                       "capacity", "sensitivity", "directions", "sobol")]
+    prefix = b.out_dir("muscle_model", "figure") + "muscle_"          # every figure of the muscle study
+    figs = sorted(p for p in b.inputs if p.startswith(prefix) and p.endswith(".png"))
     if not any(b.has(f) for f in files) and not figs:
         b.doc.add(Para(f"Muscle study: {NOT_BUILT}.", "note"))
         return
@@ -159,18 +160,19 @@ def muscle_section(b):
     b.csv_table(b.out("muscle_model", "segment_loads"), "Segmental loads of the musculoskeletal model")
     b.csv_table(b.out("muscle_model", "flexion_relaxation"), "Flexion-relaxation: active and passive muscle forces")
     b.csv_table(b.out("muscle_model", "capacity"), "Muscle capacity: sagittal moments about each level and the "
-                   "largest extension moment of the active fascicles")
+                "largest extension moment of the active fascicles")
     b.csv_table(b.out("muscle_model", "sensitivity"), "Sensitivity of L4-L5 IDP to the muscle parameters")
     b.csv_table(b.out("muscle_model", "directions"), "The paper's sensitivity statements: stated and simulated "
-                   "direction of the L4-L5 IDP change")
-    sobol, cols = b.out("muscle_model", "sobol"), ["posture", "parameter", "S1", "S1_lo", "S1_hi", "ST", "ST_lo", "ST_hi",
-                                            "q2_loo", "n_train", "stable"]   # the rest: caption and CSV
+                "direction of the L4-L5 IDP change")
+    sobol = b.out("muscle_model", "sobol")
+    cols = ["posture", "parameter", "S1", "S1_lo", "S1_hi", "ST", "ST_lo", "ST_hi", "q2_loo", "n_train",
+            "stable"]   # the rest: caption and CSV
     try:
         have = list(pd.read_csv(b.path(sobol), nrows=0).columns) if b.has(sobol) else []
     except (ValueError, pd.errors.ParserError):
         have = []
     b.csv_table(sobol, "Sobol indices of L4-L5 IDP (polynomial chaos expansion; S1/ST_lo-hi: bootstrap 95 % "
-                   "intervals)", columns=cols if set(cols) <= set(have) else None)
+                "intervals)", columns=cols if set(cols) <= set(have) else None)
     for f in figs:
         if norm_path(f) not in b.shown:
             name = Path(f).stem.replace("muscle_", "").replace("_", " ")
