@@ -64,6 +64,7 @@ def final_outputs():
         "results/calibration/admissibility.csv",
         # the calibration's posterior (MAP + Laplace) and the bands of the intact curves
         "results/calibration/posterior.csv",
+        "results/calibration/row_influence.csv",
         "results/figures/calibration_posterior.png",
         "results/load_sharing/bands_calibrated.csv",
         "results/tables/multilevel_rom.csv",
