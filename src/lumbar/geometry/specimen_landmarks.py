@@ -49,6 +49,38 @@ def _canonical_order(up, lo):
     return np.argsort(mid @ a, kind="stable")
 
 
+#: the 8 symmetries of a 3x3 grid (index 3 * row + column): rotations and reflections of the square
+_GRID_SYMMETRIES = tuple(
+    np.array([3 * r + c for r, c in (f(i, j) for i in range(3) for j in range(3))])
+    for f in (lambda i, j: (i, j), lambda i, j: (j, 2 - i), lambda i, j: (2 - i, 2 - j), lambda i, j: (2 - j, i),
+              lambda i, j: (i, 2 - j), lambda i, j: (2 - i, j), lambda i, j: (j, i), lambda i, j: (2 - j, 2 - i)))
+
+
+def canonical_grid(G):
+    """A 3x3 grid of a facet face (index 3 * row + column) re-indexed so that its rows run superior (+z) and its
+    columns anterior (+x) within the face's plane: every level's grid then means the same points. The Visible Human
+    grids are built along the principal axes of each cartilage sheet, whose order and signs differ between levels
+    (a face is nearly square); a coordinate-wise median over templates of grids in different orders shrinks the
+    carried face towards its centre."""
+    G = np.asarray(G, float)
+    if G.shape != (9, 3):
+        return G
+    _, _, vt = np.linalg.svd(G - G.mean(0))
+    n = vt[2]
+    up = np.array([0.0, 0.0, 1.0]) - n[2] * n
+    ant = np.array([1.0, 0.0, 0.0]) - n[0] * n
+    best, score = G, -np.inf
+    for p in _GRID_SYMMETRIES:
+        H = G[p].reshape(3, 3, 3)
+        col = (H[2] - H[0]).sum(0)          # along the rows' index: superior
+        row = (H[:, 2] - H[:, 0]).sum(0)    # along the columns' index: anterior
+        sc = col @ up / (np.linalg.norm(col) * np.linalg.norm(up) + 1e-30) + row @ ant / (
+            np.linalg.norm(row) * np.linalg.norm(ant) + 1e-30)
+        if sc > score + 1e-12:
+            best, score = G[p], sc
+    return best
+
+
 def _surface_distance(mesh, P):
     import trimesh  # noqa: PLC0415 - mesh library, imported where used (docs/design.md)
     return np.asarray(trimesh.proximity.closest_point(mesh, np.asarray(P, float))[1], float)
@@ -83,7 +115,7 @@ def build_atlas(geo) -> dict:
         for side, f in lev.facets.items():
             for role, body, pts in (("upper", U, f.inferior), ("lower", L, f.superior)):
                 atlas[body][role][f"{FACET_KEYS[role]}:{side}"] = dict(
-                    points=np.asarray(pts, float), on_surface=np.ones(len(pts), bool), extra=None, level=lv)
+                    points=canonical_grid(pts), on_surface=np.ones(len(pts), bool), extra=None, level=lv)
     return atlas
 
 
