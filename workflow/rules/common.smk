@@ -124,7 +124,7 @@ def final_outputs():
     """
     return (
         manifests.final_outputs(
-            RESULTS, [s for s in manifests.MANIFESTS if s != "discovery"]
+            RESULTS, [s for s in manifests.MANIFESTS if s != "discovery"], config
         )
         + discovery_final_outputs()
         + doc_outputs()

@@ -90,12 +90,24 @@ class Output:
 class Manifest:
     """A stage: its outputs by role (declaration order = the rule outputs' order), the rule file that makes them
     (``workflow/rules/<rule_file>``, default ``<stage>.smk``; the Snakefile includes the stages' rule files in
-    manifest order) and the module of its report section (imported by :mod:`lumbar.report`, where it registers
-    itself with ``report_section``), if it has one of its own."""
+    manifest order), the module of its report section (imported by :mod:`lumbar.report`, where it registers
+    itself with ``report_section``), if it has one of its own, and ``when``: the configuration key that switches
+    its final outputs on."""
     stage: str
     outputs: Mapping[str, Output] = field(default_factory=dict)
     rule_file: str | None = None
     report_module: str | None = None
+    when: tuple = ()
+
+    def built(self, config: Mapping | None) -> bool:
+        """Whether the default target builds the stage's final outputs: its ``when`` configuration key (a path of
+        keys, e.g. ``("landmark_accuracy", "run")``) is true, or it has none (or no configuration is given)."""
+        v = config
+        for k in self.when:
+            if not isinstance(v, Mapping):
+                return True
+            v = v.get(k)
+        return bool(v) if self.when and config is not None else True
 
     @property
     def rules_path(self) -> str:
@@ -180,6 +192,7 @@ MANIFESTS: dict[str, Manifest] = {m.stage: m for m in (
         "penalties": _o("calibration/calibration_penalties.csv", "calibrate"),
         "posterior": _o("calibration/posterior.csv", "calibrate", final=True),
         "covariance": _o("calibration/posterior_covariance.csv", "calibrate"),
+        "row_influence": _o("calibration/row_influence.csv", "calibrate", final=True),
         "rom_fit": _o("calibration/calibration_rom_fit.csv", "calibrate"),
         "disc_points": _o("calibration/fig4_points.csv", "calibrate"),
         "ligament_points": _o("calibration/fig5_points.csv", "calibrate"),
@@ -194,6 +207,13 @@ MANIFESTS: dict[str, Manifest] = {m.stage: m for m in (
         "posterior_figure": _o("figures/calibration_posterior.png", "posterior_figure", "calibration_posterior",
                                _CAL, final=True),
     }, report_module="lumbar.report.posterior"),
+    Manifest("landmark_accuracy", {
+        "summary": _o("geometry/landmark_accuracy_summary.csv", "landmark_accuracy", final=True),
+        "groups": _o("geometry/landmark_accuracy_groups.csv", "landmark_accuracy"),
+        "lengths": _o("geometry/landmark_accuracy_lengths.csv", "landmark_accuracy", final=True),
+        "facets": _o("geometry/landmark_accuracy_facets.csv", "landmark_accuracy"),
+        "effect": _o("geometry/landmark_error_effect.csv", "landmark_accuracy", final=True),
+    }, report_module="lumbar.report.landmark_accuracy_section", when=("landmark_accuracy", "run")),
     Manifest("load_sharing", {
         "curves": _o("load_sharing/curves_{set}.csv", "load_sharing_curves"),
         "compression": _o("load_sharing/compression_{set}.csv", "load_sharing_curves"),
@@ -400,10 +420,12 @@ def calibrated_dir(root: str = RESULTS_DIR) -> str:
     return paths("calibration", "characteristics", root)[0].rsplit("/", 1)[0]
 
 
-def final_outputs(root: str = RESULTS_DIR, stages: Iterable[str] | None = None) -> list[str]:
-    """Every output the default target builds (``final``), in manifest order."""
-    return [p for s in (stages or MANIFESTS) for o in MANIFESTS[s].outputs.values() if o.final
-            for p in o.paths(root)]
+def final_outputs(root: str = RESULTS_DIR, stages: Iterable[str] | None = None,
+                  config: Mapping | None = None) -> list[str]:
+    """Every output the default target builds (``final``, of the stages ``config`` switches on), in manifest
+    order."""
+    return [p for s in (stages or MANIFESTS) if MANIFESTS[s].built(config)
+            for o in MANIFESTS[s].outputs.values() if o.final for p in o.paths(root)]
 
 
 def report_optional(root: str = RESULTS_DIR, stages: Iterable[str] | None = None) -> list[str]:
