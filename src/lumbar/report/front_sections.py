@@ -231,7 +231,7 @@ def methods(b):
             f"+-{fmt(l2.get('moment_nm'))} N*m on L2, wire cables from {fmt(l2.get('cables'))}, IDP formula "
             f"'{fmt(l2.get('idp_formula'))}', compared with {ref}."))
     known = {"geometry", "characteristics", "fsu", "solver", "render", "stepwise_reduction", "l2s1", "paths",
-             "seed"}
+             "seed", "run"}      # run.name: where the files are (the appendix lists it), not a method
     for key in b.config:
         if key in known or not isinstance(b.config[key], Mapping):
             continue
