@@ -12,6 +12,7 @@ report: "workflow/report/workflow.rst"
 
 
 include: "workflow/rules/common.smk"
+include: "workflow/rules/specimen.smk"
 include: "workflow/rules/geometry.smk"
 include: "workflow/rules/fsu.smk"
 include: "workflow/rules/virtual_experiment.smk"
@@ -29,4 +30,4 @@ include: "workflow/rules/report.smk"
 rule all:
     default_target: True
     input:
-        final_outputs(),
+        runnable_outputs(final_outputs()),

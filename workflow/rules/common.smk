@@ -1,3 +1,4 @@
+import sys
 from glob import glob
 from pathlib import Path
 
@@ -38,6 +39,36 @@ def _sorted_keys(x):
 _canonical_config = _sorted_keys(config)
 config.clear()
 config.update(_canonical_config)
+
+
+# ---- the geometry: a user's specimen (geometry.kind meshes | label_volume) is checked here, before any job
+# (lumbar.geometry.configured.check_config: file names, levels present, units, axes, fsu.level among the units);
+# the stages it cannot feed are said once, here, and left out of the default target (specimen.smk, runnable_outputs)
+from lumbar.geometry.configured import (
+    SPECIMEN_KINDS,
+    check_config as check_geometry_config,
+    specimen_inputs,
+)
+from lumbar.geometry.core import GeometryError
+
+SPECIMEN = config["geometry"]["kind"] in SPECIMEN_KINDS
+try:
+    SKIPPED_STAGES = check_geometry_config(
+        config["geometry"], config["fsu"]["level"], config["load_sharing"]["other_levels"]
+    )
+    SPECIMEN_INPUTS = specimen_inputs(config["geometry"]) if SPECIMEN else None
+except GeometryError as _e:
+    raise WorkflowError(f"Error in config geometry: {_e}") from None
+if SKIPPED_STAGES:
+    print(
+        f"Geometry {config['geometry']['path']}: units {', '.join(SPECIMEN_INPUTS.units_present)}; skipped stages:\n"
+        + "".join(f"  {st}: {why}\n" for st, why in SKIPPED_STAGES),
+        file=sys.stderr,
+    )
+    _missing_units = {st.split(" ")[1] for st, _ in SKIPPED_STAGES if st.startswith("load_sharing.other_levels ")}
+    config["load_sharing"]["other_levels"] = [
+        u for u in config["load_sharing"]["other_levels"] if u not in _missing_units
+    ]
 
 
 def final_outputs():
@@ -108,8 +139,11 @@ def final_outputs():
 
 def geometry_inputs(wildcards):
     """Files the geometry is read from: the Visible Human directory, or the project landmarks
-    that go with the myo-sim meshes (the meshes themselves come with the pinned myo-sim package).
+    that go with the myo-sim meshes (the meshes themselves come with the pinned myo-sim package), or for a user's
+    specimen the table of rule specimen_geometry (workflow/rules/specimen.smk).
     """
+    if SPECIMEN:  # the specimen rule's table: the specimen is built (and cached) once, before the jobs that load it
+        return ["results/geometry/levels.csv"]
     if config["geometry"]["kind"] == "visible_human":
         # every file of the folder (not the folder: its mtime does not change when a file is edited in place)
         files = sorted(

@@ -24,7 +24,7 @@ def _label(df):
 
 if snakemake.rule == "calibrate":
     from lumbar.inputs.characteristics import load_characteristic_set
-    from lumbar.geometry import load_geometry
+    from lumbar.geometry.configured import load_configured
     from lumbar.experiments.stepwise_reduction import read_experiment_table, reference_table
 
     g, f, s, sr = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solver, snakemake.params.sr
@@ -37,7 +37,7 @@ if snakemake.rule == "calibrate":
     data_kind = "surrogate" if (ref["kind"] == "surrogate").any() else "measured"
     log.info("calibrating on %s (%d rows; kinds %s)", snakemake.input.experiment, len(ref),
              dict(ref["kind"].value_counts()))
-    geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
+    geo = load_configured(g, levels=[f["level"]])
     paper = load_characteristic_set("calibrated", data_dir=snakemake.input.characteristics)
     anchor = cal.read_fit_start(_common.first(snakemake.input.generator_fit))
     targets, origin = cal.admissible_fit_targets(ref, real)
