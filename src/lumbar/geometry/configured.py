@@ -125,26 +125,26 @@ def geometry_to_arrays(geo: SpineGeometry) -> dict[str, np.ndarray]:
     a = {"name": np.array(geo.name), "source": np.array(geo.source),
          "vertebrae": np.array(list(geo.vertebrae), dtype=str), "levels": np.array(list(geo.levels), dtype=str)}
     for v, vb in geo.vertebrae.items():
-        a[f"v.{v}.vertices"] = np.asarray(vb.mesh.vertices, float)
-        a[f"v.{v}.faces"] = np.asarray(vb.mesh.faces, np.int64)
-        a[f"v.{v}.centroid"] = np.asarray(vb.centroid, float)
+        a[f"v.{v}.vertices"] = np.array(vb.mesh.vertices, float)
+        a[f"v.{v}.faces"] = np.array(vb.mesh.faces, np.int64)
+        a[f"v.{v}.centroid"] = np.array(vb.centroid, float)
     for name, lev in geo.levels.items():
         p = f"l.{name}."
         a[p + "bodies"] = np.array([lev.upper, lev.lower])
-        a[p + "disc"] = np.concatenate([np.asarray(lev.disc_centre, float), np.asarray(lev.disc_normal, float),
+        a[p + "disc"] = np.concatenate([np.array(lev.disc_centre, float), np.array(lev.disc_normal, float),
                                         [lev.disc_csa, lev.disc_height]])
         a[p + "facets"] = np.array(list(lev.facets), dtype=str)
         for side, f in lev.facets.items():
-            a[p + f"f.{side}.superior"] = np.asarray(f.superior, float)
-            a[p + f"f.{side}.inferior"] = np.asarray(f.inferior, float)
+            a[p + f"f.{side}.superior"] = np.array(f.superior, float)
+            a[p + f"f.{side}.inferior"] = np.array(f.inferior, float)
             a[p + f"f.{side}.contact"] = np.array(f.contact)
             if f.contact_points is not None:
-                a[p + f"f.{side}.contact_points"] = np.asarray(f.contact_points, float)
+                a[p + f"f.{side}.contact_points"] = np.array(f.contact_points, float)
         a[p + "ligaments"] = np.array([[g.name, g.kind] for g in lev.ligaments], dtype=str).reshape(-1, 2)
         for i, g in enumerate(lev.ligaments):
-            a[p + f"g{i}.upper"] = np.asarray(g.upper, float)
-            a[p + f"g{i}.lower"] = np.asarray(g.lower, float)
-            a[p + f"g{i}.extra_length"] = np.asarray(g.extra_length, float)
+            a[p + f"g{i}.upper"] = np.array(g.upper, float)
+            a[p + f"g{i}.lower"] = np.array(g.lower, float)
+            a[p + f"g{i}.extra_length"] = np.array(g.extra_length, float)
     return a
 
 
