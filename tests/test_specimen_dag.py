@@ -66,6 +66,8 @@ def test_config_checks_name_the_problem_before_any_mesh_is_read(tmp_path):
         configured.check_config(g, calibrated_level="L5-S1")
     with pytest.raises(GeometryError, match="units 'cm'"):
         configured.check_config({**g, "units": "cm"})
+    with pytest.raises(GeometryError, match="geometry.axes missing"):
+        configured.check_config({**g, "axes": None})
     with pytest.raises(GeometryError, match="geometry.axes 'LPS' with kind label_volume"):
         configured.check_config(dict(kind="label_volume", path=str(TS_MASKS), axes="LPS"))
     assert configured.check_config(dict(kind="visible_human")) == []
@@ -115,7 +117,7 @@ def test_bad_specimen_is_rejected_before_any_job(smk_tree, tmp_path):
     assert not (smk_tree / "results" / "geometry").exists()
     bad.write_text(f"geometry: {{kind: meshes, path: {MEAN}}}\n")         # units and axes are declared, never guessed
     r = snakemake("-n", "--configfile", TEST_CONFIG, str(bad), cwd=smk_tree, timeout=300)
-    assert r.returncode != 0 and "'units' is a required property" in r.stdout + r.stderr
+    assert r.returncode != 0 and "geometry.units missing (kind meshes" in r.stdout + r.stderr
 
 
 @pytest.mark.workflow

@@ -51,6 +51,8 @@ from lumbar.geometry.configured import (
 )
 from lumbar.geometry.core import GeometryError
 
+# the specimen keys left at null are dropped: a Visible Human or myo-sim run keeps the rule params it had before
+config["geometry"] = {k: v for k, v in config["geometry"].items() if v is not None}
 SPECIMEN = config["geometry"]["kind"] in SPECIMEN_KINDS
 try:
     SKIPPED_STAGES = check_geometry_config(

@@ -79,7 +79,14 @@ def specimen_inputs(g: dict) -> SpecimenInputs:
     path = Path(g["path"])
     pattern = g.get("pattern") or None
     if kind == "meshes":
-        units, axes = g.get("units", "mm"), g.get("axes", "LPS")
+        units, axes = g.get("units"), g.get("axes")
+        for key, v in (("units", units), ("axes", axes)):
+            if v is None:
+                raise specimen_io.SpecimenError(
+                    f"geometry.{key} missing (kind meshes, path {path}): expected "
+                    + ("mm or m, the unit of the files' coordinates" if key == "units" else
+                       "LPS, RAS or project, the axes of the files' coordinates")
+                    + " (declared, never guessed)")
         try:
             specimen_io.check_units_axes(units, axes)
         except specimen_io.SpecimenError as exc:
