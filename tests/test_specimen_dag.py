@@ -95,6 +95,19 @@ def test_the_cache_address_follows_the_bytes_and_the_settings(tmp_path):
     assert configured.cache_content(configured.specimen_inputs(g)) != base
 
 
+def test_level_targets_are_yamamotos_rows_of_that_level():
+    from lumbar.experiments.admissibility import yamamoto_level_targets
+    from lumbar.experiments.stepwise_reduction import read_experiment_table
+
+    l45 = read_experiment_table(ROOT / "data/experiments/yamamoto1989_intact_rom_original_text.csv")
+    want = dict(zip(l45["direction"], l45["rom_mean_deg"]))
+    got = yamamoto_level_targets("L4-L5")
+    assert dict(zip(got["direction"], got["rom_mean_deg"])) == want
+    l34 = yamamoto_level_targets("L3-L4")
+    assert dict(zip(l34["direction"], l34["rom_mean_deg"])) != want                 # control: another level
+    assert set(l34.columns) == set(l45.columns) and (l34["kind"] == "original_text").all()
+
+
 # ------------------------------------------------------------------ the workflow
 def _tree(tmp_path_factory, name):
     return copy_repo(tmp_path_factory.mktemp(name) / "repo")
@@ -133,6 +146,22 @@ def test_default_target_of_the_mean_says_once_what_it_skips(smk_tree):
     # control: the Visible Human test config runs the stages the mean skips
     r = snakemake("-n", "--forceall", "--configfile", TEST_CONFIG, cwd=smk_tree, timeout=300)
     assert r.returncode == 0 and "l2s1_idp" in r.stdout and "specimen_geometry" not in r.stdout
+
+
+@pytest.mark.workflow
+def test_another_calibrated_unit_takes_its_own_yamamoto_targets(smk_tree, tmp_path):
+    cfg = tmp_path / "l34.yaml"
+    cfg.write_text("fsu: {level: L3-L4}\n")
+    r = snakemake("-n", "-p", "results/calibration/posterior.csv", "--configfile", TEST_CONFIG, MEAN_CONFIG, str(cfg),
+                  cwd=smk_tree, timeout=300)
+    out = r.stdout + r.stderr
+    assert r.returncode == 0, out
+    assert "rule specimen_real_targets" in out and "results/geometry/real_targets_L3-L4.csv" in out
+    assert "yamamoto1989_intact_rom_original_text.csv" not in out
+    # control: on L4-L5 the calibration reads the default L4-L5 table
+    r = snakemake("-n", "results/calibration/posterior.csv", "--configfile", TEST_CONFIG, MEAN_CONFIG, cwd=smk_tree,
+                  timeout=300)
+    assert "yamamoto1989_intact_rom_original_text.csv" in r.stdout and "specimen_real_targets" not in r.stdout
 
 
 MEAN_TARGETS = ["results/geometry/levels.csv", "results/calibration/admissibility.csv",

@@ -43,7 +43,7 @@ config.update(_canonical_config)
 
 # ---- the geometry: a user's specimen (geometry.kind meshes | label_volume) is checked here, before any job
 # (lumbar.geometry.configured.check_config: file names, levels present, units, axes, fsu.level among the units);
-# the stages it cannot feed are said once, here, and left out of the default target (specimen.smk, runnable_outputs)
+# the stages it cannot feed are said once, here, and left out of the default target (runnable_outputs, below)
 from lumbar.geometry.configured import (
     SPECIMEN_KINDS,
     check_config as check_geometry_config,
@@ -56,7 +56,9 @@ config["geometry"] = {k: v for k, v in config["geometry"].items() if v is not No
 SPECIMEN = config["geometry"]["kind"] in SPECIMEN_KINDS
 try:
     SKIPPED_STAGES = check_geometry_config(
-        config["geometry"], config["fsu"]["level"], config["load_sharing"]["other_levels"]
+        config["geometry"],
+        config["fsu"]["level"],
+        config["load_sharing"]["other_levels"],
     )
     SPECIMEN_INPUTS = specimen_inputs(config["geometry"]) if SPECIMEN else None
 except GeometryError as _e:
@@ -67,10 +69,96 @@ if SKIPPED_STAGES:
         + "".join(f"  {st}: {why}\n" for st, why in SKIPPED_STAGES),
         file=sys.stderr,
     )
-    _missing_units = {st.split(" ")[1] for st, _ in SKIPPED_STAGES if st.startswith("load_sharing.other_levels ")}
+    _missing_units = {
+        st.split(" ")[1]
+        for st, _ in SKIPPED_STAGES
+        if st.startswith("load_sharing.other_levels ")
+    }
     config["load_sharing"]["other_levels"] = [
         u for u in config["load_sharing"]["other_levels"] if u not in _missing_units
     ]
+# a specimen calibrated on another unit than L4-L5: its real targets are Yamamoto et al.'s values of that unit
+# (rule specimen_real_targets) where the config keeps the default L4-L5 table
+from lumbar.inputs.config import schema_defaults
+
+SPECIMEN_REAL_TARGETS = None
+if (
+    SPECIMEN
+    and config["fsu"]["level"] != "L4-L5"
+    and config["stepwise_reduction"]["real_targets"]
+    == schema_defaults("stepwise_reduction", "real_targets")
+):
+    SPECIMEN_REAL_TARGETS = (
+        f"results/geometry/real_targets_{config['fsu']['level']}.csv"
+    )
+    config["stepwise_reduction"]["real_targets"] = [SPECIMEN_REAL_TARGETS]
+    print(
+        f"Calibrated unit {config['fsu']['level']}: real targets {SPECIMEN_REAL_TARGETS} (Yamamoto et al. 1989, "
+        "data/experiments/yamamoto1989_levels_original_text.csv)",
+        file=sys.stderr,
+    )
+
+SPECIMEN_DIR = "results/geometry"
+
+# outputs of the stages a specimen cannot feed (lumbar.geometry.specimen_io.skipped_stages), dropped from the default
+# target by runnable_outputs(): path fragments per stage, with the stages that read their tables
+SKIPPED_STAGE_OUTPUTS = {
+    # the L2-S1 model: Table 5, Figs. 3 and 7, the IDP surrogate; the load-sharing summary, the real-data validation
+    # and the discrepancy discovery (its in-vitro IDP experiment and benchmark) read its tables
+    "l2s1": (
+        "l2s1",
+        "table5",
+        "fig3_",
+        "fig7_",
+        "idp_",
+        "load_sharing_summary",
+        "l2s1_cables",
+        "load_sharing_curves.png",
+        "load_sharing_shares.png",
+        "validation_real_data",
+        "validation_scoreboard",
+        "results/discrepancy/",
+    ),
+    "muscle_model": (
+        "muscle",
+        "in_vivo",
+        "flexion_relaxation",
+        "sensitivity_",
+        "sobol",
+        "validation_real_data",
+        "validation_scoreboard",
+    ),
+    # the paper-style report and the documents read every stage's tables
+    "report": ("results/report/",),
+    "load_sharing.other_levels": (
+        "multilevel",
+        "validation_real_data",
+        "validation_scoreboard",
+    ),
+}
+
+
+def runnable_outputs(paths):
+    """``paths`` without the outputs of the stages the configured specimen cannot feed (SKIPPED_STAGES; the report
+    with them). Other levels that are missing are left out of load_sharing.other_levels (common.smk); with none
+    left, the other-level validation is skipped."""
+    stages = {
+        s for s, _ in SKIPPED_STAGES if not s.startswith("load_sharing.other_levels")
+    }
+    if not config["load_sharing"]["other_levels"]:
+        stages.add("load_sharing.other_levels")
+    if stages:
+        stages.add("report")
+    frags = [f for s in stages for f in SKIPPED_STAGE_OUTPUTS.get(s, ())]
+    return [p for p in paths if not any(f in p for f in frags)]
+
+
+def specimen_inputs_files(wildcards):
+    """The specimen's files (every vertebra's mesh or mask, a label table)."""
+    si = SPECIMEN_INPUTS
+    return [str(f) for f in si.files.values()] + (
+        [str(si.label_table)] if si.label_table else []
+    )
 
 
 def final_outputs():
@@ -144,7 +232,9 @@ def geometry_inputs(wildcards):
     that go with the myo-sim meshes (the meshes themselves come with the pinned myo-sim package), or for a user's
     specimen the table of rule specimen_geometry (workflow/rules/specimen.smk).
     """
-    if SPECIMEN:  # the specimen rule's table: the specimen is built (and cached) once, before the jobs that load it
+    if (
+        SPECIMEN
+    ):  # the specimen rule's table: the specimen is built (and cached) once, before the jobs that load it
         return ["results/geometry/levels.csv"]
     if config["geometry"]["kind"] == "visible_human":
         # every file of the folder (not the folder: its mtime does not change when a file is edited in place)

@@ -107,6 +107,31 @@ def read_yamamoto(path=None) -> pd.DataFrame:
                               {"level", "quantity", "direction", "value_deg", "source"})
 
 
+#: the one-sided directions of the Yamamoto table -> the experiment tables' directions
+YAMAMOTO_DIRECTIONS = {"flexion": "flexion", "extension": "extension", "lateral_bending_one_side": "lateral_bending",
+                       "axial_rotation_one_side": "axial_rotation"}
+
+
+def yamamoto_level_targets(level: str, path=None) -> pd.DataFrame:
+    """The intact ROM at 10 N*m of one level in the experiment-table schema (the form of
+    ``data/experiments/yamamoto1989_intact_rom_original_text.csv``, which holds L4-L5): the calibration's real targets
+    when a specimen is calibrated on another unit. Each row is a row of :func:`read_yamamoto` (the values as printed),
+    renamed; a level without the four ROM rows is an error naming the file."""
+    src = Path(path) if path is not None else yamamoto_path()
+    y = read_yamamoto(src)
+    sel = y[(y["level"] == level) & (y["quantity"] == "rom") & y["direction"].isin(list(YAMAMOTO_DIRECTIONS))]
+    if len(sel) != len(YAMAMOTO_DIRECTIONS):
+        raise ValueError(f"{src}: level {level!r} has {len(sel)} of the {len(YAMAMOTO_DIRECTIONS)} ROM rows "
+                         f"{list(YAMAMOTO_DIRECTIONS)}; expected one per direction")
+    return pd.DataFrame({
+        "stage": "intact", "direction": sel["direction"].map(YAMAMOTO_DIRECTIONS).to_numpy(),
+        "moment_nm": sel["moment_nm"].astype(float).to_numpy(), "rom_mean_deg": sel["value_deg"].to_numpy(float),
+        "rom_min_deg": np.nan, "rom_max_deg": np.nan, "n_specimens": sel["n_specimens"].to_numpy(),
+        "kind": sel["kind"].to_numpy(), "source": sel["source"].to_numpy(),
+        "note": [f"{level} intact ROM at a pure moment of 10 N*m, one side (row {lv} {d} of {src.name}); no range "
+                 f"published: rom_min_deg/rom_max_deg empty" for lv, d in zip(sel["level"], sel["direction"])]})
+
+
 def neutral_zones(level: str, path=None) -> dict:
     y = read_yamamoto(path)
     sel = y[(y["level"] == level) & (y["quantity"] == "neutral_zone")]
@@ -421,4 +446,4 @@ def fibre_tension_remus(geometry_path, level_geom, level, kind, lengths: dict) -
 
 
 __all__ = ["assess", "criteria_table", "evaluate", "pretension_limits", "force_scales", "neutral_zones",
-           "read_literature", "read_yamamoto", "compliance_rise", "softplus_fibre_params"]
+           "read_literature", "read_yamamoto", "yamamoto_level_targets", "compliance_rise", "softplus_fibre_params"]
