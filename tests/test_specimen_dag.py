@@ -142,7 +142,8 @@ def test_default_target_of_the_mean_says_once_what_it_skips(smk_tree):
     jobs = dict(line.split() for line in out.split("Job stats:")[1].split("total")[0].splitlines()[3:]
                 if len(line.split()) == 2)
     assert jobs.get("specimen_geometry") == "1" and "calibrate" in jobs and "multilevel_validation" in jobs
-    assert not {j for j in jobs if "l2s1" in j or "muscle" in j or j in ("idp_surrogate", "paper_report")}
+    assert not {j for j in jobs if "l2s1" in j or "muscle" in j or "discovery" in j
+                or j in ("idp_surrogate", "paper_report", "validation_real_data")}
     # on its L4-L5 the calibration reads the default L4-L5 targets (control of the next test)
     assert "yamamoto1989_intact_rom_original_text.csv" in out and "specimen_real_targets" not in out
 
