@@ -208,12 +208,11 @@ def test_mean_jobs_load_the_cached_geometry(mean_run):
     assert row["disc_height_mm"] != pytest.approx(1e3 * geo.levels["L3-L4"].disc_height, rel=1e-3)   # control
 
 
-# A finding, not a tolerance: the mean shape's left L4-L5 facet joint. Its Eq. 4 contact surface (the touching rule)
-# is shifted 3.2 mm away from the upper face (0.5-0.6 mm at its right joint and at the Visible Human's joints), and
-# the lower face's landmarks lie 1.9-5.4 mm beyond it: the cubic height field over the joint's best-fit plane (tilted,
-# normal z component -0.64 against +0.2-0.3 at the other joints) does not follow this joint's curved faces where the
-# upper face's contact points lie. The joint then never closes in extension or right axial rotation. Listed here so
-# that a new miss fails and a fix shows (the set then shrinks); docs/specimen.md says so.
+# A finding, not a tolerance: the mean shape's left L4-L5 facet joint. Its two carried 3x3 face grids are strips
+# (RMS spread 2.5 x 0.6 mm against 1.4 x 1.0 mm at the right joint), so fit_surface's joint plane (least spread of both
+# faces' 18 points) is tilted 60-70 deg from each face's own normal and its Eq. 4 contact surface lies 3.2 mm from the
+# upper face (0.5-0.6 mm elsewhere): the joint never closes in extension or right axial rotation (docs/specimen.md).
+# Listed here so that a new miss fails and a fix shows (the set then shrinks).
 KNOWN_MISSES = {("facet contact non-decreasing with the moment", "axial_rotation_right")}
 
 
