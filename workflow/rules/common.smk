@@ -140,7 +140,7 @@ SKIPPED_STAGE_OUTPUTS = {
 
 def runnable_outputs(paths):
     """``paths`` without the outputs of the stages the configured specimen cannot feed (SKIPPED_STAGES; the report
-    with them). Other levels that are missing are left out of load_sharing.other_levels (common.smk); with none
+    with them). Other levels that are missing are left out of load_sharing.other_levels (above); with none
     left, the other-level validation is skipped."""
     stages = {
         s for s, _ in SKIPPED_STAGES if not s.startswith("load_sharing.other_levels")
@@ -150,7 +150,14 @@ def runnable_outputs(paths):
     if stages:
         stages.add("report")
     frags = [f for s in stages for f in SKIPPED_STAGE_OUTPUTS.get(s, ())]
-    return [p for p in paths if not any(f in p for f in frags)]
+    # a run prefix (results/<run.name>/) is not part of what is matched: a run named "muscle_test" keeps its outputs
+    name = (config.get("run") or {}).get("name") or ""
+    prefix = f"results/{name}/" if name else None
+
+    def key(p):
+        return "results/" + p[len(prefix) :] if prefix and p.startswith(prefix) else p
+
+    return [p for p in paths if not any(f in key(p) for f in frags)]
 
 
 def specimen_inputs_files(wildcards):
