@@ -73,13 +73,15 @@ def test_config_checks_name_the_problem_before_any_mesh_is_read(tmp_path):
     assert configured.check_config(dict(kind="visible_human")) == []
 
 
-def test_the_mean_skips_the_stages_that_need_a_sacrum():
+def test_the_mean_skips_the_stages_that_need_a_sacrum(tmp_path):
     skipped = dict(configured.check_config(MEAN_G, "L4-L5"))
     assert set(skipped) == {"l2s1", "muscle_model", "load_sharing.other_levels L1-L2",
                             "load_sharing.other_levels L5-S1"}
     assert all("no sacrum" in skipped[k] for k in ("l2s1", "muscle_model", "load_sharing.other_levels L5-S1"))
-    # control: the same folder with a sacrum file skips none of them
     assert configured.specimen_inputs(MEAN_G).units_present == ["L2-L3", "L3-L4", "L4-L5"]
+    # control: the same file names with a sacrum skip only the missing L1-L2
+    d = _dummy_folder(tmp_path, ["L2.stl", "L3.stl", "L4.stl", "L5.stl", "sacrum.stl"])
+    assert [s for s, _ in configured.check_config(dict(MEAN_G, path=str(d)))] == ["load_sharing.other_levels L1-L2"]
 
 
 def test_the_cache_address_follows_the_bytes_and_the_settings(tmp_path):
