@@ -155,7 +155,7 @@ def runnable_outputs(paths):
     prefix = f"results/{name}/" if name else None
 
     def key(p):
-        return "results/" + p[len(prefix) :] if prefix and p.startswith(prefix) else p
+        return f"results/{p[len(prefix):]}" if prefix and p.startswith(prefix) else p
 
     return [p for p in paths if not any(f in key(p) for f in frags)]
 
