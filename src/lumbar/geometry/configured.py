@@ -203,7 +203,7 @@ def build_tag() -> str:
     """Version tag of the built geometry: the source of the build modules, the atlas files and the versions of the
     libraries that mesh and register (trimesh, numpy, scipy, scikit-image)."""
     h = hashlib.sha256()
-    for m in _BUILD_MODULES + (specimen_landmarks,):
+    for m in _BUILD_MODULES:
         h.update(Path(m.__file__).read_bytes())
     h.update(Path(__file__).read_bytes())
     atlas = embedded_visible_human_path()
