@@ -231,13 +231,15 @@ def test_mean_calibration_admissibility_and_the_other_levels(mean_run):
 
 
 @pytest.mark.workflow
-def test_label_volume_through_the_geometry_rule_says_what_3mm_voxels_cannot_support(smk_tree, tmp_path):
+def test_label_volume_through_the_geometry_rule_says_what_3mm_voxels_cannot_support(tmp_path_factory, tmp_path):
+    pytest.importorskip("snakemake")
+    work = _tree(tmp_path_factory, "label_volume_dag")          # its own tree: the dry-run tests see no results/
     cfg = tmp_path / "ts.yaml"
     cfg.write_text(f"geometry: {{kind: label_volume, path: {TS_MASKS}}}\n")
     r = snakemake("--cores", "2", "results/geometry/levels.csv", "--configfile", TEST_CONFIG, str(cfg),
-                  cwd=smk_tree, timeout=600)
+                  cwd=work, timeout=600)
     assert r.returncode == 0, (r.stdout + r.stderr)[-6000:]
-    g = smk_tree / "results" / "geometry"
+    g = work / "results" / "geometry"
     limits = pd.read_csv(g / "meshes" / "resolution_limits.csv")
     facet = limits[limits["feature"].str.startswith("facet")].iloc[0]
     assert not facet["supported"] and "3 mm" in facet["reason"]
