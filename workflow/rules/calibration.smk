@@ -32,6 +32,7 @@ rule calibrate:
         penalties="results/calibration/calibration_penalties.csv",
         posterior="results/calibration/posterior.csv",
         covariance="results/calibration/posterior_covariance.csv",
+        row_influence="results/calibration/row_influence.csv",
         rom_fit="results/calibration/calibration_rom_fit.csv",
         disc_points="results/calibration/fig4_points.csv",
         ligament_points="results/calibration/fig5_points.csv",

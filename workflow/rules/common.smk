@@ -192,6 +192,7 @@ def final_outputs():
         "results/calibration/admissibility.csv",
         # the calibration's posterior (MAP + Laplace) and the bands of the intact curves
         "results/calibration/posterior.csv",
+        "results/calibration/row_influence.csv",
         "results/figures/calibration_posterior.png",
         "results/load_sharing/bands_calibrated.csv",
         "results/tables/multilevel_rom.csv",
@@ -226,11 +227,24 @@ def final_outputs():
         "results/figures/muscle_sobol.png",
         # discrepancy discovery (workflow/rules/discover.smk)
         *discovery_final_outputs(),
+        # the automatic landmarks scored on the embedded geometry (workflow/rules/landmark_accuracy.smk)
+        *landmark_accuracy_outputs(),
         # paper-style report (workflow/rules/report.smk): reads every output above
         "results/report/paper.html",
         "results/report/paper.pdf",
         # documents whose numbers are read from the results (rule docs_numbers)
         *[f"results/report/{Path(t).name}" for t in DOC_TEMPLATES],
+    ]
+
+
+def landmark_accuracy_outputs():
+    """The landmark-accuracy tables when landmark_accuracy.run (the rule's outputs), else none."""
+    if not config["landmark_accuracy"]["run"]:
+        return []
+    return [
+        "results/geometry/landmark_accuracy_summary.csv",
+        "results/geometry/landmark_accuracy_lengths.csv",
+        "results/geometry/landmark_error_effect.csv",
     ]
 
 

@@ -54,7 +54,8 @@ if snakemake.rule == "calibrate":
                         real_targets=targets,
                         transfer=sr["ligament_transfer"],
                         geometry_path=g["path"] if g["kind"] == "visible_human" else None,
-                        anchor_start_values=anchor, prior=sr["ligament_prior"])
+                        anchor_start_values=anchor, prior=sr["ligament_prior"],
+                        row_influence=bool(sr.get("row_influence", True)))
     log.info("calibration wall time %.1f s", res.wall_time_s)
     out_dir = Path(snakemake.output.characteristics[0]).parent
     cal.write_characteristics(res, snakemake.input.characteristics, out_dir,
@@ -72,6 +73,9 @@ if snakemake.rule == "calibrate":
     ff = res.info.get("final_fit")
     (ff.penalties if ff is not None else pd.DataFrame(columns=["penalty", "value"])).pipe(
         write_table_atomic, snakemake.output.penalties)
+    infl = res.info.get("row_influence")
+    write_table_atomic(infl if infl is not None else pd.DataFrame(columns=list(cal.INFLUENCE_COLUMNS)),
+                       snakemake.output.row_influence)
     post_tab, cov_tab = cal.posterior_tables(ff, res.info.get("prior_name", ""))
     write_table_atomic(post_tab, snakemake.output.posterior)
     write_table_atomic(cov_tab, snakemake.output.covariance)

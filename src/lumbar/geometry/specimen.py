@@ -315,3 +315,17 @@ def disc_from_endplates(upper_mesh, lower_mesh, upper_centroid, lower_centroid, 
     csa = A.section_area(upper_mesh, origin, n_inf, inside_point=origin)
     return dict(centre=0.5 * (c_inf + c_sup), normal=n, height=float((c_inf - c_sup) @ n), csa=float(csa),
                 inferior=(c_inf, n_inf), superior=(c_sup, n_sup))
+
+
+def level_disc(upper_mesh, lower_mesh, lower_is_sacrum: bool = False) -> dict:
+    """:func:`disc_from_endplates` of one level from its two meshes alone (project frame), with the reference points
+    of ``lumbar.geometry.specimen_build.centroids_of``: the body centroids, the sacrum's from its endplate below the
+    upper vertebra."""
+    x_post = body_split(upper_mesh)[0]
+    c_u = body_centroid(upper_mesh, x_post)
+    if lower_is_sacrum:
+        d = disc_from_endplates(upper_mesh, lower_mesh, c_u, np.asarray(lower_mesh.vertices).mean(0), x_post)
+        c_l = sacrum_centroid(lower_mesh, *d["superior"])
+    else:
+        c_l = body_centroid(lower_mesh, body_split(lower_mesh)[0])
+    return disc_from_endplates(upper_mesh, lower_mesh, c_u, c_l, x_post)

@@ -61,7 +61,8 @@ def _move(T, P):
 
 def accuracy_tables(specimen, reference, to_specimen, length_level="L4-L5"):
     """(groups, facets, lengths) DataFrames comparing a specimen's landmarks with a reference geometry whose points
-    ``to_specimen`` (4x4) carries into the specimen's project frame (module doc)."""
+    ``to_specimen`` (4x4) carries into the specimen's project frame (module doc); fibre lengths at ``length_level``
+    ("all": every level)."""
     import trimesh  # noqa: PLC0415 - mesh library, imported where used (docs/design.md)
     groups, facets, lengths = [], [], []
     for lv, lm in specimen.landmarks.items():
@@ -77,7 +78,7 @@ def accuracy_tables(specimen, reference, to_specimen, length_level="L4-L5"):
                     continue
                 groups.append(dict(level=lv, structure=name, kind=r.kind, end=end, body=body,
                                    centroid_error_mm=1e3 * float(np.linalg.norm(P.mean(0) - Q.mean(0)))))
-            if lv == length_level:
+            if length_level in (lv, "all"):
                 straight = float(np.linalg.norm(up - lo, axis=1).mean())
                 ref_straight = float(np.linalg.norm(ru - rl, axis=1).mean())
                 total = straight + float(np.mean(extra))
@@ -123,9 +124,10 @@ def summary(groups: pd.DataFrame, facets: pd.DataFrame, lengths: pd.DataFrame) -
 
 
 def visible_human_accuracy(seed: int = 0, method: str = "full", leave_one_out: bool = True, folder=None,
-                           vertebrae=("L1", "L2", "L3", "L4", "L5", "S1")):
+                           vertebrae=("L1", "L2", "L3", "L4", "L5", "S1"), length_level: str = "L4-L5"):
     """Run the Visible Human meshes, posed as a CT (:func:`ct_pose`), through files and the whole path, and score them
-    (:func:`accuracy_tables`). Returns dict(groups, facets, lengths, summary, specimen, pose)."""
+    (:func:`accuracy_tables`, fibre lengths at ``length_level``, "all": every level). Returns dict(groups, facets,
+    lengths, summary, specimen, pose)."""
     from .loader import load_geometry  # noqa: PLC0415 - the reference is read only here
     from .specimen_build import build_specimen  # noqa: PLC0415 - the path under test
     from .specimen_io import read_specimen_meshes  # noqa: PLC0415
@@ -138,6 +140,6 @@ def visible_human_accuracy(seed: int = 0, method: str = "full", leave_one_out: b
         sp = build_specimen(meshes, axes="LPS", sources={v: str(f) for v, f in files.items()},
                             leave_one_out=leave_one_out, method=method, units="mm", name="visible_human_posed")
     to_specimen = sp.alignment.transform @ pose
-    groups, facets, lengths = accuracy_tables(sp, ref, to_specimen)
+    groups, facets, lengths = accuracy_tables(sp, ref, to_specimen, length_level=length_level)
     return dict(groups=groups, facets=facets, lengths=lengths, summary=summary(groups, facets, lengths),
                 specimen=sp, pose=pose, to_specimen=to_specimen)

@@ -14,7 +14,7 @@ warp; the landmark is the coordinate-wise median over the templates, snapped to 
 point) when the template point lay on its own surface (within ``ON_SURFACE_M``). ALL and PLL fibre ends of the
 Visible Human model are via points off the bone (their path along the body is the fibre's ``extra_length``): they
 are carried without snapping, and their extra length is the templates' median scaled by the registration's size
-ratio.
+ratio; the ALL's whole fibre is then scaled with the target's own disc height (:func:`_fibre_rule`).
 """
 from __future__ import annotations
 
@@ -30,6 +30,10 @@ N_TEMPLATES = 3              # atlas vertebrae registered per target vertebra an
 REG_SAMPLES = 1500           # template/target vertices used by the registration (deterministic stride)
 FACET_KEYS = {"upper": "facet_inferior", "lower": "facet_superior"}
 SEGMENTS = "_segments"        # atlas key: per ligament and level the fibre vectors upper - lower (canonical order)
+SPANS = "_spans"              # atlas key: per scaled ligament and level (mean fibre length, disc height) [m]
+#: ligaments whose fibre length (segment and via-point path) is scaled with the target's own disc height
+#: (:func:`lumbar.geometry.specimen.level_disc`): the ALL's path spans the anterior disc and onto the bodies
+DISC_SCALED = ("ALL",)
 
 
 def _stride(v, n=REG_SAMPLES):
@@ -47,6 +51,46 @@ def _canonical_order(up, lo):
     k = 1 if abs(a[1]) > 0.5 else (2 if abs(a[2]) > 0.5 else 0)
     a = a * np.sign(a[k] or 1.0)
     return np.argsort(mid @ a, kind="stable")
+
+
+#: the 8 symmetries of a 3x3 grid (index 3 * row + column): rotations and reflections of the square
+_GRID_SYMMETRIES = tuple(
+    np.array([3 * r + c for r, c in (f(i, j) for i in range(3) for j in range(3))])
+    for f in (lambda i, j: (i, j), lambda i, j: (j, 2 - i), lambda i, j: (2 - i, 2 - j), lambda i, j: (2 - j, i),
+              lambda i, j: (i, 2 - j), lambda i, j: (2 - i, j), lambda i, j: (j, i), lambda i, j: (2 - j, 2 - i)))
+
+
+def canonical_grid(G):
+    """A 3x3 grid of a facet face (index 3 * row + column) re-indexed so that its rows run superior (+z) and its
+    columns anterior (+x) within the face's plane: every level's grid then means the same points. The Visible Human
+    grids are built along the principal axes of each cartilage sheet, whose order and signs differ between levels
+    (a face is nearly square); a coordinate-wise median over templates of grids in different orders shrinks the
+    carried face towards its centre."""
+    G = np.asarray(G, float)
+    if G.shape != (9, 3):
+        return G
+    _, _, vt = np.linalg.svd(G - G.mean(0))
+    n = vt[2]
+    up = np.array([0.0, 0.0, 1.0]) - n[2] * n
+    ant = np.array([1.0, 0.0, 0.0]) - n[0] * n
+    best, score = G, -np.inf
+    for p in _GRID_SYMMETRIES:
+        H = G[p].reshape(3, 3, 3)
+        col = (H[2] - H[0]).sum(0)          # along the rows' index: superior
+        row = (H[:, 2] - H[:, 0]).sum(0)    # along the columns' index: anterior
+        sc = col @ up / (np.linalg.norm(col) * np.linalg.norm(up) + 1e-30) + row @ ant / (
+            np.linalg.norm(row) * np.linalg.norm(ant) + 1e-30)
+        if sc > score + 1e-12:
+            best, score = G[p], sc
+    return best
+
+
+def disc_height(level: str, meshes: dict) -> float:
+    """The level's disc height [m] from the endplates of its two meshes (:func:`lumbar.geometry.specimen.level_disc`,
+    the measurement ``specimen_build`` writes to levels.csv)."""
+    from .specimen import level_disc  # noqa: PLC0415 - the disc from the endplates
+    U, L = level_vertebrae(level)
+    return float(level_disc(meshes[U], meshes[L], lower_is_sacrum=L == "S1")["height"])
 
 
 def _surface_distance(mesh, P):
@@ -70,12 +114,16 @@ def build_atlas(geo) -> dict:
     points (k,3), on_surface (k,), extra (k,) or None)}}} from a geometry with insertion sites (Visible Human)."""
     atlas = {v: {"points": _stride(vt.mesh.vertices), "mesh": vt.mesh, "upper": {}, "lower": {}}
              for v, vt in geo.vertebrae.items()}
-    atlas[SEGMENTS] = {}
+    atlas[SEGMENTS], atlas[SPANS] = {}, {}
     for lv, lev in geo.levels.items():
         U, L = lev.upper, lev.lower
         for lig in lev.ligaments:
             o = _canonical_order(lig.upper, lig.lower)
             atlas[SEGMENTS].setdefault(lig.name, {})[lv] = (lig.upper - lig.lower)[o]
+            if lig.name in DISC_SCALED:
+                length = float(np.mean(np.linalg.norm(lig.upper - lig.lower, axis=1) + lig.extra_length))
+                height = disc_height(lv, {v: geo.vertebrae[v].mesh for v in (U, L)})
+                atlas[SPANS].setdefault(lig.name, {})[lv] = (length, height)
             for role, body, pts in (("upper", U, lig.upper[o]), ("lower", L, lig.lower[o])):
                 on = _surface_distance(geo.vertebrae[body].mesh, pts) < ON_SURFACE_M
                 atlas[body][role][lig.name] = dict(points=pts, on_surface=on,
@@ -83,7 +131,7 @@ def build_atlas(geo) -> dict:
         for side, f in lev.facets.items():
             for role, body, pts in (("upper", U, f.inferior), ("lower", L, f.superior)):
                 atlas[body][role][f"{FACET_KEYS[role]}:{side}"] = dict(
-                    points=np.asarray(pts, float), on_surface=np.ones(len(pts), bool), extra=None, level=lv)
+                    points=canonical_grid(pts), on_surface=np.ones(len(pts), bool), extra=None, level=lv)
     return atlas
 
 
@@ -149,8 +197,8 @@ def level_landmarks(meshes: dict, level: str, atlas: dict, leave_one_out: bool =
         if name in up and name in lo and len(up[name]["points"]) == len(lo[name]["points"]):
             ex = [e for e in (up[name]["extra"], lo[name]["extra"]) if e is not None]
             extra = np.mean(ex, axis=0) if ex else np.zeros(len(up[name]["points"]))
-            u, lo_ = _fibre_rule(name, up[name]["points"], lo[name]["points"], extra, meshes[U], meshes[L],
-                                 atlas, exclude=(U, L) if leave_one_out else ())
+            u, lo_, extra = _fibre_rule(name, up[name]["points"], lo[name]["points"], extra, level, meshes, atlas,
+                                        exclude=(U, L) if leave_one_out else ())
             ligs[name] = (u, lo_, extra)
             spread[name] = (up[name]["spread_m"], lo[name]["spread_m"])
     for side in ("left", "right"):
@@ -170,23 +218,40 @@ def _closest(mesh, P):
     return np.asarray(trimesh.proximity.closest_point(mesh, np.asarray(P, float))[0], float)
 
 
-def _fibre_rule(name, up, lo, extra, mesh_u, mesh_l, atlas, exclude=()):
-    """Fibres that span a narrow gap keep their own geometry instead of two independently carried ends:
+def _allowed(per_level: dict, exclude, shape=None) -> list:
+    """The atlas levels' entries not involving a vertebra in ``exclude`` (and of ``shape`` when given)."""
+    return [v for lv, v in per_level.items() if not set(level_vertebrae(lv)) & set(exclude)
+            and (shape is None or np.shape(v) == shape)]
+
+
+def _fibre_rule(name, up, lo, extra, level, meshes, atlas, exclude=()):
+    """Fibres that span a narrow gap keep their own geometry instead of two independently carried ends; returns
+    (upper (k,3), lower (k,3), extra (k,)):
 
     * capsule fibres (CL, 2-2.6 mm across the joint's rim) and via-point fibres (ALL, PLL with ``extra`` > 0: a
       short segment at the disc, off the bone): the fibre is centred on the carried midpoint (the mean of its two
       carried ends) with the atlas's own fibre vector (median over the atlas levels not involving ``exclude``), not
       snapped: its length is the atlas's, which the two independently carried and snapped ends do not keep (the
       capsule fibres came out twice or half as long, and a unit with half-length capsule fibres was twice as stiff).
+    * ``DISC_SCALED`` ligaments (ALL): the whole fibre (segment and via-point path) is then scaled so that its mean
+      length is the target's own disc height (:func:`disc_height`, measured on the target's endplates) times the
+      atlas's ratio of mean length to disc height (median over the same atlas levels, their disc heights measured
+      the same way on the atlas's bones): the ALL's path spans its own level's disc, which the other levels'
+      paths, of shorter discs or taller, do not.
 
     Other fibres keep their two carried ends."""
     mid = 0.5 * (up + lo)
-    vecs = [v for lv, v in atlas.get(SEGMENTS, {}).get(name, {}).items()
-            if not set(level_vertebrae(lv)) & set(exclude) and v.shape == up.shape]
+    vecs = _allowed(atlas.get(SEGMENTS, {}).get(name, {}), exclude, up.shape)
     if not vecs or not (name.startswith("CL") or np.any(extra > 0)):
-        return up, lo
+        return up, lo, extra
     vec = np.median(np.stack(vecs), axis=0)
-    return mid + 0.5 * vec, mid - 0.5 * vec
+    spans = _allowed(atlas.get(SPANS, {}).get(name, {}), exclude)
+    if name in DISC_SCALED and spans:
+        ratio = float(np.median([length / height for length, height in spans]))
+        want = ratio * disc_height(level, meshes)
+        k = want / float(np.mean(np.linalg.norm(vec, axis=1) + extra))
+        vec, extra = k * vec, k * np.asarray(extra, float)
+    return mid + 0.5 * vec, mid - 0.5 * vec, extra
 
 
 def levels_present(meshes: dict) -> list[str]:

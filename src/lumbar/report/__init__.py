@@ -33,6 +33,7 @@ from .pdf_renderer import render_pdf
 from .sections import NOT_BUILT, SECTIONS, ReportBuilder, fmt, report_section
 from . import load_sharing_section as _load_sharing_section  # noqa: F401, E402 - registers its report section
 from . import posterior as _posterior_section  # noqa: F401, E402 - registers its report section
+from . import landmark_accuracy_section as _landmark_accuracy_section  # noqa: F401, E402 - registers its section
 
 __all__ = ["build_document", "build_report", "render_html", "render_pdf", "NOT_BUILT", "ReportBuilder", "Doc", "fmt",
            "SECTIONS", "report_section"]

@@ -9,6 +9,8 @@ the admissible (MAP) fit that ends it. Modules by job:
 - :mod:`.prior`: the ligament laws on elongation the calibration starts from and their spreads;
 - :mod:`.probe`, :mod:`.penalties`, :mod:`.admissible`: the admissible fit (:func:`fit_admissible`): its equilibria,
   the admissibility criteria as penalties, the MAP fit with its Laplace posterior and its tables;
+- :mod:`.influence`: the MAP refitted without each real row in turn, and what that does to the judged internal
+  loads (:func:`row_influence`);
 - :mod:`.tables`: the calibrated characteristic directory and the Table 1-3 analogs;
 - :mod:`.common`: what the fits share.
 
@@ -21,6 +23,8 @@ from .admissible import (BOUND_REASONS, DATA_SD_REL, DISC_TORQUE_SCALE_BOUNDS, F
 from .common import AT_BOUND_FRACTION, IDENTIFIABLE_MIN_DEG, PENALTY
 from .disc import (DISC_STAGE, P1_MIN_NM, c_zero, derived_disc_only_rows, eq3, fit_disc_direction, invert_eq3,
                    softplus_zero_law)
+from .influence import COLUMNS as INFLUENCE_COLUMNS
+from .influence import internal_loads, row_influence
 from .penalties import COMPLIANCE_REFERENCE_WINDOW, FIT_MARGIN
 from .prior import (ELONGATION_LIGAMENTS, PRIOR_SOURCE, calibration_prior, elongation_prior, paper_fibre_slack_length,
                     read_prior_set, rupp_as_softplus)
@@ -49,6 +53,8 @@ __all__ = [
     "FIT_SCALE_BOUNDS", "MAX_PRESTRAIN_PCT", "PENALTY_WEIGHT", "POSTERIOR_COLUMNS", "PRE_ELONGATION_SLACK_MM",
     "PROBE_DIRECTIONS", "PROBE_MOMENTS", "START_SCALES", "TARGET_COLUMNS", "AdmissibleFit", "admissible_fit_targets",
     "fit_admissible", "posterior_tables", "read_fit_start", "shift_parameter",
+    # which row decides which internal load
+    "INFLUENCE_COLUMNS", "internal_loads", "row_influence",
     # output
     "table1", "table2", "table3", "write_characteristics",
 ]

@@ -31,6 +31,11 @@ PENALTY_WEIGHT = 3.0
 #: spread of a real ROM row when its source gives none (Yamamoto et al. 1989's abstract gives means only): 25 % of the
 #: measured value, the validation's acceptance band (an assumption, stated in results/calibration/posterior.csv)
 DATA_SD_REL = 0.25
+#: least-squares budget and tolerance (x, f and gradient) of the MAP fit: at 100 evaluations and 1e-6 the default fit
+#: stopped at max_nfev (first-order optimality 0.3); 400 and 1e-8 converge it (measured ~175 evaluations, optimality
+#: 1e-3; the MAP moved by < 0.1 prior spreads)
+MAX_NFEV = 400
+FIT_TOL = 1e-8
 #: bounds of the disc torque-law scales (p1 and p3 of Eq. 3 of one direction scaled together) of the admissible fit;
 #: their prior is the disc-only fit (step 1) with the spread of a measured row (DATA_SD_REL)
 DISC_TORQUE_SCALE_BOUNDS = (0.25, 4.0)
@@ -55,6 +60,9 @@ class AdmissibleFit(RealFit):
     prior: object = None
     posterior: Posterior | None = None
     objective: object = None
+    #: the optimizer's verdict: status, message, nfev, first-order optimality, converged (status > 0: a tolerance
+    #: met; 0: max_nfev reached before any tolerance, the MAP is not converged and the results say so)
+    optimizer: dict = field(default_factory=dict)
 
 
 def set_with(charset, names, q):
@@ -321,7 +329,7 @@ def _parameter_rows(names, q, prior_q, lo, hi):
 
 
 def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", published=None, geometry_path=None,
-                   k_shear=None, max_iter=50, tol=1e-8, max_nfev=100,
+                   k_shear=None, max_iter=50, tol=1e-8, max_nfev=MAX_NFEV,
                    nz_reference=None, start: dict | None = None, prior_spread: dict | None = None,
                    data_sd_rel: float = DATA_SD_REL, fit_disc_torque: bool = True,
                    disc_rows: pd.DataFrame | None = None) -> AdmissibleFit:
@@ -394,7 +402,13 @@ def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", publ
         probe.warm = None
     r_start = obj.residual(q_start)
     sol = least_squares(obj.residual, q_start, jac=obj.jacobian, method="trf", bounds=(lo, hi), x_scale=0.3,
-                        xtol=1e-6, ftol=1e-6, gtol=1e-6, max_nfev=max_nfev)
+                        xtol=FIT_TOL, ftol=FIT_TOL, gtol=FIT_TOL, max_nfev=max_nfev)
+    optimizer = {"status": int(sol.status), "message": str(sol.message), "nfev": int(sol.nfev),
+                 "optimality": float(sol.optimality), "converged": bool(sol.status > 0)}
+    if not optimizer["converged"]:
+        log.warning("admissible fit NOT converged: %s after %d evaluations (first-order optimality %.3g); the MAP "
+                    "and its posterior are those of the last iterate (results/calibration/posterior.csv, column "
+                    "map_converged)", sol.message, sol.nfev, sol.optimality)
     q = sol.x
     obj.residual(q)
     last = obj.last
@@ -419,7 +433,7 @@ def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", publ
              "penalties: %s", obj.n_eval[0], obj.n_eval[1], 0.5 * float(r_start @ r_start), float(sol.cost),
              np.round(rom, 2).tolist(), ", ".join(f"{n} {v:.2g}" for n, v in last["pen"] if v > 0) or "none")
     fit = AdmissibleFit(cs, pd.DataFrame(rows), tt, float(sol.cost), obj.n_eval[0], probe=mt, penalties=pen,
-                        prior=charset, posterior=post)
+                        prior=charset, posterior=post, optimizer=optimizer)
     fit.objective = obj.residual      # q (fit units) -> the stacked residuals: for a sampling check of the posterior
     return fit
 
@@ -427,7 +441,7 @@ def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", publ
 POSTERIOR_COLUMNS = ("parameter", "unit", "fit_unit", "prior_centre", "prior_90_low", "prior_90_high",
                      "prior_centre_fit", "prior_spread_fit", "map", "posterior_90_low", "posterior_90_high", "map_fit",
                      "posterior_spread_fit", "spread_ratio", "shift_prior_sd", "moved_by", "data_moved_it", "at_bound",
-                     "bound_reason", "prior_source", "prior", "data_spread")
+                     "bound_reason", "prior_source", "prior", "data_spread", "map_converged")
 
 
 def posterior_tables(fit: AdmissibleFit | None, prior_name: str = "") -> tuple[pd.DataFrame, pd.DataFrame]:
@@ -445,7 +459,8 @@ def posterior_tables(fit: AdmissibleFit | None, prior_name: str = "") -> tuple[p
             src[n] = ("centre: the disc-only fit (step 1, Eq. 3 on the disc-only rows); spread: that of a measured "
                       f"row, {DATA_SD_REL:.0%} (assumed: no specimen spread published)")
     tab = posterior_table(post, src, BOUND_REASONS).assign(
-        prior=prior_name, data_spread=f"{DATA_SD_REL:.0%} of each measured ROM row (assumed; none published)")
+        prior=prior_name, data_spread=f"{DATA_SD_REL:.0%} of each measured ROM row (assumed; none published)",
+        map_converged=bool(fit.optimizer.get("converged", True)))
     return tab[list(POSTERIOR_COLUMNS)], covariance_table(post)
 
 

@@ -48,6 +48,7 @@ from scipy.optimize import least_squares
 from ...inputs.characteristics import SoftplusLaw, load_characteristic_set
 from ..fsu import build_fsu, facet_surfaces, set_ligament_law
 from ..stepwise_reduction import MAIN_DIRECTIONS, StageSolver
+from . import influence
 from .admissible import fit_admissible
 from .common import AT_BOUND_FRACTION, IDENTIFIABLE_MIN_DEG, PENALTY, kind_groups, replace_fields, rom_widths, stage_rows
 from .disc import DISC_STAGE, P1_MAX_NM, P1_MIN_NM, c_zero, eq3, fit_disc_direction
@@ -332,7 +333,7 @@ class _StepwiseFit:
 
 
 def _final_fit(geometry, cal, base, published, reference, real_targets, info, family, transfer, spreads, *, level,
-               k_shear, max_iter, geometry_path, final_surrogate_weight, tolerance_deg, real_fit_kw):
+               k_shear, max_iter, geometry_path, final_surrogate_weight, tolerance_deg, real_fit_kw, row_influence=False):
     """The final joint step on the real rows: :func:`fit_admissible` (``transfer`` "elongation") or
     :func:`fit_real_targets`, started as the comments say; returns its fit and records it in ``info``."""
     # start of the final joint fit: the start set anchored on the real rows (step 0) with the fitted disc,
@@ -353,11 +354,16 @@ def _final_fit(geometry, cal, base, published, reference, real_targets, info, fa
                                    disc=replace_fields(cal.disc, k_shear=info["prior_set"].disc.k_shear))
         a0 = info.get("anchor_fit")
         st = None if a0 is None else dict(zip(a0.parameters["parameter"], a0.parameters["fit_value"]))
-        rf = fit_admissible(geometry, prior_set, real_targets, level=level, published=published,
-                            geometry_path=geometry_path, k_shear=k_shear, max_iter=max_iter, start=st,
-                            prior_spread=spreads, disc_rows=stage_rows(reference, DISC_STAGE),
-                            **(real_fit_kw or {}))
+        def refit(targets, start):
+            return fit_admissible(geometry, prior_set, targets, level=level, published=published,
+                                  geometry_path=geometry_path, k_shear=k_shear, max_iter=max_iter, start=start,
+                                  prior_spread=spreads, disc_rows=stage_rows(reference, DISC_STAGE),
+                                  **(real_fit_kw or {}))
+
+        rf = refit(real_targets, st)
         info["final_fit"] = rf
+        if row_influence:
+            info["row_influence"] = influence.row_influence(rf, real_targets, refit, geometry, level)
     else:
         rf = fit_real_targets(geometry, final_start, real_targets, level=level, k_shear=k_shear,
                               max_iter=max_iter, secondary=reference if final_surrogate_weight > 0 else None,
@@ -384,7 +390,7 @@ def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_
               start=None, concave=CONCAVE_CANDIDATES, surrogate_weight=1.0,
               real_targets: pd.DataFrame | None = None, real_fit_kw=None, family="monotone",
               anchor_start=True, final_surrogate_weight=0.0, transfer="strain", geometry_path=None,
-              anchor_start_values: dict | None = None, prior="remus2021") -> CalibrationResult:
+              anchor_start_values: dict | None = None, prior="remus2021", row_influence=False) -> CalibrationResult:
     """Calibrate disc, facet stiffness and ligaments on ``reference`` (see module doc).
 
     ``family``: the ligament law family of steps 2-8. "monotone" (module doc: a, b, d fitted with F(0) = 0,
@@ -422,6 +428,8 @@ def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_
     ITL from the paper's Rupp characteristic) and the real-target steps (step 0 and the final one) are
     :func:`fit_admissible` (real rows plus the physical-admissibility criteria), started from
     ``anchor_start_values`` (parameter -> fit value, e.g. the surrogate generator's anchoring) when given.
+    ``row_influence`` (elongation transfer only): also refit the final MAP without each real row in turn
+    (:func:`.influence.row_influence`, ``info["row_influence"]``: what each row does to the judged internal loads).
     """
     t0 = time.perf_counter()
     published = initial if initial is not None else load_characteristic_set("calibrated")
@@ -468,7 +476,7 @@ def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_
         rf = _final_fit(geometry, cal, base, published, reference, real_targets, info, family, transfer, spreads,
                         level=level, k_shear=k_shear, max_iter=max_iter, geometry_path=geometry_path,
                         final_surrogate_weight=final_surrogate_weight, tolerance_deg=tolerance_deg,
-                        real_fit_kw=real_fit_kw)
+                        real_fit_kw=real_fit_kw, row_influence=row_influence)
         cal = replace_fields(rf.charset, name="calibrated", alternatives={})
         k_fac = float(cal.facet.stiffness)
         for kind_l in cal.ligaments:

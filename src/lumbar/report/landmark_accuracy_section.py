@@ -1,0 +1,74 @@
+"""Report section "Automatic landmarks where the truth is known": the landmark accuracy on the embedded Visible Human
+meshes given as a user gives them (leave one out) and what the remaining error does to the calibrated unit. Every
+number is read from the result files of rule landmark_accuracy (workflow/rules/landmark_accuracy.smk)."""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from .sections import ReportBuilder, fmt, report_section
+
+SUMMARY = "results/geometry/landmark_accuracy_summary.csv"
+LENGTHS = "results/geometry/landmark_accuracy_lengths.csv"
+EFFECT = "results/geometry/landmark_error_effect.csv"
+#: the must-show thresholds of the specimen path (docs/specimen.md): overall median, per-structure median [mm],
+#: facet faces [mm], L4-L5 fibre length [relative]
+OVERALL_MEDIAN_MM, STRUCTURE_MEDIAN_MM, FACET_MM, LENGTH_REL = 2.0, 4.0, 2.0, 0.15
+
+
+def accuracy_sentence(s: pd.DataFrame, lengths: pd.DataFrame) -> str:
+    """The accuracy in words against the specimen path's targets, read from the summary and length tables."""
+    by = s.set_index("structure")
+    allg = by.loc["all ligament groups"]
+    kinds = s[~s["structure"].isin(["all ligament groups", "facet faces vs cartilage nodes",
+                                    "facet faces vs their bone points"])]
+    worst = kinds.loc[kinds["median_mm"].idxmax()]
+    fac = by.loc["facet faces vs cartilage nodes"]
+    off = lengths[lengths["relative_error"].abs() > LENGTH_REL]
+    txt = (f"Insertion-group centroids are a median {fmt(allg['median_mm'], 2)} mm from the reference model's "
+           f"(target {fmt(OVERALL_MEDIAN_MM)} mm; largest {fmt(allg['max_mm'], 2)} mm); the worst structure, the "
+           f"{worst['structure']}, has a median of {fmt(worst['median_mm'], 2)} mm (target {fmt(STRUCTURE_MEDIAN_MM)} "
+           f"mm). Facet faces are a median {fmt(fac['median_mm'], 2)} mm from the cartilage nodes (target "
+           f"{fmt(FACET_MM)} mm). ")
+    if len(off):
+        txt += ("At L4-L5 the straight fibre length is off by more than "
+                f"{fmt(100 * LENGTH_REL)} % for " + ", ".join(
+                    f"{r.structure} ({fmt(100 * r.relative_error)} %)" for r in off.itertuples()) + ".")
+    else:
+        txt += f"Every L4-L5 fibre length is within {fmt(100 * LENGTH_REL)} % of the reference."
+    return txt
+
+
+@report_section("landmark_accuracy", "Automatic landmarks where the truth is known", after="models")
+def landmark_accuracy_section(b: ReportBuilder):
+    if not b.has(SUMMARY):
+        b.missing("Landmark accuracy on the Visible Human meshes (landmark_accuracy.run: false)")
+        return
+    s = pd.read_csv(b.path(SUMMARY))
+    lengths = pd.read_csv(b.path(LENGTHS)) if b.has(LENGTHS) else pd.DataFrame(columns=["structure", "relative_error"])
+    b.para("A user's specimen enters as vertebra surfaces or a CT label map (docs/specimen.md); its landmarks are "
+           "placed automatically. Scored where the truth is known: the embedded Visible Human meshes written as a "
+           "user would give them (turned and moved into a CT-like pose, millimetres, LPS) and read back, each "
+           "vertebra placed with an atlas built without it (leave one out), against the model's own insertion sites "
+           "and facet cartilage. " + accuracy_sentence(s, lengths))
+    b.table_block("Automatic landmarks against the reference model (Visible Human, leave one out)",
+                  ["structure", "groups", "median distance [mm]", "largest distance [mm]"],
+                  [[r.structure, int(r.n_groups), fmt(r.median_mm, 2), fmt(r.max_mm, 2)] for r in s.itertuples()],
+                  source=SUMMARY, label="Table G1",
+                  note="Distance of the centroid of each insertion group (one ligament's fibre ends on one vertebra) "
+                       "from the reference group's; ends on the sacrum are not scored (the atlas has one sacrum).")
+    if b.has(EFFECT):
+        e = pd.read_csv(b.path(EFFECT))
+        rows = []
+        for r in e.itertuples():
+            num = r.unit != "" and isinstance(r.unit, str)
+            rel = r.relative_difference
+            rows.append([r.quantity + (f" [{r.unit}]" if num else ""),
+                         fmt(float(r.reference_landmarks), 3) if num else str(r.reference_landmarks),
+                         fmt(float(r.automatic_landmarks), 3) if num else str(r.automatic_landmarks),
+                         fmt(100 * float(rel)) if num and np.isfinite(float(rel)) else "-"])
+        b.table_block("What the landmark error does: the calibrated L4-L5 unit on the reference and on the automatic "
+                      "landmarks", ["quantity", "reference landmarks", "automatic landmarks", "difference [%]"], rows,
+                      source=EFFECT, label="Table G2",
+                      note="The same characteristic set on both geometries; each ROM about its geometry's own "
+                           "project axes (the automatic frame is found from the anatomy).")
