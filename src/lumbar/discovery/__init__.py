@@ -53,7 +53,8 @@ Modules: :mod:`.detect` (settings, reading and recognising a measured table), :m
 batched forward model per experiment), :mod:`.specimens` (the banks of virtual specimens and the null tables),
 :mod:`.nuisance` (nuisance explanations), :mod:`.fit` (:func:`discover`: fit, test, name, identifiability),
 :mod:`.outputs` (output files, :func:`run`, the summary of the real-data discoveries), :mod:`.power_study`
-(the discrepancy benchmark: the discovery's power and false-positive rate on hidden-effect fixtures), :mod:`.cli`
+(the discrepancy benchmark: the discovery's power and false-positive rate on hidden-effect fixtures), :mod:`.jobs`
+(what the workflow's discovery rules share), :mod:`.cli`
 (``python -m lumbar.discovery``); the candidate effects are
 :mod:`lumbar.experiments.effects`, the figures :mod:`lumbar.plots.discovery`. This package re-exports the public names.
 """
