@@ -13,7 +13,6 @@ import time  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
-from lumbar.muscles import muscle_model as mm  # noqa: E402
 from lumbar.muscles import muscle_sensitivity as sens  # noqa: E402
 from lumbar.plots.muscle_model import plot_sobol  # noqa: E402
 
