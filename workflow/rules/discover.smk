@@ -27,7 +27,7 @@ rule discovery_specimen_bank:
     params:
         cfg=discovery_config,
     script:
-        "../scripts/discover.py"
+        "../scripts/discovery_specimen_bank.py"
 
 
 # the virtual specimens the IDP fixtures of the benchmark are drawn from (a stream disjoint from the null bank's),
@@ -54,7 +54,7 @@ rule discovery_fixture_specimens_idp:
     params:
         cfg=discovery_config,
     script:
-        "../scripts/discover.py"
+        "../scripts/discovery_fixture_specimens_idp.py"
 
 
 rule discovery_idp_model:
@@ -77,7 +77,7 @@ rule discovery_idp_model:
     params:
         cfg=discovery_config,
     script:
-        "../scripts/discover.py"
+        "../scripts/discovery_idp_model.py"
 
 
 rule discovery_default:
@@ -101,7 +101,7 @@ rule discovery_default:
     params:
         cfg=discovery_config,
     script:
-        "../scripts/discover.py"
+        "../scripts/discovery_default.py"
 
 
 rule discovery_va_artefact:
@@ -124,7 +124,7 @@ rule discovery_va_artefact:
     params:
         cfg=discovery_config,
     script:
-        "../scripts/discover.py"
+        "../scripts/discovery_va_artefact.py"
 
 
 # real data: the published intact L4-L5 ROM (discovery.intact_rom)
@@ -150,7 +150,7 @@ rule discovery_intact_rom:
     params:
         cfg=discovery_config,
     script:
-        "../scripts/discover.py"
+        "../scripts/discovery_intact_rom.py"
 
 
 # every discovery on real measurements in one table (the report's "What the model is missing, on real data")
@@ -170,7 +170,7 @@ rule discovery_real_data_summary:
     params:
         cfg=discovery_config,
     script:
-        "../scripts/discover.py"
+        "../scripts/discovery_real_data_summary.py"
 
 
 # chains on the muscle model by path: its rules produce these two tables
@@ -189,7 +189,7 @@ rule discovery_in_vivo:
     params:
         cfg=discovery_config,
     script:
-        "../scripts/discover.py"
+        "../scripts/discovery_in_vivo.py"
 
 
 rule discovery_benchmark_job:
@@ -216,7 +216,7 @@ rule discovery_benchmark_job:
     params:
         cfg=discovery_config,
     script:
-        "../scripts/discover.py"
+        "../scripts/discovery_benchmark_job.py"
 
 
 rule discovery_benchmark:
@@ -248,4 +248,4 @@ rule discovery_benchmark:
     params:
         cfg=discovery_config,
     script:
-        "../scripts/discover.py"
+        "../scripts/discovery_benchmark.py"

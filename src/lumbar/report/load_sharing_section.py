@@ -60,6 +60,16 @@ def _summary_sentence(b: ReportBuilder) -> str:
 
 @report_section("load_sharing", "Load sharing and physical admissibility", after="calibration")
 def load_sharing_section(b: ReportBuilder):
+    """The section, in four parts: admissibility, how the unit shares the moment, the other levels, and the transfer
+    readings with the other levels' admissibility."""
+    _admissibility_part(b)
+    _sharing_part(b)
+    _other_levels_part(b)
+    _readings_part(b)
+
+
+def _admissibility_part(b: ReportBuilder):
+    """Why reaching the ROM is not enough, and the calibrated set's admissibility criteria with the curves."""
     b.para("Reaching the range of motion is not enough: the unit must reach it for the reasons real segments have "
            "(no clamped facets at rest, no ligament switched off, no snap-through, the disc carrying most of a "
            "compression). Method and criteria: docs/load_sharing.md. " + _summary_sentence(b))
@@ -68,6 +78,11 @@ def load_sharing_section(b: ReportBuilder):
                 columns=["criterion", "direction", "value", "limit", "unit", "passed", "source"])
     b.figure("results/figures/load_sharing_curves.png", "Moment-rotation curves of the intact unit.")
     b.figure("results/figures/load_sharing_shares.png", "Moment carried by each structure, calibrated unit.")
+
+
+def _sharing_part(b: ReportBuilder):
+    """How the calibrated unit shares the moment: shares at the largest moment, the unloaded unit, the removal of the
+    posterior ligaments, axial compression, the cable load paths and the Remus et al. (2021) comparison."""
     b.heading("How the calibrated unit shares the moment")
     if b.has(SUMMARY):
         s = pd.read_csv(b.path(SUMMARY))
@@ -125,6 +140,10 @@ def load_sharing_section(b: ReportBuilder):
         b.missing(f"Cable load paths ({Path(CABLES).name})")
     b.csv_table(REMUS, "The calibrated ligaments beside the Remus et al. (2021) model of the same fibres (tension "
                        "under both laws at the same deformation)", False)
+
+
+def _other_levels_part(b: ReportBuilder):
+    """The other lumbar levels with the calibrated characteristics unchanged: ROM against Yamamoto et al. (1989)."""
     b.heading("Other lumbar levels, calibrated characteristics unchanged")
     if b.has(MULTI):
         m = pd.read_csv(b.path(MULTI))
@@ -159,6 +178,10 @@ def load_sharing_section(b: ReportBuilder):
     else:
         b.missing(f"Other levels ({Path(MULTI).name})")
     b.figure("results/figures/multilevel_rom.png", "Other levels with the L4-L5 characteristics unchanged.")
+
+
+def _readings_part(b: ReportBuilder):
+    """The other levels under other readings of the transfer, and their admissibility criteria."""
     if b.has(READINGS):
         from ..experiments.level_transfer import readings_summary  # noqa: PLC0415
 
