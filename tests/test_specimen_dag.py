@@ -158,7 +158,7 @@ def test_another_calibrated_unit_takes_its_own_yamamoto_targets(smk_tree, tmp_pa
                   cwd=smk_tree, timeout=300)
     out = r.stdout + r.stderr
     assert r.returncode == 0, out
-    assert "rule specimen_real_targets" in out and "results/geometry/real_targets_L3-L4.csv" in out
+    assert "rule specimen_real_targets" in out and "results/geometry/real_targets.csv" in out
     assert "yamamoto1989_intact_rom_original_text.csv" not in out     # control: test_default_target_of_the_mean...
 
 

@@ -81,16 +81,13 @@ if SKIPPED_STAGES:
 # (rule specimen_real_targets) where the config keeps the default L4-L5 table
 from lumbar.inputs.config import schema_defaults
 
-SPECIMEN_REAL_TARGETS = None
+SPECIMEN_REAL_TARGETS = "results/geometry/real_targets.csv"
 if (
     SPECIMEN
     and config["fsu"]["level"] != "L4-L5"
     and config["stepwise_reduction"]["real_targets"]
     == schema_defaults("stepwise_reduction", "real_targets")
 ):
-    SPECIMEN_REAL_TARGETS = (
-        f"results/geometry/real_targets_{config['fsu']['level']}.csv"
-    )
     config["stepwise_reduction"]["real_targets"] = [SPECIMEN_REAL_TARGETS]
     print(
         f"Calibrated unit {config['fsu']['level']}: real targets {SPECIMEN_REAL_TARGETS} (Yamamoto et al. 1989, "
@@ -99,6 +96,21 @@ if (
     )
 
 SPECIMEN_DIR = "results/geometry"
+# the geometry rule's figures (one per unit present) and, for a label volume, its meshes
+SPECIMEN_QA_FIGURES = (
+    [f"{SPECIMEN_DIR}/qa_{u}.png" for u in SPECIMEN_INPUTS.units_present]
+    if SPECIMEN
+    else []
+)
+SPECIMEN_LABEL_MESHES = (
+    [f"{SPECIMEN_DIR}/meshes/{v}.stl" for v in SPECIMEN_INPUTS.vertebrae]
+    + [
+        f"{SPECIMEN_DIR}/meshes/meshing_report.csv",
+        f"{SPECIMEN_DIR}/meshes/resolution_limits.csv",
+    ]
+    if SPECIMEN and SPECIMEN_INPUTS.kind == "label_volume"
+    else []
+)
 
 # outputs of the stages a specimen cannot feed (lumbar.geometry.specimen_io.skipped_stages), dropped from the default
 # target by runnable_outputs(): path fragments per stage, with the stages that read their tables
@@ -163,6 +175,8 @@ def runnable_outputs(paths):
 def specimen_inputs_files(wildcards):
     """The specimen's files (every vertebra's mesh or mask, a label table)."""
     si = SPECIMEN_INPUTS
+    if si is None:  # not a specimen: the rule is never requested
+        return []
     return [str(f) for f in si.files.values()] + (
         [str(si.label_table)] if si.label_table else []
     )

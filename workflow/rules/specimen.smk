@@ -2,54 +2,44 @@
 # the geometry ran in common.smk (SPECIMEN, SKIPPED_STAGES) before any job. Rule specimen_geometry builds the specimen
 # once (alignment, atlas registration, discs, facets), writes its landmarks, per-level table, 4x4 transform, the
 # skipped stages and one QA figure per level, and leaves the geometry in the content-addressed cache
-# (lumbar.geometry.diskcache) that every other job loads it from (geometry_inputs names its levels.csv).
-
-if SPECIMEN:
-
-    rule specimen_geometry:
-        input:
-            specimen_inputs_files,
-        output:
-            landmarks=f"{SPECIMEN_DIR}/landmarks.csv",
-            levels=f"{SPECIMEN_DIR}/levels.csv",
-            transform=f"{SPECIMEN_DIR}/transform.json",
-            skipped=f"{SPECIMEN_DIR}/skipped_stages.csv",
-            qa=[f"{SPECIMEN_DIR}/qa_{u}.png" for u in SPECIMEN_INPUTS.units_present],
-            meshes=(
-                [f"{SPECIMEN_DIR}/meshes/{v}.stl" for v in SPECIMEN_INPUTS.vertebrae]
-                + [
-                    f"{SPECIMEN_DIR}/meshes/meshing_report.csv",
-                    f"{SPECIMEN_DIR}/meshes/resolution_limits.csv",
-                ]
-                if SPECIMEN_INPUTS.kind == "label_volume"
-                else []
-            ),
-        log:
-            "logs/specimen_geometry.log",
-        benchmark:
-            "results/benchmarks/specimen_geometry.tsv"
-        conda:
-            "../envs/lumbar.yaml"
-        params:
-            geometry=config["geometry"],
-            skipped=[list(s) for s in SKIPPED_STAGES],
-            backend=config["render"]["backend"],
-        script:
-            "../scripts/specimen_geometry.py"
+# (lumbar.geometry.diskcache) that every other job loads it from (geometry_inputs names its levels.csv). Both rules are
+# defined in every configuration and requested only for a specimen (by hand on another geometry: an error saying so).
 
 
-if SPECIMEN_REAL_TARGETS:
+rule specimen_geometry:
+    input:
+        specimen_inputs_files,
+    output:
+        landmarks=f"{SPECIMEN_DIR}/landmarks.csv",
+        levels=f"{SPECIMEN_DIR}/levels.csv",
+        transform=f"{SPECIMEN_DIR}/transform.json",
+        skipped=f"{SPECIMEN_DIR}/skipped_stages.csv",
+        qa=SPECIMEN_QA_FIGURES,
+        meshes=SPECIMEN_LABEL_MESHES,
+    log:
+        "logs/specimen_geometry.log",
+    benchmark:
+        "results/benchmarks/specimen_geometry.tsv"
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        geometry=config["geometry"],
+        skipped=[list(s) for s in SKIPPED_STAGES],
+        backend=config["render"]["backend"],
+    script:
+        "../scripts/specimen_geometry.py"
 
-    rule specimen_real_targets:
-        input:
-            yamamoto="data/experiments/yamamoto1989_levels_original_text.csv",
-        output:
-            SPECIMEN_REAL_TARGETS,
-        log:
-            "logs/specimen_real_targets.log",
-        conda:
-            "../envs/lumbar.yaml"
-        params:
-            level=config["fsu"]["level"],
-        script:
-            "../scripts/specimen_real_targets.py"
+
+rule specimen_real_targets:
+    input:
+        yamamoto="data/experiments/yamamoto1989_levels_original_text.csv",
+    output:
+        SPECIMEN_REAL_TARGETS,
+    log:
+        "logs/specimen_real_targets.log",
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        level=config["fsu"]["level"],
+    script:
+        "../scripts/specimen_real_targets.py"
