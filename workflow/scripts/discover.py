@@ -79,7 +79,10 @@ elif rule in ("discovery_default", "discovery_va_artefact", "discovery_in_vivo",
         if not Path(p).is_file():
             raise RuntimeError(f"{rule}: expected output {p} was not written (outputs go to {out_dir})")
 elif rule == "discovery_real_data_summary":
-    table = discover.real_data_summary([Path(p) for p in snakemake.input.runs])
+    from lumbar.discovery.real_data import real_misses_summary  # noqa: E402
+    table = real_misses_summary([Path(p) for p in snakemake.input.runs],
+                                [Path(p) for p in snakemake.input.get("cases", [])],
+                                cfg | {"adopted_effects": list(snakemake.params.get("adopted", []))})
     write_table_atomic(table, snakemake.output[0], float_format="%.6g")
     log.info("real-data summary: %d dataset(s); named: %s", len(table), table["named_effect"].tolist())
 elif rule == "discovery_benchmark_job":

@@ -43,7 +43,7 @@ from ..experiments import effects as fx
 from ..experiments.fsu import build_fsu
 from ..experiments.validation import MULTILEVEL_DIRECTIONS
 from ..geometry import load_geometry
-from ..inputs.io import write_json_atomic
+from ..inputs.io import write_json_atomic, write_table_atomic
 from ..inputs.tables import read_kind
 from .detect import DiscoveryInputError, discovery_settings
 from .fit import discover
@@ -173,13 +173,16 @@ def multilevel_forward(units: dict, rows: pd.DataFrame):
     return forward
 
 
-def multilevel_problem(config, yamamoto_path, multilevel_rom=None, units=None) -> Problem:
+def multilevel_problem(config, yamamoto_path, multilevel_rom=None, units=None, levels=None) -> Problem:
     """The Yamamoto rows of the levels the calibration did not fit as a discovery problem (experiment
     ``stepwise_rom``: its candidates, re-solved at each level). sigma = hypot(assumed measurement SD of a row mean,
-    the model's posterior SD); ``meta["sigma_assumed"]`` and ``meta["model_sd"]`` keep the parts."""
+    the model's posterior SD); ``meta["sigma_assumed"]`` and ``meta["model_sd"]`` keep the parts. ``levels``: only
+    these levels (None: every level of the table but the calibrated one)."""
     s = discovery_settings(config)
     level = (config.get("fsu") or {}).get("level", "L4-L5")
     rows = yamamoto_other_levels(yamamoto_path, level)
+    if levels is not None:                 # the levels the workflow evaluates (load_sharing.other_levels)
+        rows = rows[rows["level"].isin(list(levels))].reset_index(drop=True)
     if rows.empty:
         raise DiscoveryInputError(f"{yamamoto_path}: no ROM row at a level other than {level}")
     units = level_units(config, list(dict.fromkeys(rows["level"]))) if units is None else units
@@ -375,19 +378,40 @@ def facet_share_case(literature_path, compression_path, out_dir, config) -> dict
                      f"library candidate acts on the facet share [{rows['source'].iloc[0]}]")}
     d = Path(out_dir)
     d.mkdir(parents=True, exist_ok=True)
-    rows.to_csv(d / "rows.csv", index=False, float_format="%.6g")
+    write_table_atomic(rows, d / "rows.csv", float_format="%.6g")
     write_json_atomic(jsonable(rec), d / "real_case.json", allow_nan=True)
     return rec
 
 
 # ------------------------------------------------------------------ the summary
+def _localise_scenarios(path) -> tuple[str, float]:
+    """Label and z of the row with the largest |z_before| of a case's scenarios.csv ("" and NaN without one)."""
+    p = Path(path)
+    if not p.is_file():
+        return "", float("nan")
+    sc = pd.read_csv(p)
+    z = sc["z_before"].to_numpy(float)
+    if not np.isfinite(z).any():
+        return "", float("nan")
+    i = int(np.nanargmax(np.abs(z)))
+    keys = [c for c in sc.columns if c == "measured" or c in ("sigma",)]
+    cols = list(sc.columns[: list(sc.columns).index(keys[0])]) if keys else []
+    return ", ".join(f"{c} {sc[c].iloc[i]}" for c in cols), float(z[i])
+
+
 def real_misses_summary(discovery_paths, real_case_paths, config) -> pd.DataFrame:
-    """One row per real dataset: the real-data summary's columns of every ``discovery.json`` (lumbar.discovery.outputs.
-    real_data_summary) joined with the posing fields of its ``real_case.json`` when it has one, plus rows for the
-    cases with a ``real_case.json`` only (facet share); the calibration target's decision is "calibration target:
-    not posed"."""
-    base = real_data_summary(list(discovery_paths))
-    recs = {json.loads(Path(p).read_text())["dataset"]: json.loads(Path(p).read_text()) for p in real_case_paths}
+    """One row per real dataset: the real-data summary's columns (lumbar.discovery.outputs.real_data_summary) of every
+    ``discovery.json`` in ``discovery_paths`` and beside a ``real_case.json``, joined with the posing fields of the
+    ``real_case.json`` when the case has one; a case without one (run by the older rules) gets its role, its largest
+    miss from its scenarios.csv and the decision at other spreads where it cannot change (too few rows at any spread;
+    the calibration target, "calibration target: not posed"). Cases with a ``real_case.json`` only (facet share) get
+    its fields."""
+    real_case_paths = [Path(p) for p in real_case_paths]
+    recs = {json.loads(p.read_text())["dataset"]: json.loads(p.read_text()) for p in real_case_paths}
+    runs = [Path(p) for p in discovery_paths] + [p.parent / "discovery.json" for p in real_case_paths
+                                                 if (p.parent / "discovery.json").is_file()]
+    base = real_data_summary(runs)
+    by_case = {p.parent.name: p for p in runs}
     rows = []
     adopted = adopted_effects(config)
     for row in base.to_dict("records"):
@@ -395,13 +419,19 @@ def real_misses_summary(discovery_paths, real_case_paths, config) -> pd.DataFram
         rec = recs.pop(case, None)
         meta = REAL_CASES.get(case, {"role": "", "what_would_decide": ""})
         if rec is None:
-            r = json.loads(Path(next(p for p in discovery_paths if Path(p).parent.name == case)).read_text())
-            rec = case_record(case, r, "", "", float("nan"), {}, config)
-            rec["decision_half_spread"] = rec["decision_double_spread"] = ""
+            r = json.loads(by_case[case].read_text())
+            where, z = _localise_scenarios(by_case[case].parent / "scenarios.csv")
+            same = r.get("decision", "") if r.get("too_few_rows") else ""
+            rec = case_record(case, r, "as configured for this case's rule", where, z, {0.5: same, 2.0: same},
+                              config)
+            if not same:
+                rec["decision_half_spread"] = rec["decision_double_spread"] = "not rerun (see in_vivo_lying)" \
+                    if case == "in_vivo" else "not rerun"
         if meta["role"].startswith("calibration target"):
-            rec["decision"] = "calibration target: not posed"
+            rec["decision"] = rec["decision_half_spread"] = rec["decision_double_spread"] = \
+                "calibration target: not posed"
             row["note"] = f"discovery run kept for reference: {row['decision']}; " + row["note"]
-        row.update({k: v for k, v in rec.items() if k in SUMMARY_COLUMNS and k not in ("dataset",)})
+        row.update({k: v for k, v in rec.items() if k in SUMMARY_COLUMNS and k not in ("dataset", "note")})
         rows.append(row)
     for case, rec in recs.items():
         rows.append({c: rec.get(c, "") for c in SUMMARY_COLUMNS} | {"dataset": case})
