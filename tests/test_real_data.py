@@ -268,3 +268,17 @@ def test_adopted_effects_key_exists_is_empty_and_refuses_an_entry():
     assert load_config(ROOT / "config" / "config.yaml")["adopted_effects"] == []
     with pytest.raises(ConfigError, match="adopted_effects"):
         load_config({"adopted_effects": ["ligament_prestrain"]})
+
+
+def test_candidate_sensitivity_separates_a_candidate_that_moves_the_rows_from_one_that_does_not(ml_problem):
+    base = ml_problem.forward({})[0]
+    s = RD.candidate_sensitivity(ml_problem, base)
+    assert set(s) == set(ml_problem.candidates)
+    assert s["ligament_prestrain"]["rows_moved"] >= 1 and s["ligament_prestrain"]["largest_abs_dz"] > 0.1
+    assert s["va_neutral_offset"]["rows_moved"] == 0 and s["va_neutral_offset"]["largest_abs_dz"] < 1e-6
+
+
+def test_gap_by_group_is_the_rms_z_per_level(ml_problem):
+    base = ml_problem.y + ml_problem.sigma * np.where(np.arange(ml_problem.n) % 2 == 0, 2.0, 0.0)
+    g = RD.gap_by_group(ml_problem, base)
+    assert list(g) == ["L5-S1"] and g["L5-S1"] == pytest.approx(np.sqrt(2.0))

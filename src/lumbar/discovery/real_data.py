@@ -303,10 +303,43 @@ def run_case(case: str, problem: Problem, config, out_dir, measured_label: str, 
     where, z = localise(out["problem"], _base_from(out))
     rec = case_record(case, out["result"], problem.meta.get("spread", ""), where, z,
                       {f: outs[f]["result"]["decision"] for f in SPREAD_FACTORS}, config)
+    base = _base_from(out)
+    sens = candidate_sensitivity(problem, base)
+    rec["candidates_tried"] = ", ".join(f"{c} (largest |dz| {v['largest_abs_dz']:.2g} at {v['value']:.3g} "
+                                        f"{fx.EFFECTS[c].unit})" for c, v in sens.items())
+    rec["candidate_sensitivity"] = sens
+    rec["gap_by_group"] = gap_by_group(problem, base)
     out["result"]["real_data"] = rec
     write_outputs(out, out_dir, measured_label)
     write_json_atomic(jsonable(rec), Path(out_dir) / "real_case.json", allow_nan=True)
     return rec
+
+
+def candidate_sensitivity(problem: Problem, base: np.ndarray) -> dict:
+    """Per candidate: how far it moves the compared rows at its first benchmark magnitude (one forward batch), in
+    units of the rows' sigma: {name: {value, largest_abs_dz, rows_moved (|dz| > 0.1)}}. A candidate that moves no
+    row cannot explain the miss here (nor be judged on these rows)."""
+    cands = [c for c in problem.candidates if fx.EFFECTS[c].magnitudes]
+    if not cands:
+        return {}
+    vals = {c: float(fx.EFFECTS[c].magnitudes[0]) for c in cands}
+    G = len(cands)
+    P = problem.forward({c: np.where(np.arange(G) == i, vals[c], 0.0) for i, c in enumerate(cands)})
+    dz = (P - np.asarray(base, float)[None, :]) / problem.sigma[None, :]
+    out = {}
+    for i, c in enumerate(cands):
+        a = np.abs(dz[i])
+        out[c] = {"value": vals[c], "largest_abs_dz": float(np.nanmax(a)) if np.isfinite(a).any() else float("nan"),
+                  "rows_moved": int(np.sum(a > 0.1))}
+    return out
+
+
+def gap_by_group(problem: Problem, base: np.ndarray) -> dict:
+    """RMS z of the nominal model per value of the problem's row key (per level for the other levels' ROM)."""
+    z = (np.asarray(base, float) - problem.y) / problem.sigma
+    g = problem.keys[problem.row_key].astype(str).to_numpy() if problem.row_key in problem.keys else \
+        np.full(problem.n, "all")
+    return {k: float(np.sqrt(np.nanmean(z[g == k] ** 2))) for k in dict.fromkeys(g)}
 
 
 def _base_from(out) -> np.ndarray:
@@ -432,6 +465,9 @@ def real_misses_summary(discovery_paths, real_case_paths, config) -> pd.DataFram
                 "calibration target: not posed"
             row["note"] = f"discovery run kept for reference: {row['decision']}; " + row["note"]
         row.update({k: v for k, v in rec.items() if k in SUMMARY_COLUMNS and k not in ("dataset", "note")})
+        if rec.get("gap_by_group") and len(rec["gap_by_group"]) > 1:
+            row["note"] = "gap (RMS z) by " + ", ".join(f"{k} {v:.2f}" for k, v in rec["gap_by_group"].items()) + \
+                "; " + row["note"]
         rows.append(row)
     for case, rec in recs.items():
         rows.append({c: rec.get(c, "") for c in SUMMARY_COLUMNS} | {"dataset": case})
