@@ -282,3 +282,19 @@ def test_gap_by_group_is_the_rms_z_per_level(ml_problem):
     base = ml_problem.y + ml_problem.sigma * np.where(np.arange(ml_problem.n) % 2 == 0, 2.0, 0.0)
     g = RD.gap_by_group(ml_problem, base)
     assert list(g) == ["L5-S1"] and g["L5-S1"] == pytest.approx(np.sqrt(2.0))
+
+
+def test_report_text_reads_every_number_from_the_summary(tmp_path):
+    from lumbar.report.real_loop import real_misses_markdown
+    intact = _discovery_json(tmp_path / "intact_rom" / "discovery.json")
+    va = _discovery_json(tmp_path / "va_artefact" / "discovery.json", "nothing named: too few rows", True)
+    t = RD.real_misses_summary([intact, va], [], {"adopted_effects": []})
+    md = real_misses_markdown(t)
+    assert "compared with 2 real dataset(s); 1 of them a calibration target" in md
+    assert "named an effect on 0 and 0 effect(s) were adopted" in md
+    assert md.count("\n| ") == 3 and "calibration target: not posed" in md and "| -3.00 |" in md
+    # control: a named row changes the count
+    t.loc[1, "named_effect"] = "itl"
+    assert "named an effect on 1 " in real_misses_markdown(t)
+    with pytest.raises(ValueError, match=r"column\(s\) \['adopted'\] missing"):
+        real_misses_markdown(t.drop(columns=["adopted"]))
