@@ -153,10 +153,22 @@ rule discovery_intact_rom:
         "../scripts/discovery_intact_rom.py"
 
 
+def discovery_real_misses_runs(wildcards):
+    """real_case.json of every real-miss case this configuration can pose (the in-vivo one when the muscle model's
+    tables are built or present, as for discovery_in_vivo)."""
+    cases = ["facet_share"]
+    if config["load_sharing"]["other_levels"]:
+        cases.append("multilevel_rom")
+    if "results/discrepancy/in_vivo/discovery.json" in discovery_final_outputs():
+        cases.append("in_vivo_lying")
+    return [f"results/discrepancy/{c}/real_case.json" for c in cases]
+
+
 # every discovery on real measurements in one table (the report's "What the model is missing, on real data")
 rule discovery_real_data_summary:
     input:
         runs=discovery_real_data_runs,
+        cases=discovery_real_misses_runs,
     output:
         report(
             "results/discrepancy/real_data_summary.csv",
@@ -169,6 +181,7 @@ rule discovery_real_data_summary:
         "../envs/lumbar.yaml"
     params:
         cfg=discovery_config,
+        adopted=config["adopted_effects"],
     script:
         "../scripts/discovery_real_data_summary.py"
 
@@ -249,3 +262,72 @@ rule discovery_benchmark:
         cfg=discovery_config,
     script:
         "../scripts/discovery_benchmark.py"
+
+
+# real misses posed (lumbar.discovery.real_data): the Yamamoto ROM of the levels the calibration did not fit, the
+# in-vivo IDP with the lying postures, the facet share of compression; each also at half and double its assumed spread
+rule discovery_multilevel_rom:
+    input:
+        geometry_inputs,
+        measured="data/experiments/yamamoto1989_levels_original_text.csv",
+        multilevel="results/tables/multilevel_rom.csv",
+        characteristics=characteristics_dir(),
+        characteristic_tables=characteristic_tables(
+            config["characteristics"]["data_dir"]
+        ),
+        calibrated=discovery_calibrated_tables(),
+    output:
+        **discovery_case_outputs("multilevel_rom"),
+        real_case="results/discrepancy/multilevel_rom/real_case.json",
+    log:
+        "logs/discovery_multilevel_rom.log",
+    benchmark:
+        "results/benchmarks/discovery_multilevel_rom.tsv"
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        cfg=discovery_config,
+        levels=config["load_sharing"]["other_levels"],
+        adopted=config["adopted_effects"],
+    script:
+        "../scripts/discovery_multilevel_rom.py"
+
+
+rule discovery_in_vivo_lying:
+    input:
+        measured="results/tables/in_vivo_validation.csv",
+        segment_loads=config["discovery"]["in_vivo_segment_loads"],
+        lying="data/in_vivo/wilke1999_idp_lying_original_text.csv",
+        compression="results/load_sharing/compression_calibrated.csv",
+    output:
+        **discovery_case_outputs("in_vivo_lying"),
+        real_case="results/discrepancy/in_vivo_lying/real_case.json",
+    log:
+        "logs/discovery_in_vivo_lying.log",
+    benchmark:
+        "results/benchmarks/discovery_in_vivo_lying.tsv"
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        cfg=discovery_config,
+        adopted=config["adopted_effects"],
+    script:
+        "../scripts/discovery_in_vivo_lying.py"
+
+
+rule discovery_facet_share:
+    input:
+        literature="data/load_sharing/load_sharing_literature.csv",
+        compression="results/load_sharing/compression_calibrated.csv",
+    output:
+        rows="results/discrepancy/facet_share/rows.csv",
+        real_case="results/discrepancy/facet_share/real_case.json",
+    log:
+        "logs/discovery_facet_share.log",
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        cfg=discovery_config,
+        adopted=config["adopted_effects"],
+    script:
+        "../scripts/discovery_facet_share.py"
