@@ -24,4 +24,4 @@ for _rule_file in manifests.rule_files():
 rule all:
     default_target: True
     input:
-        final_outputs(),
+        runnable_outputs(final_outputs()),

@@ -35,6 +35,7 @@ import numpy as np  # noqa: E402
 import yaml  # noqa: E402
 
 from lumbar.muscles import muscle_model as mm  # noqa: E402
+from lumbar.muscles import muscle_sensitivity as msens  # noqa: E402
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "config.yaml"
 SETTINGS = {
@@ -66,19 +67,19 @@ def measure(model, cfg, settings, n_samples, seed):
     stand = mm.solve_postures(model, solver, ["upright_standing"])[0]
     out = {"one_posture_s": round(time.perf_counter() - t, 3), "one_posture_certified": bool(stand.certified)}
     base = dict(zip(mm.POSTURES, mm.solve_postures(model, solver, list(mm.POSTURES.values()))))
-    X = mm.sobol_samples(cfg["sobol"]["n_train"], seed)
+    X = msens.sobol_samples(cfg["sobol"]["n_train"], seed)
     per = {}
     for posture in mm.POSTURES:
         t = time.perf_counter()
-        d = mm.sobol_evaluate(model, solver, base, X, np.arange(n_samples), posture)
+        d = msens.sobol_evaluate(model, solver, base, X, np.arange(n_samples), posture)
         el = time.perf_counter() - t
         per[posture] = el / n_samples
         out[f"sobol_{posture}"] = {"solves": n_samples, "s_per_solve": round(el / n_samples, 3),
                                    "reached": int(d["reached"].sum()), "certified": int(d["certified"].sum())}
     sens = cfg["sensitivity"]
-    rows = mm.sensitivity_rows("ssl_um", None, sens["ssl_um"], sens["scopes"], sens["postures"])
+    rows = msens.sensitivity_rows("ssl_um", None, sens["ssl_um"], sens["scopes"], sens["postures"])
     t = time.perf_counter()
-    d = mm.run_sensitivity(model, solver, rows, base)
+    d = msens.run_sensitivity(model, solver, rows, base)
     el = time.perf_counter() - t
     out["sensitivity_chunk"] = {"solves": len(d), "s_per_solve": round(el / len(d), 3),
                                 "reached": int(d["reached"].sum()), "certified": int(d["certified"].sum())}

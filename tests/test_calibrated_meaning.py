@@ -155,7 +155,8 @@ def test_facet_contact_follows_the_gap_and_the_set_stiffness(model):
     import dataclasses
     from types import SimpleNamespace
 
-    from lumbar.muscles.muscle_model import LumbarMuscleModel, facet_contact
+    from lumbar.muscles.muscle_model import LumbarMuscleModel
+    from lumbar.muscles.muscle_validation import facet_contact
 
     x0, R0 = model.reference_state()
     rest = [SimpleNamespace(x=x0[0], R=R0[0], reached=True)]
@@ -179,7 +180,7 @@ def test_face_separation_is_the_joint_space_of_the_landmarks(space_mm):
     """Two parallel landmark faces ``space_mm`` apart along their normal: face_separation returns that distance
     (the quantity the facet-contact table compares with the anatomical joint space)."""
     from lumbar.mechanics.elements.facet import fit_surface
-    from lumbar.muscles.muscle_model import face_separation
+    from lumbar.muscles.muscle_validation import face_separation
 
     u, v = np.meshgrid([-4e-3, 0.0, 4e-3], [-5e-3, 0.0, 5e-3])
     n = np.array([0.3, -0.9, 0.3]) / np.linalg.norm([0.3, -0.9, 0.3])

@@ -314,6 +314,18 @@ def test_a_fresh_process_loads_the_compiled_kernels_from_the_cache(charset):
     assert r.stdout.strip() == "[(1, 0, 1), (1, 0, 1)]", r.stdout     # warm_up has the callers' signature
 
 
+def test_newton_cache_pins_the_residual_module():
+    """numba keys a function's cached machine code on its own source file only: newton_batch (kernel.py) holds the
+    residual of kernel_residual.py, so kernel.RESIDUAL_SHA256 pins that file (a mismatch compiles newton_batch without
+    the cache). Control: another digest is not the file's."""
+    import hashlib
+    from lumbar.mechanics import kernel_residual
+    digest = hashlib.sha256(Path(kernel_residual.__file__).read_bytes()).hexdigest()
+    assert kernel.residual_pinned(), (f"kernel_residual.py changed: set RESIDUAL_SHA256 = {digest!r} in "
+                                      f"lumbar/mechanics/kernel.py (that edit retires newton_batch's cached code)")
+    assert not kernel.residual_pinned("0" * 64)
+
+
 def test_numba_is_pinned_in_environment_conda_env_and_pyproject():
     """environment.txt and workflow/envs/lumbar.yaml pin the same numba (and its llvmlite; the equality of the two
     files is test_workflow's), pyproject requires at least that major.minor, and the installed numba is the pin

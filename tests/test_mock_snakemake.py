@@ -14,8 +14,6 @@ from conftest import ROOT
 SCRIPTS = ROOT / "workflow" / "scripts"
 TEST_CONFIG = "config/test/config.yaml"
 STAGE_SCRIPTS = sorted(p for p in SCRIPTS.glob("*.py") if p.name != "_common.py")
-#: scripts that still run several rules, branching on ``snakemake.rule`` (every other script runs one rule)
-STILL_DISPATCHING = {"calibration.py", "discover.py"}
 
 
 @pytest.fixture(scope="module")
@@ -34,8 +32,21 @@ def test_scripts_do_not_mirror_their_rules(script):
     paths = re.findall(r"""["'](?:results|logs)/[^"']*""", text)
     assert not paths, f"{script.name} spells result/log paths (they belong to the rules): {paths}"
     assert "snakemake, log = _common.start(globals())" in text
-    if script.name not in STILL_DISPATCHING:     # one script per rule: rules of a family share library functions
-        assert not re.search(r"\brule\s*==", text), f"{script.name} dispatches on snakemake.rule"
+    # one script per rule: rules of a family share library functions
+    assert not re.search(r"\brule\s*==", text), f"{script.name} dispatches on snakemake.rule"
+
+
+def test_one_script_per_rule(common, in_root):
+    """Every ``script:`` of the workflow serves one rule, and every script in the folder is some rule's (a family of
+    rules shares library functions, not a script). Control: two rules naming one script fail here."""
+    workflow = common._workflow(TEST_CONFIG)
+    rules_of = {}
+    for r in workflow.rules:
+        if r.is_script:
+            rules_of.setdefault(common._rule_script(r).name, []).append(r.name)
+    shared = {script: rules for script, rules in rules_of.items() if len(rules) > 1}
+    assert not shared, f"scripts serving several rules: {shared}"
+    assert sorted(rules_of) == [p.name for p in STAGE_SCRIPTS]
 
 
 @pytest.fixture
@@ -67,7 +78,7 @@ def test_mock_snakemake_gives_the_rules_outputs(common, in_root):
     cal = common.mock_snakemake("calibrate", TEST_CONFIG)
     assert sur.output.table == "results/experiments/stepwise_reduction_surrogate.csv"
     assert cal.input.experiment == sur.output.table
-    assert len(cal.output) == 19 and len(cal.output.characteristics) == 6
+    assert len(cal.output) == 20 and len(cal.output.characteristics) == 6
 
 
 def test_mock_snakemake_rejects_wrong_wildcards(common, in_root):

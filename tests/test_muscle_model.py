@@ -269,7 +269,8 @@ def test_sensitivity_directions(model, solver, standing):
     passive multifidus force replaces active extensor force; the paper reports a doubling. On ALL muscles the
     exactly bilateral model's symmetric equilibrium becomes laterally unstable and the SQP does not certify
     stationarity, so that posture is flagged. See sensitivity_idp.csv.)"""
-    from lumbar.muscles.muscle_model import run_sensitivity, validation
+    from lumbar.muscles.muscle_sensitivity import run_sensitivity
+    from lumbar.muscles.muscle_validation import validation
     rows = pd.DataFrame([{"parameter": "ssl_um", "value": 2.0, "ssl_um": np.nan, "group_scope": "EXT+PS",
                           "posture": "standing"},
                          {"parameter": "pennation_deg", "value": 0.0, "ssl_um": np.nan, "group_scope": "ALL",
@@ -294,7 +295,7 @@ def test_sensitivity_direction_classification():
     """Each paper statement gets the direction it asserts; a posture not reached counts as not reached, a
     reached one whose optimum is not certified keeps its direction (marked); an increase needs more than 5 %,
     "unchanged" statements use their own tolerance."""
-    from lumbar.muscles.muscle_model import paper_direction, sensitivity_directions
+    from lumbar.muscles.muscle_sensitivity import paper_direction, sensitivity_directions
     assert paper_direction("IDP doubled (Sect. 3.2.1)") == "increase"
     assert paper_direction("36 deg flexion not reached (Sect. 3.2.1)") == "not_reached"
     assert paper_direction("change <= 20% (Sect. 3.2.2)") == "unchanged"
@@ -320,7 +321,7 @@ def test_capacity_check_balances_and_scales(model, standing):
     active fascicles, the level's tissues) sum to zero; moving the 190 N crate 30 cm further forward adds
     190 N x 0.30 m at every level; doubling the specific tension doubles the active extension capacity and
     halves the demand ratio, leaving the needed specific tension unchanged."""
-    from lumbar.muscles.muscle_model import capacity_check
+    from lumbar.muscles.muscle_validation import capacity_check
     c0 = capacity_check(model, standing.x, standing.R, "upright_standing", standing.a)
     assert np.abs(c0["balance_nm"]).max() < 1e-4
     assert (c0["extension_capacity_nm"] > 20).all() and (c0["flexion_capacity_nm"] > 20).all()
@@ -347,7 +348,7 @@ def test_reject_bad_in_vivo_table(tmp_path):
 
 
 def test_invalid_solver_settings_rejected(model):
-    from lumbar.muscles.muscle_model import sensitivity_rows
+    from lumbar.muscles.muscle_sensitivity import sensitivity_rows
     from lumbar.muscles.redundancy import RedundancySolver, Weights
     with pytest.raises(ValueError, match="activation"):
         Weights(activation=-1.0)
@@ -363,7 +364,7 @@ def test_validation_metrics_with_and_without_flagged_postures(model, baseline):
     """R2/RMSE are over converged activities only; r2_all/rmse_all_mpa add the IDP of flagged postures."""
     from dataclasses import replace
 
-    from lumbar.muscles.muscle_model import validation
+    from lumbar.muscles.muscle_validation import validation
     st, fl = baseline["standing"], baseline["flexion"]
     sols = [st, fl, st, replace(fl, converged=False)]
     names = ["upright_standing", "flexion_36deg", "crate_close", "crate_far"]

@@ -134,7 +134,8 @@ def test_full_step_first_line_search_reaches_the_same_optimum(model):
     """The line search tries the full step alone first and the shorter ones only where it fails (for
     speed); evaluating every step length at once (``full_step_first`` False, the former search) chooses the same
     step, so both reach the same optimum from the same warm start (four standing Sobol samples, SQP alone)."""
-    from lumbar.muscles.muscle_model import POSTURES, make_solver, sobol_evaluate, solve_postures, sobol_samples
+    from lumbar.muscles.muscle_model import POSTURES, make_solver, solve_postures
+    from lumbar.muscles.muscle_sensitivity import sobol_evaluate, sobol_samples
     out = []
     X = sobol_samples(16, 20261123)
     for first in (True, False):

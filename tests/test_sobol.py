@@ -124,7 +124,8 @@ def test_to_unit_rejects_bad_bounds():
 
 # ---------------------------------------------------------------------- the muscle study's Sobol functions
 def test_sobol_samples_and_chunks():
-    from lumbar.muscles.muscle_model import PARAMETERS, SOBOL_BOUNDS, sobol_chunk_rows, sobol_samples
+    from lumbar.muscles.muscle_model import PARAMETERS
+    from lumbar.muscles.muscle_sensitivity import SOBOL_BOUNDS, sobol_chunk_rows, sobol_samples
     X = sobol_samples(16, 1)
     assert X.shape == (16, len(PARAMETERS)) and np.array_equal(X, sobol_samples(16, 1))
     for k, name in enumerate(PARAMETERS):
@@ -140,7 +141,8 @@ def test_sobol_samples_and_chunks():
 
 def _synthetic_samples(n, posture="standing", fail=()):
     """A sample table as sobol_evaluate writes it, with an additive IDP in (scaled) SSL and SpT."""
-    from lumbar.muscles.muscle_model import PARAMETERS, sobol_samples
+    from lumbar.muscles.muscle_model import PARAMETERS
+    from lumbar.muscles.muscle_sensitivity import sobol_samples
     X = sobol_samples(n, 9)
     d = pd.DataFrame(X, columns=list(PARAMETERS))
     d.insert(0, "posture", posture)
@@ -155,7 +157,8 @@ def _synthetic_samples(n, posture="standing", fail=()):
 
 
 def test_sobol_indices_table():
-    from lumbar.muscles.muscle_model import PARAMETERS, sobol_indices
+    from lumbar.muscles.muscle_model import PARAMETERS
+    from lumbar.muscles.muscle_sensitivity import sobol_indices
     s = pd.concat([_synthetic_samples(64), _synthetic_samples(64, "flexion", fail=(5, 6))], ignore_index=True)
     df = sobol_indices(s, 64, 2, seed=1, n_bootstrap=100)
     assert len(df) == 2 * len(PARAMETERS)
@@ -172,7 +175,7 @@ def test_sobol_indices_table():
 
 
 def test_sobol_indices_lowers_the_degree_and_checks_rows():
-    from lumbar.muscles.muscle_model import sobol_indices
+    from lumbar.muscles.muscle_sensitivity import sobol_indices
     s = _synthetic_samples(16, fail=(0, 1))          # 14 reached < 21 terms of degree 2: degree 1 (6 terms)
     df = sobol_indices(s, 16, 2, seed=1, n_bootstrap=20)
     assert (df["degree"] == 1).all() and (df["n_terms"] == 6).all() and df["S1"].notna().all()

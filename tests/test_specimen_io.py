@@ -226,7 +226,7 @@ def test_visible_human_meshes_read_with_pattern():
 def test_skipped_stages():
     assert S.skipped_stages(["L1", "L2", "L3", "L4", "L5", "S1"]) == []
     no_s1 = dict(S.skipped_stages(["L1", "L2", "L3", "L4", "L5"]))
-    assert set(no_s1) == {"l2s1", "load_sharing.other_levels L5-S1"}
+    assert set(no_s1) == {"l2s1", "muscle_model", "load_sharing.other_levels L5-S1"}
     assert "no sacrum" in no_s1["l2s1"] and "L2-S1" in no_s1["l2s1"]
     no_l45 = dict(S.skipped_stages(["L1", "L2", "L3"]))
     assert {"fsu", "stepwise_reduction", "calibration"} <= set(no_l45)

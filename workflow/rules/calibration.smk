@@ -24,7 +24,7 @@ rule calibrate:
         solver=config["solver"],
         sr=config["stepwise_reduction"],
     script:
-        "../scripts/calibration.py"
+        "../scripts/calibrate.py"
 
 
 rule fig4_disc_torque_angle:
@@ -38,7 +38,7 @@ rule fig4_disc_torque_angle:
     conda:
         "../envs/lumbar.yaml"
     script:
-        "../scripts/calibration.py"
+        "../scripts/fig4_disc_torque_angle.py"
 
 
 rule fig5_ligament_characteristics:
@@ -52,7 +52,7 @@ rule fig5_ligament_characteristics:
     conda:
         "../envs/lumbar.yaml"
     script:
-        "../scripts/calibration.py"
+        "../scripts/fig5_ligament_characteristics.py"
 
 
 # What the data told us: every calibrated parameter's prior and posterior (Laplace) 90 % interval.

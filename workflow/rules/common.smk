@@ -1,3 +1,4 @@
+import sys
 from glob import glob
 from pathlib import Path
 
@@ -60,7 +61,7 @@ def stage_outputs(stage, rule, **fill):
     res = {}
     for name, o in manifests.rule_outputs(stage, rule).items():
         ps = o.paths(RESULTS, **fill)
-        item = ps if o.expand else ps[0]
+        item = ps if o.listed(**fill) else ps[0]
         if o.directory:
             item = directory(item)
         if o.caption:
@@ -118,6 +119,146 @@ config.clear()
 config.update(_canonical_config)
 
 
+# ---- the geometry: a user's specimen (geometry.kind meshes | label_volume) is checked here, before any job
+# (lumbar.geometry.configured.check_config: file names, levels present, units, axes, fsu.level among the units);
+# the stages it cannot feed are said once, here, and left out of the default target (runnable_outputs, below)
+from lumbar.geometry.configured import (
+    SPECIMEN_KINDS,
+    check_config as check_geometry_config,
+    specimen_inputs,
+)
+from lumbar.geometry.core import GeometryError
+
+# the specimen keys left at null are dropped: a Visible Human or myo-sim run keeps the rule params it had before
+config["geometry"] = {k: v for k, v in config["geometry"].items() if v is not None}
+SPECIMEN = config["geometry"]["kind"] in SPECIMEN_KINDS
+try:
+    SKIPPED_STAGES = check_geometry_config(
+        config["geometry"],
+        config["fsu"]["level"],
+        config["load_sharing"]["other_levels"],
+    )
+    SPECIMEN_INPUTS = specimen_inputs(config["geometry"]) if SPECIMEN else None
+except GeometryError as _e:
+    raise WorkflowError(f"Error in config geometry: {_e}") from None
+if SKIPPED_STAGES:
+    print(
+        f"Geometry {config['geometry']['path']}: units {', '.join(SPECIMEN_INPUTS.units_present)}; skipped stages:\n"
+        + "".join(f"  {st}: {why}\n" for st, why in SKIPPED_STAGES),
+        file=sys.stderr,
+    )
+    _missing_units = {
+        st.split(" ")[1]
+        for st, _ in SKIPPED_STAGES
+        if st.startswith("load_sharing.other_levels ")
+    }
+    config["load_sharing"]["other_levels"] = [
+        u for u in config["load_sharing"]["other_levels"] if u not in _missing_units
+    ]
+# a specimen calibrated on another unit than L4-L5: its real targets are Yamamoto et al.'s values of that unit
+# (rule specimen_real_targets) where the config keeps the default L4-L5 table
+from lumbar.inputs.config import schema_defaults
+
+SPECIMEN_REAL_TARGETS = out("specimen", "real_targets")
+if (
+    SPECIMEN
+    and config["fsu"]["level"] != "L4-L5"
+    and config["stepwise_reduction"]["real_targets"]
+    == schema_defaults("stepwise_reduction", "real_targets")
+):
+    config["stepwise_reduction"]["real_targets"] = [SPECIMEN_REAL_TARGETS]
+    print(
+        f"Calibrated unit {config['fsu']['level']}: real targets {SPECIMEN_REAL_TARGETS} (Yamamoto et al. 1989, "
+        "data/experiments/yamamoto1989_levels_original_text.csv)",
+        file=sys.stderr,
+    )
+
+# the geometry rule's figures (one per unit present) and, for a label volume, its meshes (the specimen manifest's
+# roles qa and meshes, filled by specimen.smk with these lists)
+SPECIMEN_UNITS = list(SPECIMEN_INPUTS.units_present) if SPECIMEN else []
+SPECIMEN_MESHES = (
+    [f"{v}.stl" for v in SPECIMEN_INPUTS.vertebrae]
+    + ["meshing_report.csv", "resolution_limits.csv"]
+    if SPECIMEN and SPECIMEN_INPUTS.kind == "label_volume"
+    else []
+)
+SPECIMEN_QA_FIGURES = outs("specimen", "qa", unit=SPECIMEN_UNITS)
+SPECIMEN_LABEL_MESHES = outs("specimen", "meshes", mesh=SPECIMEN_MESHES)
+
+# outputs of the stages a specimen cannot feed (lumbar.geometry.specimen_io.skipped_stages), dropped from the default
+# target by runnable_outputs(): path fragments per stage, with the stages that read their tables
+SKIPPED_STAGE_OUTPUTS = {
+    # the L2-S1 model: Table 5, Figs. 3 and 7, the IDP surrogate; the load-sharing summary, the real-data validation
+    # and the discrepancy discovery (its in-vitro IDP experiment and benchmark: every discrepancy output) read its tables
+    "l2s1": (
+        "l2s1",
+        "table5",
+        "fig3_",
+        "fig7_",
+        "idp_",
+        "load_sharing_summary",
+        "l2s1_cables",
+        "load_sharing_curves.png",
+        "load_sharing_shares.png",
+        "validation_real_data",
+        "validation_scoreboard",
+        "discrepancy",
+    ),
+    "muscle_model": (
+        "muscle",
+        "in_vivo",
+        "flexion_relaxation",
+        "sensitivity_",
+        "sobol",
+        "validation_real_data",
+        "validation_scoreboard",
+    ),
+    # the paper-style report and the documents read every stage's tables
+    "report": (manifests.folder("report", "html"),),
+    "load_sharing.other_levels": (
+        "multilevel",
+        "validation_real_data",
+        "validation_scoreboard",
+    ),
+}
+
+
+def runnable_outputs(paths):
+    """``paths`` without the outputs of the stages the configured specimen cannot feed (SKIPPED_STAGES; the report
+    with them). Other levels that are missing are left out of load_sharing.other_levels (above); with none
+    left, the other-level validation is skipped."""
+    stages = {
+        s for s, _ in SKIPPED_STAGES if not s.startswith("load_sharing.other_levels")
+    }
+    if not config["load_sharing"]["other_levels"]:
+        stages.add("load_sharing.other_levels")
+    if stages:
+        stages.add("report")
+    frags = [f for s in stages for f in SKIPPED_STAGE_OUTPUTS.get(s, ())]
+    # the run prefix (the run's results root) is not part of what is matched: a run named "muscle_test" keeps its
+    # outputs (the fragments are matched against the default root's paths)
+    prefix = f"{RESULTS}/" if RESULTS != manifests.RESULTS_DIR else None
+
+    def key(p):
+        return (
+            f"{manifests.RESULTS_DIR}/{p[len(prefix):]}"
+            if prefix and p.startswith(prefix)
+            else p
+        )
+
+    return [p for p in paths if not any(f in key(p) for f in frags)]
+
+
+def specimen_inputs_files(wildcards):
+    """The specimen's files (every vertebra's mesh or mask, a label table)."""
+    si = SPECIMEN_INPUTS
+    if si is None:  # not a specimen: the rule is never requested
+        return []
+    return [str(f) for f in si.files.values()] + (
+        [str(si.label_table)] if si.label_table else []
+    )
+
+
 def final_outputs():
     """Every result the default target builds: the stage manifests' final outputs, the discovery runs of this
     configuration, and the documents whose numbers are read from the results (rule docs_numbers).
@@ -133,8 +274,13 @@ def final_outputs():
 
 def geometry_inputs(wildcards):
     """Files the geometry is read from: the Visible Human directory, or the project landmarks
-    that go with the myo-sim meshes (the meshes themselves come with the pinned myo-sim package).
+    that go with the myo-sim meshes (the meshes themselves come with the pinned myo-sim package), or for a user's
+    specimen the table of rule specimen_geometry (workflow/rules/specimen.smk).
     """
+    if (
+        SPECIMEN
+    ):  # the specimen rule's table: the specimen is built (and cached) once, before the jobs that load it
+        return [out("specimen", "levels")]
     if config["geometry"]["kind"] == "visible_human":
         # every file of the folder (not the folder: its mtime does not change when a file is edited in place)
         files = sorted(
@@ -441,3 +587,14 @@ def discovery_real_data_runs(wildcards):
     if out("discovery", "in_vivo.discovery") in discovery_final_outputs():
         cases.append("in_vivo")
     return [out("discovery", f"{c}.discovery") for c in cases]
+
+
+def discovery_real_misses_runs(wildcards):
+    """real_case.json of every real-miss case this configuration can pose (the in-vivo one when the muscle model's
+    tables are built or present, as for discovery_in_vivo)."""
+    cases = ["facet_share"]
+    if config["load_sharing"]["other_levels"]:
+        cases.append("multilevel_rom")
+    if out("discovery", "in_vivo.discovery") in discovery_final_outputs():
+        cases.append("in_vivo_lying")
+    return [out("discovery", f"{c}.real_case") for c in cases]

@@ -27,7 +27,7 @@ rule discovery_specimen_bank:
     params:
         cfg=discovery_config,
     script:
-        "../scripts/discover.py"
+        "../scripts/discovery_specimen_bank.py"
 
 
 # the virtual specimens the IDP fixtures of the benchmark are drawn from (a stream disjoint from the null bank's),
@@ -54,7 +54,7 @@ rule discovery_fixture_specimens_idp:
     params:
         cfg=discovery_config,
     script:
-        "../scripts/discover.py"
+        "../scripts/discovery_fixture_specimens_idp.py"
 
 
 rule discovery_idp_model:
@@ -77,7 +77,7 @@ rule discovery_idp_model:
     params:
         cfg=discovery_config,
     script:
-        "../scripts/discover.py"
+        "../scripts/discovery_idp_model.py"
 
 
 rule discovery_default:
@@ -101,7 +101,7 @@ rule discovery_default:
     params:
         cfg=discovery_config,
     script:
-        "../scripts/discover.py"
+        "../scripts/discovery_default.py"
 
 
 rule discovery_va_artefact:
@@ -124,7 +124,7 @@ rule discovery_va_artefact:
     params:
         cfg=discovery_config,
     script:
-        "../scripts/discover.py"
+        "../scripts/discovery_va_artefact.py"
 
 
 # real data: the published intact L4-L5 ROM (discovery.intact_rom)
@@ -150,13 +150,14 @@ rule discovery_intact_rom:
     params:
         cfg=discovery_config,
     script:
-        "../scripts/discover.py"
+        "../scripts/discovery_intact_rom.py"
 
 
 # every discovery on real measurements in one table (the report's "What the model is missing, on real data")
 rule discovery_real_data_summary:
     input:
         runs=discovery_real_data_runs,
+        cases=discovery_real_misses_runs,
     output:
         **stage_outputs("discovery", "discovery_real_data_summary"),
     log:
@@ -165,8 +166,9 @@ rule discovery_real_data_summary:
         "../envs/lumbar.yaml"
     params:
         cfg=discovery_config,
+        adopted=config["adopted_effects"],
     script:
-        "../scripts/discover.py"
+        "../scripts/discovery_real_data_summary.py"
 
 
 # chains on the muscle model by path: its rules produce these two tables
@@ -185,7 +187,7 @@ rule discovery_in_vivo:
     params:
         cfg=discovery_config,
     script:
-        "../scripts/discover.py"
+        "../scripts/discovery_in_vivo.py"
 
 
 rule discovery_benchmark_job:
@@ -211,7 +213,7 @@ rule discovery_benchmark_job:
     params:
         cfg=discovery_config,
     script:
-        "../scripts/discover.py"
+        "../scripts/discovery_benchmark_job.py"
 
 
 rule discovery_benchmark:
@@ -226,4 +228,70 @@ rule discovery_benchmark:
     params:
         cfg=discovery_config,
     script:
-        "../scripts/discover.py"
+        "../scripts/discovery_benchmark.py"
+
+
+# real misses posed (lumbar.discovery.real_data): the Yamamoto ROM of the levels the calibration did not fit, the
+# in-vivo IDP with the lying postures, the facet share of compression; each also at half and double its assumed spread
+rule discovery_multilevel_rom:
+    input:
+        geometry_inputs,
+        measured="data/experiments/yamamoto1989_levels_original_text.csv",
+        multilevel=out("validation", "multilevel_rom"),
+        characteristics=characteristics_dir(),
+        characteristic_tables=characteristic_tables(
+            config["characteristics"]["data_dir"]
+        ),
+        calibrated=discovery_calibrated_tables(),
+    output:
+        **discovery_case_outputs("multilevel_rom"),
+    log:
+        log_file("discovery_multilevel_rom"),
+    benchmark:
+        benchmark_file("discovery_multilevel_rom")
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        cfg=discovery_config,
+        levels=config["load_sharing"]["other_levels"],
+        adopted=config["adopted_effects"],
+    script:
+        "../scripts/discovery_multilevel_rom.py"
+
+
+rule discovery_in_vivo_lying:
+    input:
+        measured=out("muscle_model", "validation"),
+        segment_loads=config["discovery"]["in_vivo_segment_loads"],
+        lying="data/in_vivo/wilke1999_idp_lying_original_text.csv",
+        compression=out("load_sharing", "compression", set="calibrated"),
+    output:
+        **discovery_case_outputs("in_vivo_lying"),
+    log:
+        log_file("discovery_in_vivo_lying"),
+    benchmark:
+        benchmark_file("discovery_in_vivo_lying")
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        cfg=discovery_config,
+        adopted=config["adopted_effects"],
+    script:
+        "../scripts/discovery_in_vivo_lying.py"
+
+
+rule discovery_facet_share:
+    input:
+        literature="data/load_sharing/load_sharing_literature.csv",
+        compression=out("load_sharing", "compression", set="calibrated"),
+    output:
+        **stage_outputs("discovery", "discovery_facet_share"),
+    log:
+        log_file("discovery_facet_share"),
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        cfg=discovery_config,
+        adopted=config["adopted_effects"],
+    script:
+        "../scripts/discovery_facet_share.py"

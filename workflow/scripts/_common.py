@@ -213,13 +213,13 @@ def set_fsu(smk, **kw):
     from ``params.geometry``, level and stiffness overrides from ``params.fsu``, the set read from the folder of
     ``input.characteristics`` (a file or the folder); ``kw`` goes to ``lumbar.experiments.fsu.build_fsu``."""
     from lumbar.experiments.fsu import build_fsu  # noqa: PLC0415 - the library only for the jobs that build a unit
-    from lumbar.geometry import load_geometry  # noqa: PLC0415
+    from lumbar.geometry.configured import load_configured  # noqa: PLC0415
     from lumbar.inputs.characteristics import load_characteristic_set  # noqa: PLC0415
 
     g, f = smk.params.geometry, smk.params.fsu
     data_dir = Path(smk.input.characteristics)
     data_dir = data_dir.parent if data_dir.is_file() else data_dir
-    geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
+    geo = load_configured(g, levels=[f["level"]])
     cs = load_characteristic_set(smk.wildcards.set, data_dir=data_dir)
     fsu = build_fsu(geo, cs, f["level"], facet_stiffness=f.get("facet_stiffness_n_per_m"),
                     k_shear=f.get("disc_shear_stiffness_n_per_m"), **kw)

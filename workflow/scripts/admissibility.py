@@ -15,12 +15,12 @@ import pandas as pd  # noqa: E402
 
 from lumbar.experiments import admissibility as ADM  # noqa: E402
 from lumbar.experiments.calibration import read_prior_set  # noqa: E402
-from lumbar.geometry import load_geometry  # noqa: E402
+from lumbar.geometry.configured import load_configured  # noqa: E402
 from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 
 g, f = snakemake.params.geometry, snakemake.params.fsu
-geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
+geo = load_configured(g, levels=[f["level"]])
 published = load_characteristic_set("calibrated", data_dir=Path(_common.as_list(snakemake.input.published)[0]).parent)
 cal = load_characteristic_set("calibrated", data_dir=Path(_common.as_list(snakemake.input.characteristics)[0]).parent)
 on_elongation = any(getattr(law, "law_length_m", None) is not None for law in cal.ligaments.values())

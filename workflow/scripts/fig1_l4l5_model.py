@@ -9,13 +9,13 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _common.py
 import _common  # noqa: E402
 
-from lumbar.geometry import load_geometry  # noqa: E402
+from lumbar.geometry.configured import load_configured  # noqa: E402
 from lumbar.plots.render import render_fsu  # noqa: E402
 
 
 def main(snakemake, log):
     g = snakemake.params.geometry
-    geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None)
+    geo = load_configured(g)
     log.info("geometry %r: vertebrae %s, levels %s", geo.name, sorted(geo.vertebrae), sorted(geo.levels))
     used = render_fsu(geo, snakemake.params.level, snakemake.output[0], backend=snakemake.params.backend)
     log.info("rendered %s with %s to %s", snakemake.params.level, used, snakemake.output[0])

@@ -10,14 +10,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _c
 import _common  # noqa: E402
 
 from lumbar.experiments import l2s1  # noqa: E402
-from lumbar.geometry import load_geometry  # noqa: E402
+from lumbar.geometry.configured import load_configured  # noqa: E402
 from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
 from lumbar.plots.render_spine import render_spine  # noqa: E402
 
 
 def main(snakemake, log):
     g = snakemake.params.geometry
-    geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=list(l2s1.LEVELS))
+    geo = load_configured(g, levels=list(l2s1.LEVELS))
     cab = l2s1.build_l2s1(geo, load_characteristic_set("rupp2015"), l2s1.derive_cables(snakemake.input.cables)).cables
     used = render_spine(geo, l2s1.LEVELS, snakemake.output[0], cables=cab, backend=snakemake.params.render["backend"])
     log.info("rendered %s with %s", snakemake.output[0], used)

@@ -14,11 +14,11 @@ snakemake, log = _common.start(globals())
 
 from lumbar.inputs.characteristics import resolve_characteristic_set  # noqa: E402
 from lumbar.experiments.fsu import build_fsu, range_of_motion  # noqa: E402
-from lumbar.geometry import load_geometry  # noqa: E402
+from lumbar.geometry.configured import load_configured  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 
 g, f, s = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solver
-geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
+geo = load_configured(g, levels=[f["level"]])
 tables = []
 for name in snakemake.params.sets:
     cal = _common.as_list(snakemake.input.calibrated)

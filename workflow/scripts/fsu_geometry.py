@@ -8,13 +8,14 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _common.py
 import _common  # noqa: E402
 
-from lumbar.geometry import load_geometry, summary_table  # noqa: E402
+from lumbar.geometry import summary_table  # noqa: E402
+from lumbar.geometry.configured import load_configured  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 
 
 def main(snakemake, log):
     g = snakemake.params.geometry
-    geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None)
+    geo = load_configured(g)
     log.info("geometry %r: vertebrae %s, levels %s", geo.name, sorted(geo.vertebrae), sorted(geo.levels))
     table = summary_table(geo)
     write_table_atomic(table, snakemake.output[0])

@@ -11,7 +11,7 @@ import _common  # noqa: E402
 
 from lumbar.experiments import l2s1  # noqa: E402
 from lumbar.experiments.virtual_experiment import idp_table  # noqa: E402
-from lumbar.geometry import load_geometry  # noqa: E402
+from lumbar.geometry.configured import load_configured  # noqa: E402
 from lumbar.inputs.characteristics import resolve_characteristic_set  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 
@@ -24,7 +24,7 @@ def main(snakemake, log):
     log.info("generator set %s from %s", p["generator_set"],
              Path(cal[0]).parent if cal and p["generator_set"] == "calibrated" else snakemake.input.characteristics)
     g = snakemake.params.geometry
-    geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=list(l2s1.LEVELS))
+    geo = load_configured(g, levels=list(l2s1.LEVELS))
     df = idp_table(geo, cs, snakemake.params.seed, n_specimens=p["n_specimens"], variation=p["variation"],
                    noise_sd_mpa=p["noise_sd_mpa"], cables=l2s1.derive_cables(snakemake.input.cables),
                    idp_formula=p["idp_formula"], k_shear=snakemake.params.fsu.get("disc_shear_stiffness_n_per_m"),

@@ -12,7 +12,7 @@ import _common  # noqa: E402
 from lumbar.experiments import l2s1  # noqa: E402
 from lumbar.experiments.calibration import shift_parameter  # noqa: E402
 from lumbar.experiments.posterior import table_bands_from_files  # noqa: E402
-from lumbar.geometry import load_geometry  # noqa: E402
+from lumbar.geometry.configured import load_configured  # noqa: E402
 from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 
@@ -21,7 +21,7 @@ KEYS = ("muscle_setup", "load_case")
 
 def main(snakemake, log):
     g, f, s, p = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solver, snakemake.params.l2s1
-    geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=list(l2s1.LEVELS))
+    geo = load_configured(g, levels=list(l2s1.LEVELS))
     cs = load_characteristic_set("calibrated", data_dir=Path(_common.as_list(snakemake.input.characteristics)[0]).parent)
     cables = l2s1.derive_cables(snakemake.input.cables)
 

@@ -11,7 +11,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _c
 import _common  # noqa: E402
 
 from lumbar.experiments import l2s1  # noqa: E402
-from lumbar.geometry import load_geometry  # noqa: E402
+from lumbar.geometry.configured import load_configured  # noqa: E402
 from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 
@@ -24,7 +24,7 @@ def main(snakemake, log):
     log.info("set %s: characteristics from %s", name, d)
     cs = load_characteristic_set(name, data_dir=d)
     g = snakemake.params.geometry
-    geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=list(l2s1.LEVELS))
+    geo = load_configured(g, levels=list(l2s1.LEVELS))
     df, sol = l2s1.run_set(geo, cs, l2s1.derive_cables(snakemake.input.cables), idp_formula=p["idp_formula"],
                            idp_kwargs={"area_m2": p["disc_area_m2"]} if p["idp_formula"] == "paper2" else None,
                            facet_stiffness=snakemake.params.fsu["facet_stiffness_n_per_m"],

@@ -15,7 +15,7 @@ from lumbar.experiments import load_sharing as LS  # noqa: E402
 from lumbar.experiments.calibration import shift_parameter  # noqa: E402
 from lumbar.experiments.fsu import build_fsu  # noqa: E402
 from lumbar.experiments.posterior import BAND_COLUMNS, curve_bands, read_posterior  # noqa: E402
-from lumbar.geometry import load_geometry  # noqa: E402
+from lumbar.geometry.configured import load_configured  # noqa: E402
 from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 
@@ -28,7 +28,7 @@ def main(snakemake, log):
         write_table_atomic(pd.DataFrame(columns=list(BAND_COLUMNS)), snakemake.output.bands)
         return
     names, cov = post
-    geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
+    geo = load_configured(g, levels=[f["level"]])
     cs = load_characteristic_set("calibrated", data_dir=Path(_common.as_list(snakemake.input.characteristics)[0]).parent)
     moments = np.round(np.arange(0.0, ls["max_moment_nm"] + 1e-9, ls["moment_step_nm"]), 6)
 

@@ -21,7 +21,7 @@ from lumbar.experiments import validation as V  # noqa: E402
 from lumbar.experiments.fsu import build_fsu  # noqa: E402
 from lumbar.experiments.load_sharing import moment_rotation_curves  # noqa: E402
 from lumbar.experiments.posterior import read_posterior  # noqa: E402
-from lumbar.geometry import load_geometry  # noqa: E402
+from lumbar.geometry.configured import load_configured  # noqa: E402
 from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 from lumbar.plots.validation import plot_multilevel  # noqa: E402
@@ -30,7 +30,7 @@ from lumbar.plots.validation import plot_multilevel  # noqa: E402
 def main(snakemake, log):
     g, f, ls = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.ls
     levels = [lv for lv in ls["other_levels"] if lv != f["level"]]
-    geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None,
+    geo = load_configured(g,
                         levels=levels + [f["level"]])
     published = load_characteristic_set("calibrated",
                                         data_dir=Path(_common.as_list(snakemake.input.published)[0]).parent)

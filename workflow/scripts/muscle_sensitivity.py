@@ -13,18 +13,19 @@ import time  # noqa: E402
 
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 from lumbar.muscles import muscle_model as mm  # noqa: E402
+from lumbar.muscles import muscle_sensitivity as sens  # noqa: E402
 
 
 def main(snakemake, log):
     p = snakemake.params.muscle_model
     param, ssl = snakemake.wildcards.parameter, snakemake.wildcards.ssl_um
     s = p["sensitivity"]
-    rows = mm.sensitivity_rows(param, None if ssl == "none" else float(ssl), s[param], s["scopes"], s["postures"])
+    rows = sens.sensitivity_rows(param, None if ssl == "none" else float(ssl), s[param], s["scopes"], s["postures"])
     model = mm.model_from_config(p, Path(_common.as_list(snakemake.input.passive)[0]).parent)
     solver = mm.make_solver(model, p["solver"])
     t0 = time.perf_counter()
     log.info("chunk %s (ssl %s): %d scenarios", param, ssl, len(rows))
-    out = mm.run_sensitivity(model, solver, rows, mm.read_baseline(snakemake.input.baseline), p["disc_area_m2"],
+    out = sens.run_sensitivity(model, solver, rows, mm.read_baseline(snakemake.input.baseline), p["disc_area_m2"],
                              label=f"sensitivity {param} (ssl {ssl})")
     log.info("chunk %s (ssl %s): %d scenarios in %.1f s, %d not reached, %d reached but not certified "
              "(max KKT residual %.1e)", param, ssl, len(out), time.perf_counter() - t0, int((~out["reached"]).sum()),

@@ -14,6 +14,7 @@ import pandas as pd  # noqa: E402
 
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 from lumbar.muscles import muscle_model as mm  # noqa: E402
+from lumbar.muscles import muscle_sensitivity as sens  # noqa: E402
 from lumbar.plots.muscle_model import plot_sensitivity  # noqa: E402
 
 
@@ -29,7 +30,7 @@ def main(snakemake, log):
                               for q in df["posture"]]
     df["change_pct"] = 100 * (df["idp_mpa"] / df["baseline_idp_mpa"] - 1)
     write_table_atomic(df, snakemake.output[0])
-    dirs = mm.sensitivity_directions(df)
+    dirs = sens.sensitivity_directions(df)
     write_table_atomic(dirs, snakemake.output[-1])
     log.info("paper statements reproduced in direction: %d of %d (%d reached postures with uncertified optimum)",
              int(dirs["agrees"].sum()), len(dirs), int((dirs["reached"] & ~dirs["certified"]).sum()))

@@ -13,7 +13,7 @@ import time  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
-from lumbar.muscles import muscle_model as mm  # noqa: E402
+from lumbar.muscles import muscle_sensitivity as sens  # noqa: E402
 from lumbar.plots.muscle_model import plot_sobol  # noqa: E402
 
 
@@ -22,7 +22,7 @@ def main(snakemake, log):
     sb = p["sobol"]
     samples = pd.concat([pd.read_csv(f) for f in snakemake.input.chunks], ignore_index=True)
     t0 = time.perf_counter()
-    df = mm.sobol_indices(samples, sb["n_train"], sb["degree"], snakemake.params.seed, sb.get("n_bootstrap", 500))
+    df = sens.sobol_indices(samples, sb["n_train"], sb["degree"], snakemake.params.seed, sb.get("n_bootstrap", 500))
     log.info("PCE fits and %d bootstrap refits per posture in %.1f s", sb.get("n_bootstrap", 500),
              time.perf_counter() - t0)
     for post, d in df.groupby("posture", sort=False):
@@ -32,7 +32,7 @@ def main(snakemake, log):
         log.info("Sobol %s: PCE degree %d on %d of %d samples, Q2_loo = %.3f%s; top first-order index %s S1 = %.3f "
                  "[%.3f, %.3f] (bootstrap 95 %%; width %.3f: %s), sum S1 = %.2f; %d not reached, %d not certified",
                  post, int(r["degree"]), int(r["n_fit"]), int(r["n_train"]), r["q2_loo"],
-                 "" if r["fit_ok"] else f" < {mm.SOBOL_Q2_MIN} (poor fit)", top["parameter"], top["S1"],
+                 "" if r["fit_ok"] else f" < {sens.SOBOL_Q2_MIN} (poor fit)", top["parameter"], top["S1"],
                  top["S1_lo"], top["S1_hi"], r["top_s1_width"], "stable" if r["stable"] else "NOT stable",
                  d["S1"].sum(), int(r["n_failed"]), int(r["n_uncertified"]))
     write_table_atomic(df, snakemake.output[0])

@@ -13,20 +13,21 @@ import time  # noqa: E402
 
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 from lumbar.muscles import muscle_model as mm  # noqa: E402
+from lumbar.muscles import muscle_sensitivity as sens  # noqa: E402
 
 
 def main(snakemake, log):
     p = snakemake.params.muscle_model
     posture, k = snakemake.wildcards.posture, int(snakemake.wildcards.chunk)
     sb = p["sobol"]
-    X = mm.sobol_samples(sb["n_train"], snakemake.params.seed)
-    rows = mm.sobol_chunk_rows(len(X), sb.get("chunks", 1), k)
+    X = sens.sobol_samples(sb["n_train"], snakemake.params.seed)
+    rows = sens.sobol_chunk_rows(len(X), sb.get("chunks", 1), k)
     model = mm.model_from_config(p, Path(_common.as_list(snakemake.input.passive)[0]).parent)
     solver = mm.make_solver(model, p["solver"])
     t0 = time.perf_counter()
     log.info("Sobol %s, chunk %d of %d: samples %d-%d of %d (PCE training design, n_train %d)", posture, k + 1,
              sb.get("chunks", 1), rows[0], rows[-1], len(X), sb["n_train"])
-    out = mm.sobol_evaluate(model, solver, mm.read_baseline(snakemake.input.baseline), X, rows, posture, sb["scope"],
+    out = sens.sobol_evaluate(model, solver, mm.read_baseline(snakemake.input.baseline), X, rows, posture, sb["scope"],
                             p["disc_area_m2"], label=f"sobol {posture} chunk {k + 1}/{sb.get('chunks', 1)}")
     # one summary line: samples not reached are left out of the expansion, reached but uncertified ones are kept
     # (n_failed / n_uncertified of sobol_indices.csv): results of the study, not something to act on

@@ -15,6 +15,7 @@ import time  # noqa: E402
 
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 from lumbar.muscles import muscle_model as mm  # noqa: E402
+from lumbar.muscles import muscle_validation as mv  # noqa: E402
 from lumbar.plots.muscle_model import plot_in_vivo_validation  # noqa: E402
 
 
@@ -39,13 +40,13 @@ def main(snakemake, log):
         log.info("%s: converged=%s reached=%s certified=%s KKT residual %.1e, residual %.1e N %.1e N*m, tracking "
                  "error %.3f deg, %d iterations %s", n, s.converged, s.reached, s.certified, s.kkt_residual,
                  s.residual_force_n, s.residual_moment_nm, s.tracking_error_deg, s.iterations, s.message)
-    seg, val, metrics = mm.validation(model, sols, names, mm.read_in_vivo(snakemake.input.in_vivo), p["disc_area_m2"])
+    seg, val, metrics = mv.validation(model, sols, names, mm.read_in_vivo(snakemake.input.in_vivo), p["disc_area_m2"])
     keep = [n for n in names if n in p["activities"]]
     seg = seg[seg["activity"].isin(keep)]
     val = val[val["activity"].isin(keep)]
-    _, val2, metrics = mm.validation(model, [s for n, s in zip(names, sols) if n in keep], keep,
+    _, val2, metrics = mv.validation(model, [s for n, s in zip(names, sols) if n in keep], keep,
                                      mm.read_in_vivo(snakemake.input.in_vivo), p["disc_area_m2"])
-    fr = mm.flexion_relaxation(model, sols, names)
+    fr = mv.flexion_relaxation(model, sols, names)
     fr = fr[fr["activity"].isin(list(mm.POSTURES.values()))].copy()
     paper = {"upright_standing": (206.0, 0.0, 4.0), "flexion_36deg": (44.0, 334.0, 371.0)}
     fr["paper_extensor_active_n"] = [paper[a][0] for a in fr["activity"]]
@@ -68,7 +69,7 @@ def main(snakemake, log):
     log.info("in-vivo validation: %s", metrics)
     plot_in_vivo_validation(val2, metrics, snakemake.output.figure)        # Fig. 3 analog
     mm.write_baseline(sols, names, snakemake.output.baseline)
-    contact = mm.facet_contact(model, sols, names)
+    contact = mv.facet_contact(model, sols, names)
     contact = contact[contact["activity"].isin(keep)]
     write_table_atomic(contact, snakemake.output.facet_contact)
     for lv, d in contact.groupby("level", sort=False):
@@ -79,7 +80,7 @@ def main(snakemake, log):
     fas["l_ref_m"] = model.props.l_ref_m
     fas["l_opt_m"] = model.props.l_opt_m
     write_table_atomic(fas, snakemake.output.fascicles)
-    cap = mm.capacity_table(model, [s for n, s in zip(names, sols) if n in keep], keep)
+    cap = mv.capacity_table(model, [s for n, s in zip(names, sols) if n in keep], keep)
     write_table_atomic(cap, snakemake.output.capacity)
     short = cap[(cap["pose"] == "own solution") & (cap["demand_ratio"] > 1.0)]
     for _, r in short.iterrows():

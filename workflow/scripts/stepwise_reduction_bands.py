@@ -13,7 +13,7 @@ from lumbar.experiments import stepwise_reduction as sr_mod  # noqa: E402
 from lumbar.experiments.calibration import shift_parameter  # noqa: E402
 from lumbar.experiments.fsu import build_fsu  # noqa: E402
 from lumbar.experiments.posterior import table_bands_from_files  # noqa: E402
-from lumbar.geometry import load_geometry  # noqa: E402
+from lumbar.geometry.configured import load_configured  # noqa: E402
 from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 
@@ -22,7 +22,7 @@ KEYS = ("stage", "direction", "moment_nm")
 
 def main(snakemake, log):
     g, f, s, sr = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solver, snakemake.params.sr
-    geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
+    geo = load_configured(g, levels=[f["level"]])
     cs = load_characteristic_set("calibrated", data_dir=Path(_common.as_list(snakemake.input.characteristics)[0]).parent)
 
     def table_of(c):

@@ -14,14 +14,14 @@ import pandas as pd  # noqa: E402
 
 from lumbar.experiments import validation as V  # noqa: E402
 from lumbar.experiments.stepwise_reduction import read_experiment_table  # noqa: E402
-from lumbar.geometry import load_geometry  # noqa: E402
+from lumbar.geometry.configured import load_configured  # noqa: E402
 from lumbar.inputs.characteristics import load_characteristic_set, resolve_characteristic_set  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 
 
 def main(snakemake, log):
     g, f, sr = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.sr
-    geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
+    geo = load_configured(g, levels=[f["level"]])
     cal_dir = Path(_common.as_list(snakemake.input.calibrated)[0]).parent
     cs = resolve_characteristic_set("calibrated", calibrated_dir=cal_dir)
     rows = V.rom_rows(pd.read_csv(snakemake.input.synopsis), sr["outlier_tolerance_deg"])

@@ -13,12 +13,12 @@ import _common  # noqa: E402
 snakemake, log = _common.start(globals())
 
 from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
-from lumbar.geometry import load_geometry  # noqa: E402
+from lumbar.geometry.configured import load_configured  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 from lumbar.experiments.virtual_experiment import stepwise_reduction_table  # noqa: E402
 
 g, f, s, sr = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solver, snakemake.params.sr
-geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
+geo = load_configured(g, levels=[f["level"]])
 cs = load_characteristic_set(sr["generator_set"], data_dir=snakemake.input.characteristics)
 if sr.get("anchor_generator") and sr.get("real_targets"):
     import pandas as pd  # noqa: E402

@@ -52,8 +52,10 @@ out-of-library causes) is :func:`make_hidden_effect_dataset` / :func:`run_benchm
 Modules: :mod:`.detect` (settings, reading and recognising a measured table), :mod:`.problems` (measured data +
 batched forward model per experiment), :mod:`.specimens` (the banks of virtual specimens and the null tables),
 :mod:`.nuisance` (nuisance explanations), :mod:`.fit` (:func:`discover`: fit, test, name, identifiability),
+:mod:`.decision` (the naming rule and the result record),
 :mod:`.outputs` (output files, :func:`run`, the summary of the real-data discoveries), :mod:`.power_study`
-(the discrepancy benchmark: the discovery's power and false-positive rate on hidden-effect fixtures), :mod:`.cli`
+(the discrepancy benchmark: the discovery's power and false-positive rate on hidden-effect fixtures), :mod:`.jobs`
+(what the workflow's discovery rules share), :mod:`.cli`
 (``python -m lumbar.discovery``); the candidate effects are
 :mod:`lumbar.experiments.effects`, the figures :mod:`lumbar.plots.discovery`. This package re-exports the public names.
 """

@@ -15,7 +15,7 @@ import pandas as pd
 from ..experiments import effects as fx
 from ..inputs.characteristics import resolve_characteristic_set
 from ..experiments.fsu import MAIN_DIRECTIONS, STAGES, build_fsu
-from ..geometry import load_geometry
+from ..geometry.configured import load_configured
 from ..mechanics.idp import DISC_AREA_M2, idp_per_newton
 from ..experiments.l2s1 import LEVELS, derive_cables, run_set
 from ..experiments.stepwise_reduction import scenario_grid
@@ -58,8 +58,8 @@ def _rom_sigma(df, s):
 
 
 @functools.lru_cache(maxsize=4)
-def _fsu_variants(geometry_kind, geometry_path, level, set_name, data_dir, facet_k, k_shear, calibrated_dir=None):
-    geo = load_geometry(geometry_kind, path=geometry_path if geometry_kind == "visible_human" else None, levels=[level])
+def _fsu_variants(geometry, level, set_name, data_dir, facet_k, k_shear, calibrated_dir=None):
+    geo = load_configured(dict(geometry), levels=[level])
     cs = resolve_charset(set_name, data_dir, calibrated_dir)
     return fx.FsuVariants(build_fsu(geo, cs, level, facet_stiffness=facet_k, k_shear=k_shear))
 
@@ -67,7 +67,7 @@ def _fsu_variants(geometry_kind, geometry_path, level, set_name, data_dir, facet
 def fsu_variants_from_config(config):
     g, f = config.get("geometry", {}), config.get("fsu", {})
     s = discovery_settings(config)
-    return _fsu_variants(g.get("kind", "default"), g.get("path"), f.get("level", "L4-L5"), s["characteristic_set"],
+    return _fsu_variants(tuple(sorted({"kind": "default", **g}.items())), f.get("level", "L4-L5"), s["characteristic_set"],
                          (config.get("characteristics") or {}).get("data_dir"), f.get("facet_stiffness_n_per_m"),
                          f.get("disc_shear_stiffness_n_per_m"),
                          (config.get("characteristics") or {}).get("calibrated_dir"))
@@ -234,8 +234,7 @@ def idp_model_table(config):
 def solve_idp_model(config):
     s = discovery_settings(config)
     g, l2 = config.get("geometry", {}), config.get("l2s1", {})
-    geo = load_geometry(g.get("kind", "default"), path=g.get("path") if g.get("kind") == "visible_human" else None,
-                        levels=list(LEVELS))
+    geo = load_configured({"kind": "default", **g}, levels=list(LEVELS))
     data_dir = (config.get("characteristics") or {}).get("data_dir")
     cs = resolve_charset(s["characteristic_set"], data_dir, (config.get("characteristics") or {}).get("calibrated_dir"))
     sim, _ = run_set(geo, cs, derive_cables(l2.get("cables")), idp_formula=l2.get("idp_formula", "paper1"),

@@ -48,7 +48,7 @@ from ..experiments.fsu import MAIN_DIRECTIONS, STAGES
 from ..experiments.l2s1 import LEVELS, derive_cables
 from ..experiments.stepwise_reduction import scenario_grid
 from ..experiments.virtual_experiment import SpecimenVariation, idp_specimens, rom_specimens
-from ..geometry import load_geometry
+from ..geometry.configured import load_configured
 from ..inputs.characteristics import resolve_characteristic_set
 from ..inputs.io import Column, TableError, TableSchema, read_table, write_table_atomic
 from ..mechanics.idp import DISC_AREA_M2
@@ -134,8 +134,7 @@ def _variation(config, section) -> SpecimenVariation:
 
 def _geometry(config, levels):
     g = (config or {}).get("geometry", {})
-    return load_geometry(g.get("kind", "default"), path=g.get("path") if g.get("kind") == "visible_human" else None,
-                         levels=list(levels))
+    return load_configured({"kind": "default", **g}, levels=list(levels))
 
 
 def _charset(config):

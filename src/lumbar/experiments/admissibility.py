@@ -107,6 +107,31 @@ def read_yamamoto(path=None) -> pd.DataFrame:
                               {"level", "quantity", "direction", "value_deg", "source"})
 
 
+#: the one-sided directions of the Yamamoto table -> the experiment tables' directions
+YAMAMOTO_DIRECTIONS = {"flexion": "flexion", "extension": "extension", "lateral_bending_one_side": "lateral_bending",
+                       "axial_rotation_one_side": "axial_rotation"}
+
+
+def yamamoto_level_targets(level: str, path=None) -> pd.DataFrame:
+    """The intact ROM at 10 N*m of one level in the experiment-table schema (the form of
+    ``data/experiments/yamamoto1989_intact_rom_original_text.csv``, which holds L4-L5): the calibration's real targets
+    when a specimen is calibrated on another unit. Each row is a row of :func:`read_yamamoto` (the values as printed),
+    renamed; a level without the four ROM rows is an error naming the file."""
+    src = Path(path) if path is not None else yamamoto_path()
+    y = read_yamamoto(src)
+    sel = y[(y["level"] == level) & (y["quantity"] == "rom") & y["direction"].isin(list(YAMAMOTO_DIRECTIONS))]
+    if len(sel) != len(YAMAMOTO_DIRECTIONS):
+        raise ValueError(f"{src}: level {level!r} has {len(sel)} of the {len(YAMAMOTO_DIRECTIONS)} ROM rows "
+                         f"{list(YAMAMOTO_DIRECTIONS)}; expected one per direction")
+    return pd.DataFrame({
+        "stage": "intact", "direction": sel["direction"].map(YAMAMOTO_DIRECTIONS).to_numpy(),
+        "moment_nm": sel["moment_nm"].astype(float).to_numpy(), "rom_mean_deg": sel["value_deg"].to_numpy(float),
+        "rom_min_deg": np.nan, "rom_max_deg": np.nan, "n_specimens": sel["n_specimens"].to_numpy(),
+        "kind": sel["kind"].to_numpy(), "source": sel["source"].to_numpy(),
+        "note": [f"{level} intact ROM at a pure moment of 10 N*m, one side (row {lv} {d} of {src.name}); no range "
+                 f"published: rom_min_deg/rom_max_deg empty" for lv, d in zip(sel["level"], sel["direction"])]})
+
+
 def neutral_zones(level: str, path=None) -> dict:
     y = read_yamamoto(path)
     sel = y[(y["level"] == level) & (y["quantity"] == "neutral_zone")]
@@ -202,22 +227,36 @@ def compliance_rise(curve: pd.DataFrame, start_nm=2.5, end_nm=10.0) -> float:
     return float(comp[sel].max() / ref - 1.0)
 
 
+#: the source of the criteria whose limit is the project's own
+_PROJECT = "project threshold (docs/load_sharing.md)"
+
+
 def criteria_table(curves: pd.DataFrame, compression: pd.DataFrame | None, limits: pd.DataFrame, level: str,
                    nz: dict, literature: pd.DataFrame, scales: dict | None = None,
                    fit_parameters: pd.DataFrame | None = None, stage="intact",
                    remus: pd.DataFrame | None = None) -> pd.DataFrame:
     """One row per admissibility criterion (module docstring) from :func:`assess`'s outputs (``remus``: the table of
-    :func:`remus_comparison`, the sourced reason a force scale may leave 0.1-10 x its source law)."""
-    rows = []
+    :func:`remus_comparison`, the sourced reason a force scale may leave 0.1-10 x its source law), in this order: the
+    unloaded state, snap-through and curve shape, the neutral-zone proxy, the ligaments in flexion at 10 N*m, the facets
+    loading with the moment, axial compression, the force scales and bounds of the fit."""
     cv = curves[curves["stage"] == stage]
+    rows = [*_unloaded_rows(cv, limits, level), *_curve_shape_rows(cv, level), *_neutral_zone_rows(cv, nz, level),
+            *_flexion_rows(cv, literature, level), *_facet_loading_rows(cv, level),
+            *_compression_rows(compression, literature, level),
+            *_fit_rows(scales, remus, fit_parameters, level)]
+    return pd.DataFrame(rows, columns=["level", "criterion", "direction", "value", "limit", "unit", "passed", "source",
+                                       "note"])
+
+
+def _unloaded_rows(cv: pd.DataFrame, limits: pd.DataFrame, level: str) -> list:
+    """The unloaded state: facet contact and ligament tension at 0 N*m."""
+    rows = []
     rest = cv[cv["moment_nm"] == 0.0].iloc[0]
-    proj = "project threshold (docs/load_sharing.md)"
-    # unloaded state
     for side in ("left", "right"):
         col = f"facet_{side}_contact_n"
         if col in rest:
             v = float(rest[col])
-            rows.append(_row("unloaded facet contact", v, REST_FACET_MAX_N, "N", v <= REST_FACET_MAX_N, proj,
+            rows.append(_row("unloaded facet contact", v, REST_FACET_MAX_N, "N", v <= REST_FACET_MAX_N, _PROJECT,
                              f"{side} facet joint at 0 N*m, no preload", side, level))
     for r in limits.itertuples(index=False):
         col = f"{r.ligament}_tension_n"
@@ -227,7 +266,12 @@ def criteria_table(curves: pd.DataFrame, compression: pd.DataFrame | None, limit
                              f"largest sourced pre-tension ({r.limit_source})",
                              f"{r.ligament}: paper {r.paper_pretension_n:.3g} N, Remus et al. 2021 "
                              f"{r.remus2021_pretension_n:.3g} N", r.ligament, level))
-    # snap-through and curve shape
+    return rows
+
+
+def _curve_shape_rows(cv: pd.DataFrame, level: str) -> list:
+    """Per direction: no snap-through (the rotation change per 0.25 N*m) and the compliance rise 2.5-10 N*m."""
+    rows = []
     for d, g in cv.groupby("direction", sort=False):
         g = g.sort_values("moment_nm")
         th = g["rotation_deg"].to_numpy(float)
@@ -236,11 +280,16 @@ def criteria_table(curves: pd.DataFrame, compression: pd.DataFrame | None, limit
         jump = float(np.nanmax(np.abs(np.diff(th)) * np.minimum(1.0, JUMP_STEP_NM / dM))) if len(th) > 1 else 0.0
         conv = bool(g["converged"].all())
         rows.append(_row("no snap-through: largest rotation change per 0.25 N*m", jump, JUMP_DEG, "deg",
-                         conv and jump < JUMP_DEG, proj, "" if conv else "a step did not converge", d, level))
+                         conv and jump < JUMP_DEG, _PROJECT, "" if conv else "a step did not converge", d, level))
         rise = compliance_rise(g)
         rows.append(_row("compliance rise 2.5-10 N*m", rise, COMPLIANCE_RISE_MAX, "1", rise <= COMPLIANCE_RISE_MAX,
-                         proj, "relative to the tangent compliance at 2.5 N*m; <= 0: stiffening", d, level))
-    # neutral-zone proxy
+                         _PROJECT, "relative to the tangent compliance at 2.5 N*m; <= 0: stiffening", d, level))
+    return rows
+
+
+def _neutral_zone_rows(cv: pd.DataFrame, nz: dict, level: str) -> list:
+    """The neutral-zone proxy per plane: the rotation at +1 plus -1 N*m against a fraction of the measured zone."""
+    rows = []
     for plane, (dpos, dneg) in NZ_PLANES.items():
         if plane not in nz:
             continue
@@ -253,45 +302,57 @@ def criteria_table(curves: pd.DataFrame, compression: pd.DataFrame | None, limit
                          v >= NZ_FRACTION * ref, src,
                          f"{NZ_FRACTION:g} x the measured neutral zone {ref:g} deg; a proxy (no hysteresis in the "
                          "model)", plane, level))
-    # ligaments in flexion at 10 N*m
-    f10 = cv[(cv["direction"] == "flexion") & np.isclose(cv["moment_nm"], cv["moment_nm"].max())]
-    if len(f10):
-        f10 = f10.iloc[0]
-        Mapp = float(f10["moment_nm"])
-        for k in FUNCTIONAL_KINDS:
-            col = f"{k}_tension_n"
-            if col in f10:
-                v = float(f10[col])
-                rows.append(_row("ligament in tension at 10 N*m flexion", v, FUNCTIONAL_MIN_N, "N",
-                                 v >= FUNCTIONAL_MIN_N, proj, "", k, level))
+    return rows
 
-        def moment(k):
-            col = f"{k}_moment_y_nm"
-            return -float(f10[col]) if col in f10 else 0.0      # resisting flexion = negative y moment
-        isl_ssl = moment("ISL") + moment("SSL")
-        v_share = isl_ssl / Mapp
-        hindle_f, hsrc = literature_value(literature, "isl_ssl_force_end_of_flexion")
-        rows.append(_row("ISL+SSL share of the flexion moment at 10 N*m", v_share, ISL_SSL_MIN_SHARE, "1",
-                         v_share >= ISL_SSL_MIN_SHARE, hsrc,
-                         "Hindle et al. 1990: the ISL and SSL resist a real part of flexion (about 7 N*m near its end)",
-                         "flexion", level))
-        force = float(f10.get("ISL_tension_n", 0.0) + f10.get("SSL_tension_n", 0.0))
-        rows.append(_row("ISL+SSL tension at 10 N*m flexion at most the end-of-flexion maximum", force, hindle_f, "N",
-                         force <= hindle_f, hsrc, "", "flexion", level))
-        if "ISL_tension_n" in f10 and "SSL_tension_n" in f10:
-            isl, ssl = float(f10["ISL_tension_n"]), float(f10["SSL_tension_n"])
-            frac, fsrc = literature_value(literature, "isl_fraction_of_isl_ssl_force")
-            rows.append(_row("ISL carries more than the SSL at 10 N*m flexion", isl / max(isl + ssl, 1e-12), 0.5,
-                             "1", isl > ssl, fsrc, f"measured: the ISL {frac:g} % of the ISL+SSL force", "flexion",
-                             level))
-        if "CL_moment_y_nm" in f10 and "FL_moment_y_nm" in f10:
-            cl, fl = moment("CL"), moment("FL")
-            c_sh, csrc = literature_value(literature, "capsular_ligament_share_of_flexion_resistance")
-            f_sh, _ = literature_value(literature, "ligamentum_flavum_share_of_flexion_resistance")
-            rows.append(_row("CL moment above FL moment at 10 N*m flexion", cl - fl, 0.0, "N*m", cl > fl, csrc,
-                             f"ordering of the full-flexion shares CL {c_sh:g} % > FL {f_sh:g} % (not a tolerance at "
-                             "10 N*m)", "flexion", level))
-    # facets load with the moment in extension and contralateral axial rotation
+
+def _flexion_rows(cv: pd.DataFrame, literature: pd.DataFrame, level: str) -> list:
+    """The ligaments in flexion at the largest moment (10 N*m): in tension, the ISL+SSL share and force, the ISL
+    above the SSL, the CL moment above the FL moment."""
+    rows = []
+    f10 = cv[(cv["direction"] == "flexion") & np.isclose(cv["moment_nm"], cv["moment_nm"].max())]
+    if not len(f10):
+        return rows
+    f10 = f10.iloc[0]
+    Mapp = float(f10["moment_nm"])
+    for k in FUNCTIONAL_KINDS:
+        col = f"{k}_tension_n"
+        if col in f10:
+            v = float(f10[col])
+            rows.append(_row("ligament in tension at 10 N*m flexion", v, FUNCTIONAL_MIN_N, "N",
+                             v >= FUNCTIONAL_MIN_N, _PROJECT, "", k, level))
+
+    def moment(k):
+        col = f"{k}_moment_y_nm"
+        return -float(f10[col]) if col in f10 else 0.0      # resisting flexion = negative y moment
+    isl_ssl = moment("ISL") + moment("SSL")
+    v_share = isl_ssl / Mapp
+    hindle_f, hsrc = literature_value(literature, "isl_ssl_force_end_of_flexion")
+    rows.append(_row("ISL+SSL share of the flexion moment at 10 N*m", v_share, ISL_SSL_MIN_SHARE, "1",
+                     v_share >= ISL_SSL_MIN_SHARE, hsrc,
+                     "Hindle et al. 1990: the ISL and SSL resist a real part of flexion (about 7 N*m near its end)",
+                     "flexion", level))
+    force = float(f10.get("ISL_tension_n", 0.0) + f10.get("SSL_tension_n", 0.0))
+    rows.append(_row("ISL+SSL tension at 10 N*m flexion at most the end-of-flexion maximum", force, hindle_f, "N",
+                     force <= hindle_f, hsrc, "", "flexion", level))
+    if "ISL_tension_n" in f10 and "SSL_tension_n" in f10:
+        isl, ssl = float(f10["ISL_tension_n"]), float(f10["SSL_tension_n"])
+        frac, fsrc = literature_value(literature, "isl_fraction_of_isl_ssl_force")
+        rows.append(_row("ISL carries more than the SSL at 10 N*m flexion", isl / max(isl + ssl, 1e-12), 0.5,
+                         "1", isl > ssl, fsrc, f"measured: the ISL {frac:g} % of the ISL+SSL force", "flexion",
+                         level))
+    if "CL_moment_y_nm" in f10 and "FL_moment_y_nm" in f10:
+        cl, fl = moment("CL"), moment("FL")
+        c_sh, csrc = literature_value(literature, "capsular_ligament_share_of_flexion_resistance")
+        f_sh, _ = literature_value(literature, "ligamentum_flavum_share_of_flexion_resistance")
+        rows.append(_row("CL moment above FL moment at 10 N*m flexion", cl - fl, 0.0, "N*m", cl > fl, csrc,
+                         f"ordering of the full-flexion shares CL {c_sh:g} % > FL {f_sh:g} % (not a tolerance at "
+                         "10 N*m)", "flexion", level))
+    return rows
+
+
+def _facet_loading_rows(cv: pd.DataFrame, level: str) -> list:
+    """The facets load with the moment in extension (both) and in axial rotation (the contralateral one)."""
+    rows = []
     for d, side in (("extension", None), ("axial_rotation_left", "right"), ("axial_rotation_right", "left")):
         g = cv[cv["direction"] == d].sort_values("moment_nm")
         if not len(g):
@@ -305,21 +366,32 @@ def criteria_table(curves: pd.DataFrame, compression: pd.DataFrame | None, limit
         on = F > CONTACT_ON_N
         drop = float(np.max(np.maximum(0.0, -np.diff(F))[on[1:]], initial=0.0))
         rows.append(_row("facet contact non-decreasing with the moment", drop, CONTACT_TOL_N, "N",
-                         drop <= CONTACT_TOL_N and F[-1] > F[0], proj,
+                         drop <= CONTACT_TOL_N and F[-1] > F[0], _PROJECT,
                          f"{'both facets' if side is None else side + ' (contralateral) facet'}: {F[0]:.3g} -> "
                          f"{F[-1]:.3g} N from 0 to {g['moment_nm'].max():g} N*m; value = largest drop", d, level))
-    # axial compression
-    if compression is not None and len(compression):
-        last = compression.sort_values("force_n").iloc[-1]
-        share = float(last["facet_share"])
-        ref, src = literature_value(literature, "facet_share_of_compression", "erect standing posture")
-        rows.append(_row("facet share of a pure axial (follower) load", share, COMPRESSION_FACET_MAX_SHARE, "1",
-                         bool(last["converged"]) and share <= COMPRESSION_FACET_MAX_SHARE, src,
-                         f"at {last['force_n']:g} N; measured about {ref:g} % in erect standing", "compression", level))
-    # force scales and bounds of the fit
+    return rows
+
+
+def _compression_rows(compression: pd.DataFrame | None, literature: pd.DataFrame, level: str) -> list:
+    """The facet share of a pure axial (follower) load at its largest force."""
+    if compression is None or not len(compression):
+        return []
+    last = compression.sort_values("force_n").iloc[-1]
+    share = float(last["facet_share"])
+    ref, src = literature_value(literature, "facet_share_of_compression", "erect standing posture")
+    return [_row("facet share of a pure axial (follower) load", share, COMPRESSION_FACET_MAX_SHARE, "1",
+                 bool(last["converged"]) and share <= COMPRESSION_FACET_MAX_SHARE, src,
+                 f"at {last['force_n']:g} N; measured about {ref:g} % in erect standing", "compression", level)]
+
+
+def _fit_rows(scales: dict | None, remus: pd.DataFrame | None, fit_parameters: pd.DataFrame | None,
+              level: str) -> list:
+    """The fit: every ligament force scale within 0.1-10 x its source law (or, outside, near the Remus et al. 2021
+    model of the same fibres), and no fitted parameter at a bound without a documented reason."""
+    rows = []
     for k, s in (scales or {}).items():
         inside = SCALE_MIN * (1 - 1e-9) <= s <= SCALE_MAX * (1 + 1e-9)
-        note, src = "", proj
+        note, src = "", _PROJECT
         if not inside and remus is not None and k in set(remus["ligament"]):
             r = remus[(remus["ligament"] == k) & (remus["remus2021_n"] > 1.0)]
             if len(r):
@@ -336,9 +408,8 @@ def criteria_table(curves: pd.DataFrame, compression: pd.DataFrame | None, limit
         bad = fp[fp["at_bound"].astype(bool) & (fp.get("bound_reason", pd.Series("", index=fp.index))
                                                 .fillna("").astype(str) == "")]
         rows.append(_row("fitted parameters at a bound without a documented reason", float(len(bad)), 0.0, "count",
-                         len(bad) == 0, proj, "; ".join(bad["parameter"].astype(str)), "", level))
-    return pd.DataFrame(rows, columns=["level", "criterion", "direction", "value", "limit", "unit", "passed", "source",
-                                       "note"])
+                         len(bad) == 0, _PROJECT, "; ".join(bad["parameter"].astype(str)), "", level))
+    return rows
 
 
 def force_scales(charset, prior) -> dict:
@@ -421,4 +492,4 @@ def fibre_tension_remus(geometry_path, level_geom, level, kind, lengths: dict) -
 
 
 __all__ = ["assess", "criteria_table", "evaluate", "pretension_limits", "force_scales", "neutral_zones",
-           "read_literature", "read_yamamoto", "compliance_rise", "softplus_fibre_params"]
+           "read_literature", "read_yamamoto", "yamamoto_level_targets", "compliance_rise", "softplus_fibre_params"]

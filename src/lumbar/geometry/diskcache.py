@@ -38,10 +38,16 @@ def cache_dir() -> Path | None:
 
 def entry_path(path, kind: str, tag: str) -> Path | None:
     """Where the arrays parsed from ``path`` by parser ``kind`` (version ``tag``) are kept (None: cache off)."""
+    return entry_for(Path(path).read_bytes(), kind, tag)
+
+
+def entry_for(content: bytes, kind: str, tag: str) -> Path | None:
+    """Where the arrays computed from ``content`` (the bytes the result depends on) by ``kind`` (version ``tag``)
+    are kept (None: cache off)."""
     d = cache_dir()
     if d is None:
         return None
-    h = hashlib.sha256(Path(path).read_bytes())
+    h = hashlib.sha256(content)
     h.update(f"|{kind}|{tag}|format {FORMAT}".encode())
     return d / kind / f"{h.hexdigest()}.npz"
 
@@ -54,12 +60,23 @@ def load_or_parse(path, kind: str, tag: str, parse) -> dict:
     except OSError as exc:                    # unreadable input: the parser says what is wrong with it
         log.debug("geometry cache skipped for %s: %s", path, exc)
         entry = None
+    return _load_or_store(entry, parse, path)
+
+
+def load_or_compute(content: bytes, kind: str, tag: str, compute, what: str = "") -> dict:
+    """The arrays ``compute()`` returns (a dict of numpy arrays) for an input whose bytes, all of them, are
+    ``content`` (e.g. the hashes of several files and the settings), from the cache when an entry for this content,
+    ``kind`` and ``tag`` exists, else computed and stored; ``what`` names the input in the debug log."""
+    return _load_or_store(entry_for(content, kind, tag), compute, what or kind)
+
+
+def _load_or_store(entry: Path | None, parse, what) -> dict:
     if entry is not None and entry.is_file():
         try:
             with np.load(entry, allow_pickle=False) as z:
                 return {k: z[k] for k in z.files}
         except Exception as exc:  # noqa: BLE001  (a damaged entry of any kind: parse again, below)
-            log.debug("geometry cache entry %s not readable (%s): parsing %s", entry, exc, path)
+            log.debug("geometry cache entry %s not readable (%s): parsing %s", entry, exc, what)
     arrays = parse()
     if entry is not None:
         tmp = entry.with_name(f"{entry.stem}.{os.getpid()}.tmp.npz")
@@ -68,7 +85,7 @@ def load_or_parse(path, kind: str, tag: str, parse) -> dict:
             np.savez(tmp, **arrays)
             os.replace(tmp, entry)
         except OSError as exc:
-            log.debug("geometry cache not written for %s: %s", path, exc)
+            log.debug("geometry cache not written for %s: %s", what, exc)
             try:
                 tmp.unlink(missing_ok=True)
             except OSError:

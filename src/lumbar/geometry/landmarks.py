@@ -135,7 +135,9 @@ def _ray_project(mesh, origins, direction, side_sign):
 
 def propose_landmarks(meshes: dict, version: str = "0.2.4") -> pd.DataFrame:
     """Deterministic rule-based landmarks for every level whose two vertebrae are in ``meshes``
-    (project frame, metres).  Returns a DataFrame with columns ``COLUMNS``."""
+    (project frame, metres).  Returns a DataFrame with columns ``COLUMNS``: per level, the endplate rims (ALL, PLL),
+    the ligamentum flavum, the spinous processes (ISL, SSL), the transverse processes (ITL) and the facets with
+    their capsules (CL), each structure's rule a function of its own."""
     rows = []
     feats = {}
     for v in ("L1", "L2", "L3", "L4", "L5"):
@@ -155,124 +157,147 @@ def propose_landmarks(meshes: dict, version: str = "0.2.4") -> pd.DataFrame:
         if U not in feats or L not in feats:
             continue
         fu, fl = feats[U], feats[L]
-        vu, vl = fu.v, fl.v
-        used_u, used_l = set(), set()
         c_inf, n_inf, _ = inferior_endplate(fu.mesh, fu.mesh.triangles_center[:, 0] > fu.x_post)
         c_sup, n_sup, _ = facing_endplate(fl.mesh, c_inf, n_inf, radius=ENDPLATE_RADIUS)
-        y0 = 0.0
-        # endplate rims (ALL anterior, PLL posterior), bands measured along the endplate normals
-        hu = (vu - c_inf) @ n_inf
-        body_u = vu[:, 0] > fu.x_post
-        band_u = body_u & (hu < hu[body_u].min() + 5 * MM)
-        dl_ = vl - c_sup
-        hl = dl_ @ n_sup
-        rl = np.linalg.norm(dl_ - np.outer(hl, n_sup), axis=1)
-        body_l = (vl[:, 0] > fl.x_post - 1 * MM) & (rl < 25 * MM)
-        band_l = body_l & (hl > -4 * MM) & (hl < 3 * MM)
-        if band_l.sum() < 8:  # coarse sacrum: widen the rim band to 10 mm below the endplate
-            band_l = body_l & (hl > -10 * MM) & (hl < 3 * MM)
-        for lig, half in (("ALL", 8 * MM), ("PLL", 5 * MM)):
-            used_u, used_l = set(), set()   # fibres of one ligament use distinct vertices
-            pick = np.argmax if lig == "ALL" else np.argmin
-            ju = np.flatnonzero(band_u)[pick(vu[band_u, 0])]
-            jl = np.flatnonzero(band_l)[pick(vl[band_l, 0])]
-            where = "anterior" if lig == "ALL" else "posterior"
-            for k, (side, sg) in enumerate(SIDES3):
-                tu = np.array([vu[ju, 0], y0 + sg * half, vu[ju, 2]])
-                iu, pu = _snap(vu, tu, used_u, band_u, mesh=fu.mesh)
-                tl = np.array([vl[jl, 0], y0 + sg * half, vl[jl, 2]]) if L != "S1" else pu
-                il, pl = _snap(vl, tl, used_l, band_l, mesh=fl.mesh)
-                ru = (f"closest point, on the faces touching them, to the {U} vertebral body vertices within 5 mm (along the endplate normal) of its inferior endplate, "
-                      f"of the {where}-most such vertex moved to y={sg * half * 1e3:+.0f} mm ({side})")
-                rl_ = (f"closest point (on faces touching the candidates) of the {L} superior endplate rim vertices (within 4 mm below/3 mm above the endplate, 25 mm of its "
-                       f"centre; coarse sacrum: 10 mm below) to the {where}-most such vertex moved to "
-                       f"y={sg * half * 1e3:+.0f} mm ({side}); for S1 the rim vertex nearest to the upper end")
-                add(level, lig, side, k, U, iu, pu, ru)
-                add(level, lig, side, k, L, il, pl, rl_)
+        _rim_landmarks(add, level, fu, fl, c_inf, n_inf, c_sup, n_sup)
         # lower-vertebra posterior candidates: no deeper than 30 mm below its superior endplate centre
         # (keeps the sacrum's posterior landmarks at the S1 segment; excludes lumbar inferior processes)
-        zok = vl[:, 2] > c_sup[2] - 30 * MM
-        # ligamentum flavum: inferior lamina edge of U -> superior lamina edge of L
-        used_u, used_l = set(), set()
-        for k, (side, sg) in enumerate(SIDES3):
-            mu = (np.abs(vu[:, 1] - sg * 6 * MM) < 6 * MM) & (vu[:, 0] < fu.x_lam + 2 * MM) & (vu[:, 0] > fu.x_lam - 8 * MM)
-            tu = np.array([fu.x_lam, sg * 6 * MM, vu[mu, 2].min()])
-            iu = _snap(vu, tu, used_u, mu)
-            ml = zok & (np.abs(vl[:, 1] - sg * 6 * MM) < 6 * MM) & (vl[:, 0] < fl.x_lam + 2 * MM) & (vl[:, 0] > fl.x_lam - 8 * MM)
-            if not ml.any():  # sacrum: no lamina window; take its posterior arch near the midline
-                ml = zok & (np.abs(vl[:, 1] - sg * 6 * MM) < 10 * MM) & (vl[:, 0] < fl.x_post - 2 * MM)
-            tl = np.array([fl.x_lam, sg * 6 * MM, vl[ml, 2].max()])
-            il = _snap(vl, tl, used_l, ml)
-            add(level, "FL", side, k, U, iu, vu[iu],
-                f"lowest vertex of the {U} lamina (0-8 mm behind the canal's posterior wall at the midline), "
-                f"near y={sg * 6:+.0f} mm ({side})")
-            add(level, "FL", side, k, L, il, vl[il],
-                f"highest vertex of the {L} lamina (0-8 mm behind the canal's posterior wall; for S1 that of L5) no lower than 30 mm below the endplate, near y={sg * 6:+.0f} mm ({side})")
-        # spinous processes: ISL (3 fibres along the process), SSL (tips)
-        mid_u = (np.abs(vu[:, 1]) < 5 * MM) & (vu[:, 0] < fu.x_lam - 3 * MM)
-        mid_l = zok & (np.abs(vl[:, 1]) < 5 * MM) & (vl[:, 0] < fl.x_lam - 3 * MM)
-        if mid_l.sum() < 4:  # coarse sacrum: whole posterior midline within 30 mm of the endplate
-            mid_l = zok & (np.abs(vl[:, 1]) < 5 * MM) & (vl[:, 0] < fl.x_post - 2 * MM)
-        used_u, used_l = set(), set()
-        tip_u = vu[mid_u, 0].min()
-        tip_l = vl[mid_l, 0].min() if mid_l.any() else tip_u
-        for k, f in enumerate((0.25, 0.5, 0.75)):
-            xu = fu.x_lam + f * (tip_u - fu.x_lam)
-            iu = _snap(vu, np.array([xu, 0.0, vu[mid_u, 2].min()]), used_u, mid_u)
-            xl_ = fl.x_lam + f * (tip_l - fl.x_lam)
-            tl = np.array([xl_, 0.0, vl[mid_l, 2].max()]) if L != "S1" else vu[iu]
-            il = _snap(vl, tl, used_l, mid_l)
-            add(level, "ISL", "medial", k, U, iu, vu[iu],
-                f"inferior edge of the {U} spinous process: midline vertex nearest to {int(f * 100)}% of the way "
-                "from lamina to tip at the process's lowest z")
-            add(level, "ISL", "medial", k, L, il, vl[il],
-                f"superior edge of the {L} spinous process: midline vertex nearest to {int(f * 100)}% of the way "
-                "from lamina to tip at the process's highest z (S1: sacral midline posterior vertex nearest to the upper end)")
-        used_u, used_l = set(), set()
-        iu = _snap(vu, np.array([tip_u, 0.0, vu[mid_u, 2].min()]), used_u, mid_u)
-        il = _snap(vl, np.array([tip_l, 0.0, vl[mid_l, 2].max()]) if L != "S1" else vu[iu], used_l, mid_l)
-        add(level, "SSL", "medial", 0, U, iu, vu[iu], f"posterior-inferior corner of the {U} spinous process tip")
-        add(level, "SSL", "medial", 0, L, il, vl[il], f"posterior-superior corner of the {L} spinous process tip (S1: sacral midline posterior vertex nearest to the upper end)")
-        # intertransverse: lateral-most vertices
-        for side, sg in SIDE_SIGN.items():
-            name = "ITL_L" if sg > 0 else "ITL_R"
-            used_u, used_l = set(), set()
-            iu = _snap(vu, vu[np.argmax(sg * vu[:, 1])] + np.array([0, 0, -5 * MM]), used_u,
-                       sg * vu[:, 1] > sg * vu[np.argmax(sg * vu[:, 1]), 1] - 5 * MM)
-            ml = (vl[:, 2] > c_sup[2] - 25 * MM) & (vl[:, 0] < fl.x_post)
-            jl = np.where(ml)[0][np.argmax(sg * vl[ml, 1])]
-            il = _snap(vl, vl[jl] + np.array([0, 0, 5 * MM]), used_l,
-                       ml & (sg * vl[:, 1] > sg * vl[jl, 1] - 5 * MM))
-            add(level, name, side, 0, U, iu, vu[iu],
-                f"{side} transverse process tip of {U}: lowest of the vertices within 5 mm of the most lateral one")
-            add(level, name, side, 0, L, il, vl[il],
-                f"{side} transverse process (ala for S1) tip of {L}: highest of the vertices within 5 mm of the "
-                "most lateral posterior vertex within 25 mm below the endplate")
-        # facets + capsule
-        for side, sg in SIDE_SIGN.items():
-            sup, inf, c, iap, sap = facet_grid(fu, fl, sg)
-            for k in range(9):
-                add(level, "facet_superior", side, k, L, -1, sup[k],
-                    f"{L} superior articular process, medial face: first surface hit of a ray cast laterally (along the "
-                    f"IAP->SAP cluster direction) from 6 mm medial of node {k} of a 3x3 grid (3 mm pitch, rows "
-                    "top->bottom, centred at the SAP cluster height) in the vertical joint plane through the midpoint "
-                    "of the IAP and SAP vertex clusters")
-                add(level, "facet_inferior", side, k, U, -1, inf[k],
-                    f"{U} inferior articular process, lateral face: first surface hit of a ray cast medially from 6 mm "
-                    f"lateral of node {k} of the same 3x3 joint-plane grid")
-            name = "CL_L" if sg > 0 else "CL_R"
-            offs = [(0, 0, 6), (0, 0, -6), (-5, 0, 0), (5, 0, 0)]   # superior, inferior, posterior, anterior rim
-            ui, li = set(), set()
-            for k, o in enumerate(offs):
-                t = c + np.array(o) * MM
-                iu = _snap(vu, t, ui, (vu[:, 0] < fu.x_post - 2 * MM) & (sg * vu[:, 1] > 8 * MM))
-                il = _snap(vl, t, li, zok & (vl[:, 0] < fl.x_post - 2 * MM) & (sg * vl[:, 1] > 8 * MM) & (sg * vl[:, 1] < 30 * MM))
-                add(level, name, side, k, U, iu, vu[iu],
-                    f"{U} articular-process vertex nearest to the facet joint centre offset by {o} mm (x,y,z): "
-                    "capsule rim fibre")
-                add(level, name, side, k, L, il, vl[il],
-                    f"{L} articular-process vertex nearest to the facet joint centre offset by {o} mm: capsule rim fibre")
+        zok = fl.v[:, 2] > c_sup[2] - 30 * MM
+        _flavum_landmarks(add, level, fu, fl, zok)
+        _spinous_landmarks(add, level, fu, fl, zok)
+        _intertransverse_landmarks(add, level, fu, fl, c_sup)
+        _facet_landmarks(add, level, fu, fl, zok)
     return pd.DataFrame(rows, columns=COLUMNS)
+
+
+def _rim_landmarks(add, level, fu, fl, c_inf, n_inf, c_sup, n_sup):
+    """Endplate rims (ALL anterior, PLL posterior), bands measured along the endplate normals."""
+    U, L, vu, vl = fu.name, fl.name, fu.v, fl.v
+    y0 = 0.0
+    hu = (vu - c_inf) @ n_inf
+    body_u = vu[:, 0] > fu.x_post
+    band_u = body_u & (hu < hu[body_u].min() + 5 * MM)
+    dl_ = vl - c_sup
+    hl = dl_ @ n_sup
+    rl = np.linalg.norm(dl_ - np.outer(hl, n_sup), axis=1)
+    body_l = (vl[:, 0] > fl.x_post - 1 * MM) & (rl < 25 * MM)
+    band_l = body_l & (hl > -4 * MM) & (hl < 3 * MM)
+    if band_l.sum() < 8:  # coarse sacrum: widen the rim band to 10 mm below the endplate
+        band_l = body_l & (hl > -10 * MM) & (hl < 3 * MM)
+    for lig, half in (("ALL", 8 * MM), ("PLL", 5 * MM)):
+        used_u, used_l = set(), set()   # fibres of one ligament use distinct vertices
+        pick = np.argmax if lig == "ALL" else np.argmin
+        ju = np.flatnonzero(band_u)[pick(vu[band_u, 0])]
+        jl = np.flatnonzero(band_l)[pick(vl[band_l, 0])]
+        where = "anterior" if lig == "ALL" else "posterior"
+        for k, (side, sg) in enumerate(SIDES3):
+            tu = np.array([vu[ju, 0], y0 + sg * half, vu[ju, 2]])
+            iu, pu = _snap(vu, tu, used_u, band_u, mesh=fu.mesh)
+            tl = np.array([vl[jl, 0], y0 + sg * half, vl[jl, 2]]) if L != "S1" else pu
+            il, pl = _snap(vl, tl, used_l, band_l, mesh=fl.mesh)
+            ru = (f"closest point, on the faces touching them, to the {U} vertebral body vertices within 5 mm (along the endplate normal) of its inferior endplate, "
+                  f"of the {where}-most such vertex moved to y={sg * half * 1e3:+.0f} mm ({side})")
+            rl_ = (f"closest point (on faces touching the candidates) of the {L} superior endplate rim vertices (within 4 mm below/3 mm above the endplate, 25 mm of its "
+                   f"centre; coarse sacrum: 10 mm below) to the {where}-most such vertex moved to "
+                   f"y={sg * half * 1e3:+.0f} mm ({side}); for S1 the rim vertex nearest to the upper end")
+            add(level, lig, side, k, U, iu, pu, ru)
+            add(level, lig, side, k, L, il, pl, rl_)
+
+
+def _flavum_landmarks(add, level, fu, fl, zok):
+    """Ligamentum flavum: inferior lamina edge of the upper vertebra -> superior lamina edge of the lower one."""
+    U, L, vu, vl = fu.name, fl.name, fu.v, fl.v
+    used_u, used_l = set(), set()
+    for k, (side, sg) in enumerate(SIDES3):
+        mu = (np.abs(vu[:, 1] - sg * 6 * MM) < 6 * MM) & (vu[:, 0] < fu.x_lam + 2 * MM) & (vu[:, 0] > fu.x_lam - 8 * MM)
+        tu = np.array([fu.x_lam, sg * 6 * MM, vu[mu, 2].min()])
+        iu = _snap(vu, tu, used_u, mu)
+        ml = zok & (np.abs(vl[:, 1] - sg * 6 * MM) < 6 * MM) & (vl[:, 0] < fl.x_lam + 2 * MM) & (vl[:, 0] > fl.x_lam - 8 * MM)
+        if not ml.any():  # sacrum: no lamina window; take its posterior arch near the midline
+            ml = zok & (np.abs(vl[:, 1] - sg * 6 * MM) < 10 * MM) & (vl[:, 0] < fl.x_post - 2 * MM)
+        tl = np.array([fl.x_lam, sg * 6 * MM, vl[ml, 2].max()])
+        il = _snap(vl, tl, used_l, ml)
+        add(level, "FL", side, k, U, iu, vu[iu],
+            f"lowest vertex of the {U} lamina (0-8 mm behind the canal's posterior wall at the midline), "
+            f"near y={sg * 6:+.0f} mm ({side})")
+        add(level, "FL", side, k, L, il, vl[il],
+            f"highest vertex of the {L} lamina (0-8 mm behind the canal's posterior wall; for S1 that of L5) no lower than 30 mm below the endplate, near y={sg * 6:+.0f} mm ({side})")
+
+
+def _spinous_landmarks(add, level, fu, fl, zok):
+    """Spinous processes: ISL (3 fibres along the process), SSL (tips)."""
+    U, L, vu, vl = fu.name, fl.name, fu.v, fl.v
+    mid_u = (np.abs(vu[:, 1]) < 5 * MM) & (vu[:, 0] < fu.x_lam - 3 * MM)
+    mid_l = zok & (np.abs(vl[:, 1]) < 5 * MM) & (vl[:, 0] < fl.x_lam - 3 * MM)
+    if mid_l.sum() < 4:  # coarse sacrum: whole posterior midline within 30 mm of the endplate
+        mid_l = zok & (np.abs(vl[:, 1]) < 5 * MM) & (vl[:, 0] < fl.x_post - 2 * MM)
+    used_u, used_l = set(), set()
+    tip_u = vu[mid_u, 0].min()
+    tip_l = vl[mid_l, 0].min() if mid_l.any() else tip_u
+    for k, f in enumerate((0.25, 0.5, 0.75)):
+        xu = fu.x_lam + f * (tip_u - fu.x_lam)
+        iu = _snap(vu, np.array([xu, 0.0, vu[mid_u, 2].min()]), used_u, mid_u)
+        xl_ = fl.x_lam + f * (tip_l - fl.x_lam)
+        tl = np.array([xl_, 0.0, vl[mid_l, 2].max()]) if L != "S1" else vu[iu]
+        il = _snap(vl, tl, used_l, mid_l)
+        add(level, "ISL", "medial", k, U, iu, vu[iu],
+            f"inferior edge of the {U} spinous process: midline vertex nearest to {int(f * 100)}% of the way "
+            "from lamina to tip at the process's lowest z")
+        add(level, "ISL", "medial", k, L, il, vl[il],
+            f"superior edge of the {L} spinous process: midline vertex nearest to {int(f * 100)}% of the way "
+            "from lamina to tip at the process's highest z (S1: sacral midline posterior vertex nearest to the upper end)")
+    used_u, used_l = set(), set()
+    iu = _snap(vu, np.array([tip_u, 0.0, vu[mid_u, 2].min()]), used_u, mid_u)
+    il = _snap(vl, np.array([tip_l, 0.0, vl[mid_l, 2].max()]) if L != "S1" else vu[iu], used_l, mid_l)
+    add(level, "SSL", "medial", 0, U, iu, vu[iu], f"posterior-inferior corner of the {U} spinous process tip")
+    add(level, "SSL", "medial", 0, L, il, vl[il], f"posterior-superior corner of the {L} spinous process tip (S1: sacral midline posterior vertex nearest to the upper end)")
+
+
+def _intertransverse_landmarks(add, level, fu, fl, c_sup):
+    """Intertransverse ligaments: the lateral-most vertices of the transverse processes (the ala for S1)."""
+    U, L, vu, vl = fu.name, fl.name, fu.v, fl.v
+    for side, sg in SIDE_SIGN.items():
+        name = "ITL_L" if sg > 0 else "ITL_R"
+        used_u, used_l = set(), set()
+        iu = _snap(vu, vu[np.argmax(sg * vu[:, 1])] + np.array([0, 0, -5 * MM]), used_u,
+                   sg * vu[:, 1] > sg * vu[np.argmax(sg * vu[:, 1]), 1] - 5 * MM)
+        ml = (vl[:, 2] > c_sup[2] - 25 * MM) & (vl[:, 0] < fl.x_post)
+        jl = np.where(ml)[0][np.argmax(sg * vl[ml, 1])]
+        il = _snap(vl, vl[jl] + np.array([0, 0, 5 * MM]), used_l,
+                   ml & (sg * vl[:, 1] > sg * vl[jl, 1] - 5 * MM))
+        add(level, name, side, 0, U, iu, vu[iu],
+            f"{side} transverse process tip of {U}: lowest of the vertices within 5 mm of the most lateral one")
+        add(level, name, side, 0, L, il, vl[il],
+            f"{side} transverse process (ala for S1) tip of {L}: highest of the vertices within 5 mm of the "
+            "most lateral posterior vertex within 25 mm below the endplate")
+
+
+def _facet_landmarks(add, level, fu, fl, zok):
+    """Facets (a 3x3 grid on each articular face) and their capsules (four rim fibres per side)."""
+    U, L, vu, vl = fu.name, fl.name, fu.v, fl.v
+    for side, sg in SIDE_SIGN.items():
+        sup, inf, c, iap, sap = facet_grid(fu, fl, sg)
+        for k in range(9):
+            add(level, "facet_superior", side, k, L, -1, sup[k],
+                f"{L} superior articular process, medial face: first surface hit of a ray cast laterally (along the "
+                f"IAP->SAP cluster direction) from 6 mm medial of node {k} of a 3x3 grid (3 mm pitch, rows "
+                "top->bottom, centred at the SAP cluster height) in the vertical joint plane through the midpoint "
+                "of the IAP and SAP vertex clusters")
+            add(level, "facet_inferior", side, k, U, -1, inf[k],
+                f"{U} inferior articular process, lateral face: first surface hit of a ray cast medially from 6 mm "
+                f"lateral of node {k} of the same 3x3 joint-plane grid")
+        name = "CL_L" if sg > 0 else "CL_R"
+        offs = [(0, 0, 6), (0, 0, -6), (-5, 0, 0), (5, 0, 0)]   # superior, inferior, posterior, anterior rim
+        ui, li = set(), set()
+        for k, o in enumerate(offs):
+            t = c + np.array(o) * MM
+            iu = _snap(vu, t, ui, (vu[:, 0] < fu.x_post - 2 * MM) & (sg * vu[:, 1] > 8 * MM))
+            il = _snap(vl, t, li, zok & (vl[:, 0] < fl.x_post - 2 * MM) & (sg * vl[:, 1] > 8 * MM) & (sg * vl[:, 1] < 30 * MM))
+            add(level, name, side, k, U, iu, vu[iu],
+                f"{U} articular-process vertex nearest to the facet joint centre offset by {o} mm (x,y,z): "
+                "capsule rim fibre")
+            add(level, name, side, k, L, il, vl[il],
+                f"{L} articular-process vertex nearest to the facet joint centre offset by {o} mm: capsule rim fibre")
 
 
 def read_landmarks(path, meshes: dict) -> pd.DataFrame:

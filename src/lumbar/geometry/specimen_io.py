@@ -411,7 +411,8 @@ def skipped_stages(levels, calibrated_level: str = "L4-L5", other_levels=None) -
 
     Stages by their configuration section: ``fsu``, ``stepwise_reduction`` and ``calibration`` on the calibrated
     unit (``fsu.level``), ``l2s1`` (the L2-S1 model with cables and the L4-L5 IDP; discovery on IDP data uses it),
-    ``load_sharing.other_levels <unit>`` (the calibrated characteristics on the other units; default all four)."""
+    ``muscle_model`` (without a sacrum), ``load_sharing.other_levels <unit>`` (the calibrated characteristics on the
+    other units; default all four)."""
     have = set(levels)
     units = buildable_units(have)
     out = []
@@ -430,6 +431,9 @@ def skipped_stages(levels, calibrated_level: str = "L4-L5", other_levels=None) -
         why = ("no sacrum (S1): no L5-S1 unit and no L2-S1 model" if "S1" not in have
                else f"{missing(l2s1)} missing: the L2-S1 model needs L2, L3, L4, L5 and S1")
         out.append(("l2s1", why))
+    if "S1" not in have:
+        out.append(("muscle_model", "no sacrum (S1): the muscle model's spine is L1-S1 with its fascicles on the "
+                    "sacrum and pelvis; it is run only for a specimen with a sacrum"))
     others = [u for u in LEVEL_NAMES if u != calibrated_level] if other_levels is None else list(other_levels)
     for u in others:
         if u not in units:
@@ -573,6 +577,18 @@ def _volume_inputs(path: Path, label_table, pattern=None) -> list[tuple[str, Pat
     if len(set(vals)) != len(vals):
         raise SpecimenError(f"{label_table}: one voxel value for two vertebrae ({vals}); expected distinct values")
     return sorted(out, key=lambda r: VERTEBRA_NAMES.index(r[0]))
+
+
+def volume_files(path, label_table=None, pattern: str | None = None) -> dict[str, Path]:
+    """Level -> NIfTI file of a label volume input (a folder of per-structure masks or one multi-label file with
+    ``label_table``), with the checks :func:`label_volume_to_meshes` runs before reading any voxel (file names,
+    the label table, no vertebra missing between the highest and the lowest present); nothing is read but the
+    folder listing and the label table."""
+    path = Path(path)
+    items = _volume_inputs(path, label_table, pattern)
+    files = {lv: f for lv, f, _ in items}
+    check_levels(files, None, path)
+    return files
 
 
 def label_volume_to_meshes(path, out_dir, label_table=None, *, pattern: str | None = None, require=None,

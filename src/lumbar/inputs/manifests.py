@@ -45,6 +45,9 @@ CALIBRATED_CHARACTERISTIC_FILES = (DISC_TABLE, FACET_TABLE, PRESTRAIN_TABLE, SOF
                                    RUPP2015_SHAPE_TABLE)
 #: the discovery runs and the files each writes (role -> file name, caption)
 DISCOVERY_CASES = ("default", "in_vivo", "va_artefact", "intact_rom")
+#: the real misses posed to the discovery (lumbar.discovery.real_data) with the outputs of a discovery run, plus
+#: real_case.json; not read by the report's discrepancy section (the real-data summary is)
+REAL_MISS_CASES = ("multilevel_rom", "in_vivo_lying")
 DISCOVERY_CASE_FILES = (("discovery", "discovery.json", "discovery_json"),
                         ("disagreement_map", "disagreement_map.png", "discovery_disagreement_map"),
                         ("ranking", "ranking.png", "discovery_ranking"),
@@ -77,13 +80,22 @@ class Output:
     directory: bool = False
     name: str | None = None
 
+    def listed(self, **fill) -> bool:
+        """Whether the output is a list of files: declared with ``expand``, or a wildcard of its path filled with a
+        list (a rule's run-time list, e.g. the units a specimen holds; an empty list: no file)."""
+        return bool(self.expand) or any(isinstance(v, (list, tuple)) and "{" + k + "}" in self.path
+                                        for k, v in fill.items())
+
     def paths(self, root: str = RESULTS_DIR, **fill) -> list[str]:
-        """The output's path(s) under ``root``: its ``expand`` wildcards expanded, ``fill`` substituted."""
-        p = _fill(f"{root}/{self.path}", fill)
-        if not self.expand:
+        """The output's path(s) under ``root``: its ``expand`` wildcards and the list values of ``fill`` expanded,
+        the other values of ``fill`` substituted."""
+        lists = dict(self.expand)
+        lists.update({k: v for k, v in fill.items() if isinstance(v, (list, tuple)) and "{" + k + "}" in self.path})
+        p = _fill(f"{root}/{self.path}", {k: v for k, v in fill.items() if k not in lists})
+        if not lists:
             return [p]
-        keys = [k for k, _ in self.expand]
-        return [_fill(p, dict(zip(keys, vals))) for vals in product(*(v for _, v in self.expand))]
+        keys = list(lists)
+        return [_fill(p, dict(zip(keys, vals))) for vals in product(*(lists[k] for k in keys))]
 
 
 @dataclass(frozen=True)
@@ -149,6 +161,15 @@ def _discovery_outputs() -> dict[str, Output]:
             out[f"{case}.{role}"] = _o(f"discrepancy/{case}/{name}", f"discovery_{case}", caption, _D,
                                        subcategory=case, report="optional", name=role)
         out[f"{case}.scenarios"] = _o(f"discrepancy/{case}/scenarios.csv", f"discovery_{case}", name="scenarios")
+    for case in REAL_MISS_CASES:
+        for role, name, caption in DISCOVERY_CASE_FILES:
+            out[f"{case}.{role}"] = _o(f"discrepancy/{case}/{name}", f"discovery_{case}", caption, _D,
+                                       subcategory=case, name=role)
+        out[f"{case}.scenarios"] = _o(f"discrepancy/{case}/scenarios.csv", f"discovery_{case}", name="scenarios")
+        out[f"{case}.real_case"] = _o(f"discrepancy/{case}/real_case.json", f"discovery_{case}", name="real_case")
+    out["facet_share.rows"] = _o("discrepancy/facet_share/rows.csv", "discovery_facet_share", name="rows")
+    out["facet_share.real_case"] = _o("discrepancy/facet_share/real_case.json", "discovery_facet_share",
+                                      name="real_case")
     out.update({
         "real_data_summary": _o("discrepancy/real_data_summary.csv", "discovery_real_data_summary",
                                 "discovery_real_data_summary", _D, final=True, report="optional"),
@@ -168,6 +189,17 @@ def _discovery_outputs() -> dict[str, Output]:
 
 
 MANIFESTS: dict[str, Manifest] = {m.stage: m for m in (
+    # a user's specimen (geometry.kind meshes | label_volume): defined in every configuration, requested for a
+    # specimen only; {unit}: the units present, {mesh}: a label volume's meshes and reports (the rule fills them)
+    Manifest("specimen", {
+        "landmarks": _o("geometry/landmarks.csv", "specimen_geometry"),
+        "levels": _o("geometry/levels.csv", "specimen_geometry"),
+        "transform": _o("geometry/transform.json", "specimen_geometry"),
+        "skipped": _o("geometry/skipped_stages.csv", "specimen_geometry"),
+        "qa": _o("geometry/qa_{unit}.png", "specimen_geometry"),
+        "meshes": _o("geometry/meshes/{mesh}", "specimen_geometry"),
+        "real_targets": _o("geometry/real_targets.csv", "specimen_real_targets"),
+    }),
     Manifest("geometry", {
         "table": _o("tables/fsu_geometry.csv", "fsu_geometry", "fsu_geometry", "Geometry", final=True),
         "figure": _o("figures/fig1_l4l5_model.png", "fig1_l4l5_model", "fig1_l4l5_model", "Geometry", final=True),
@@ -399,6 +431,11 @@ def path(stage: str, role: str, root: str = RESULTS_DIR, **fill) -> str:
         raise ValueError(f"{stage}.{role} is a list of files ({o.path}): use paths(), or fill "
                          f"{[k for k, _ in o.expand]}")
     return _fill(f"{root}/{o.path}", fill)
+
+
+def folder(stage: str, role: str, root: str = RESULTS_DIR) -> str:
+    """The folder of a role's file(s) under ``root``, with a trailing ``/``."""
+    return paths(stage, role, root)[0].rsplit("/", 1)[0] + "/"
 
 
 def paths(stage: str, role: str, root: str = RESULTS_DIR, **fill) -> list[str]:

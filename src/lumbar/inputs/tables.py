@@ -17,7 +17,7 @@ cables                data/cables/wilke1996_cables.csv                  CABLES
 landmarks             data/landmarks/myo_sim_landmarks.csv              LANDMARKS
 muscle_groups         data/muscles/muscle_groups.csv                    MUSCLE_GROUPS
 anthropometry         data/anthropometry/upper_body_segments.csv        ANTHROPOMETRY
-in_vivo_idp           data/in_vivo/wilke_idp_l4l5.csv                   IN_VIVO_IDP
+in_vivo_idp           data/in_vivo/wilke_idp_l4l5.csv, wilke1999_*.csv  IN_VIVO_IDP
 neutral_angle         data/experiments/heuer2007_va_artefact_*.csv      NEUTRAL_ANGLE (discovery)
 in_vivo               stage manifest role muscle_model.validation       IN_VIVO (discovery)
 ====================  ================================================  =====================================
@@ -506,6 +506,7 @@ DATA_FILES = {
     "data/muscles/muscle_groups.csv": "muscle_groups",
     "data/anthropometry/upper_body_segments.csv": "anthropometry",
     "data/in_vivo/wilke_idp_l4l5.csv": "in_vivo_idp",
+    "data/in_vivo/wilke1999_idp_lying_original_text.csv": "in_vivo_idp",
 }
 
 

@@ -1,8 +1,11 @@
 """Compiled core of the equilibrium solver: force evaluation, Jacobian assembly and the damped Newton step,
-per scenario, in numba (machine code cached on disk, ``cache=True``).
+per scenario, in numba (machine code cached on disk, ``cache=True``). This module holds the switch, the packing of
+the model's arrays, the Newton iteration and the Python entry points; the compiled residual and Jacobian of one
+scenario (element laws and assembly) are :mod:`lumbar.mechanics.kernel_residual`, the decorators
+:mod:`lumbar.mechanics.jit`.
 
 The reference is the vectorised numpy path (:meth:`lumbar.mechanics.model.SpineModel.evaluate_reference` and
-``lumbar.mechanics.solve.newton_reference``); this module computes the same quantities with the same formulas,
+``lumbar.mechanics.solve.newton_reference``); the compiled core computes the same quantities with the same formulas,
 element by element, and runs the same Newton iteration (modified Newton with the same eigenvalue shift, step
 limits and backtracking line search) scenario by scenario: both paths give the same equilibria, iteration counts
 and flags up to round-off (tests/test_kernel.py checks 1e-9 relative). What makes it fast: no per-call numpy
@@ -29,44 +32,57 @@ one warning says so.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import logging
 import os
+from pathlib import Path
 
 import numpy as np
 
-from .elements.ligament import LAW_CABLE, LAW_RUPP, LAW_SOFTPLUS  # noqa: F401 - compile-time constants
+from . import kernel_residual
+from .elements.ligament import LAW_CABLE, LAW_RUPP, LAW_SOFTPLUS  # noqa: F401 - the laws' codes, for callers
+from .jit import HAVE_NUMBA, njit
+from .jit import inner_jit as _inner
+from .jit import jit as _jit
+from .kernel_residual import (
+    SCREEN_M,  # noqa: F401 - the contact screen's margin (kernel.SCREEN_M, as before the residual had a module)
+    copy_array,
+    eval_one,
+    evaluate_batch,
+    rotation_exp,
+    same_array,
+    same_row,
+    zero_array,
+)
 
 log = logging.getLogger(__name__)
-
-try:  # numba is pinned (environment.txt); without it the numpy reference path runs
-    from numba import njit
-    HAVE_NUMBA = True
-except ImportError:  # pragma: no cover - exercised only in an environment without the pin
-    HAVE_NUMBA = False
-
-    def njit(*args, **kwargs):
-        if args and callable(args[0]):
-            return args[0]
-        return lambda f: f
-
-# machine code cached beside this file (or in NUMBA_CACHE_DIR); numpy's error model: a division by zero gives
-# inf/nan as in the reference path instead of raising
-_jit = njit(cache=True, error_model="numpy")
-# the helpers, called only from compiled code: no Python (CPython / C) entry point is built for them (about a tenth of
-# the core's compile time, measured in alternating pairs with and without)
-_inner = njit(cache=True, error_model="numpy", no_cpython_wrapper=True, no_cfunc_wrapper=True) if HAVE_NUMBA \
-    else _jit
-#: the same decorators for other compiled modules of the package (lumbar.muscles.compiled): one cache rule, one error
-#: model, one switch (:func:`active`); ``inner_jit`` for functions called only from compiled code
+#: the decorators of the compiled modules (lumbar.mechanics.jit), kept here for lumbar.muscles.compiled
 jit = _jit
 inner_jit = _inner
+
+#: SHA-256 of kernel_residual.py. numba keys the on-disk cache of a compiled function on its own source file (time
+#: stamp and size), and the machine code of newton_batch here holds the residual it calls there: a change of that
+#: file alone would leave newton_batch's cached code stale. While the digest matches, newton_batch is cached like
+#: every kernel; when it does not (kernel_residual.py edited), newton_batch compiles without the cache in that
+#: process, and tests/test_kernel.py fails until the digest here is updated, the edit of this file that retires the
+#: cache entry.
+RESIDUAL_SHA256 = "eddbdcbd023a8a7a9f5fbb483d84667f37620251fb7408e336cf2aa30745bdee"
+
+
+def residual_pinned(digest: str = RESIDUAL_SHA256) -> bool:
+    """True when kernel_residual.py is the file whose SHA-256 is ``digest`` (see :data:`RESIDUAL_SHA256`)."""
+    try:
+        return hashlib.sha256(Path(kernel_residual.__file__).read_bytes()).hexdigest() == digest
+    except OSError:           # no source beside the module: nothing to pin, nothing cached from it
+        return False
+
+
+_newton_jit = _jit if residual_pinned() else njit(cache=False, error_model="numpy")
+
 #: Newton trials from residuals below LAZY x the tolerances are evaluated without the Jacobian first (newton_batch);
 #: on the default unit's benchmark scenarios 1e3, 1e4, 1e5, 1e6 and 1e7 cost 83.9, 83.1, 82.8, 85.3 and 88.2 us of
 #: evaluations per equilibrium (counted evaluations x the measured cost with / without the Jacobian; all: 85.7)
 LAZY = 1e5
-#: a contact point whose screened gap (the affine map of _screen_map; it differs from the exact one by round-off,
-#: about 1e-15 m on these coordinates) exceeds SCREEN_M is open and skipped; every other point is evaluated exactly
-SCREEN_M = 1e-9
 MODES = ("compiled", "reference")
 _state = {"mode": os.environ.get("LUMBAR_KERNEL", "compiled"), "warned": False}
 if _state["mode"] not in MODES:
@@ -223,615 +239,6 @@ def scenario_data(model, B, loads, fmask, cmask, params) -> tuple:
     return L, fm, cm, l0, kt, off
 
 
-# ---------------------------------------------------------------------------------------------------- SO(3)
-@_inner
-def _exp(w, out):
-    """Rotation matrix of rotation vector w (as scipy's Rotation.from_rotvec(w).as_matrix())."""
-    angle = np.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
-    if angle <= 1e-3:
-        a2 = angle * angle
-        scale = 0.5 - a2 / 48.0 + a2 * a2 / 3840.0
-    else:
-        scale = np.sin(angle / 2.0) / angle
-    x, y, z, q = scale * w[0], scale * w[1], scale * w[2], np.cos(angle / 2.0)
-    x2, y2, z2, w2 = x * x, y * y, z * z, q * q
-    xy, zw, xz, yw, yz, xw = x * y, z * q, x * z, y * q, y * z, x * q
-    out[0, 0] = x2 - y2 - z2 + w2
-    out[1, 0] = 2.0 * (xy + zw)
-    out[2, 0] = 2.0 * (xz - yw)
-    out[0, 1] = 2.0 * (xy - zw)
-    out[1, 1] = -x2 + y2 - z2 + w2
-    out[2, 1] = 2.0 * (yz + xw)
-    out[0, 2] = 2.0 * (xz + yw)
-    out[1, 2] = 2.0 * (yz - xw)
-    out[2, 2] = -x2 - y2 + z2 + w2
-
-
-@_inner
-def _log(Rm, out, out4):
-    """Rotation vector of rotation matrix Rm (quaternion route, as scipy's Rotation.from_matrix().as_rotvec())."""
-    q = out4
-    tr = Rm[0, 0] + Rm[1, 1] + Rm[2, 2]
-    choice = 3
-    best = tr
-    for i in range(3):
-        if Rm[i, i] > best:
-            best = Rm[i, i]
-            choice = i
-    if choice != 3:
-        i = choice
-        j = (i + 1) % 3
-        k = (j + 1) % 3
-        q[i] = 1.0 - tr + 2.0 * Rm[i, i]
-        q[j] = Rm[j, i] + Rm[i, j]
-        q[k] = Rm[k, i] + Rm[i, k]
-        q[3] = Rm[k, j] - Rm[j, k]
-    else:
-        q[0] = Rm[2, 1] - Rm[1, 2]
-        q[1] = Rm[0, 2] - Rm[2, 0]
-        q[2] = Rm[1, 0] - Rm[0, 1]
-        q[3] = 1.0 + tr
-    nq = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    for i in range(4):
-        q[i] /= nq
-    if q[3] < 0.0:
-        for i in range(4):
-            q[i] = -q[i]
-    angle = 2.0 * np.arctan2(np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]), q[3])
-    if angle <= 1e-3:
-        a2 = angle * angle
-        scale = 2.0 + a2 / 12.0 + 7.0 * a2 * a2 / 2880.0
-    else:
-        scale = angle / np.sin(angle / 2.0)
-    for i in range(3):
-        out[i] = scale * q[i]
-
-
-@_inner
-def _jl_inv(phi, out, work):
-    """Inverse left Jacobian of SO(3) at phi (lumbar.mechanics.so3.left_jacobian_inverse)."""
-    theta = np.sqrt(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2])
-    if theta < 1e-4:
-        coef = 1.0 / 12.0 + theta ** 2 / 720.0
-    else:
-        coef = 1.0 / theta ** 2 - (1.0 + np.cos(theta)) / (2.0 * theta * np.sin(theta))
-    K = work
-    K[0, 0], K[1, 1], K[2, 2] = 0.0, 0.0, 0.0
-    K[0, 1], K[0, 2], K[1, 0] = -phi[2], phi[1], phi[2]
-    K[1, 2], K[2, 0], K[2, 1] = -phi[0], -phi[1], phi[0]
-    for i in range(3):
-        for j in range(3):
-            k2 = K[i, 0] * K[0, j] + K[i, 1] * K[1, j] + K[i, 2] * K[2, j]
-            out[i, j] = (1.0 if i == j else 0.0) - 0.5 * K[i, j] + coef * k2
-
-
-# ---------------------------------------------------------------------------------------------------- assembly
-@_inner
-def _attach(x, R, c, body, S, row, p, r):
-    """World point p of body-fixed reference point S[row] on ``body`` and its lever arm r about the body's point
-    (the point itself for ground)."""
-    if body < 0:
-        for i in range(3):
-            p[i] = S[row, i]
-            r[i] = S[row, i]
-    else:
-        s0, s1, s2 = S[row, 0] - c[body, 0], S[row, 1] - c[body, 1], S[row, 2] - c[body, 2]
-        for i in range(3):
-            r[i] = R[body, i, 0] * s0 + R[body, i, 1] * s1 + R[body, i, 2] * s2
-            p[i] = x[body, i] + r[i]
-
-
-@_inner
-def _point(x, R, c, body, S, row):
-    """(p, r) as six scalars: world point of reference point S[row] on ``body`` and its lever arm (see _attach)."""
-    if body < 0:
-        return S[row, 0], S[row, 1], S[row, 2], S[row, 0], S[row, 1], S[row, 2]
-    s0, s1, s2 = S[row, 0] - c[body, 0], S[row, 1] - c[body, 1], S[row, 2] - c[body, 2]
-    r0 = R[body, 0, 0] * s0 + R[body, 0, 1] * s1 + R[body, 0, 2] * s2
-    r1 = R[body, 1, 0] * s0 + R[body, 1, 1] * s1 + R[body, 1, 2] * s2
-    r2 = R[body, 2, 0] * s0 + R[body, 2, 1] * s1 + R[body, 2, 2] * s2
-    return x[body, 0] + r0, x[body, 1] + r1, x[body, 2] + r2, r0, r1, r2
-
-
-@_inner
-def _frame_coords(P, o, A):
-    """Coordinates of point P in the frame with origin o and rows A (the rows' directions)."""
-    d0, d1, d2 = P[0] - o[0], P[1] - o[1], P[2] - o[2]
-    return (d0 * A[0, 0] + d1 * A[0, 1] + d2 * A[0, 2], d0 * A[1, 0] + d1 * A[1, 1] + d2 * A[1, 2],
-            d0 * A[2, 0] + d1 * A[2, 1] + d2 * A[2, 2])
-
-
-@_inner
-def _in_body(x, R, c, body, p0, p1, p2):
-    """(lever arm of world point p about ``body``'s reference point, reference-frame coordinates of p in ``body``)
-    as six scalars (see _lever, _to_body)."""
-    if body < 0:
-        return p0, p1, p2, p0, p1, p2
-    e0, e1, e2 = p0 - x[body, 0], p1 - x[body, 1], p2 - x[body, 2]
-    return (e0, e1, e2, R[body, 0, 0] * e0 + R[body, 1, 0] * e1 + R[body, 2, 0] * e2 + c[body, 0],
-            R[body, 0, 1] * e0 + R[body, 1, 1] * e1 + R[body, 2, 1] * e2 + c[body, 1],
-            R[body, 0, 2] * e0 + R[body, 1, 2] * e1 + R[body, 2, 2] * e2 + c[body, 2])
-
-
-@_inner
-def _lever(x, body, p, r):
-    """Lever arm of world point p about ``body``'s reference point (the point itself for ground)."""
-    for i in range(3):
-        r[i] = p[i] if body < 0 else p[i] - x[body, i]
-
-
-@_inner
-def _to_body(x, R, c, body, p, P):
-    """Reference-frame coordinates in ``body`` of world point p."""
-    if body < 0:
-        for i in range(3):
-            P[i] = p[i]
-    else:
-        for i in range(3):
-            P[i] = (R[body, 0, i] * (p[0] - x[body, 0]) + R[body, 1, i] * (p[1] - x[body, 1])
-                    + R[body, 2, i] * (p[2] - x[body, 2])) + c[body, i]
-
-
-@_inner
-def _relative_point(x, R, c, a, b, S, row, p, ra, rb, P):
-    """Point S[row] carried by body a: world point p, its lever arms ra, rb about bodies a and b, and its
-    reference-frame coordinates P in body b (where a law fixed in body b reads it)."""
-    _attach(x, R, c, a, S, row, p, ra)
-    _lever(x, b, p, rb)
-    _to_body(x, R, c, b, p, P)
-
-
-@_inner
-def _rot(R, body, v, out):
-    if body < 0:
-        for i in range(3):
-            out[i] = v[i]
-    else:
-        for i in range(3):
-            out[i] = R[body, i, 0] * v[0] + R[body, i, 1] * v[1] + R[body, i, 2] * v[2]
-
-
-@_inner
-def _add_force(Q, body, f, r, sign):
-    if body >= 0:
-        Q[body, 0] += sign * f[0]
-        Q[body, 1] += sign * f[1]
-        Q[body, 2] += sign * f[2]
-        Q[body, 3] += sign * (r[1] * f[2] - r[2] * f[1])
-        Q[body, 4] += sign * (r[2] * f[0] - r[0] * f[2])
-        Q[body, 5] += sign * (r[0] * f[1] - r[1] * f[0])
-
-
-@_inner
-def _add_gkg(J, bi, bj, K, r1, r2, sign):
-    """J[bi, :, bj, :] += sign * G1 K G2^T with G = [I; [r]x]:
-    [[K, -K [r2]x], [[r1]x K, -[r1]x K [r2]x]]."""
-    for rr in range(3):
-        # row rr of [r1]x K is (r1 x K[:, c])[rr] for each column c; row rr of -K [r2]x is r2 x K[rr, :] and of
-        # -[r1]x K [r2]x is r2 x ([r1]x K)[rr, :]
-        i1, i2 = (rr + 1) % 3, (rr + 2) % 3
-        k0, k1, k2 = K[rr, 0], K[rr, 1], K[rr, 2]
-        m0 = r1[i1] * K[i2, 0] - r1[i2] * K[i1, 0]
-        m1 = r1[i1] * K[i2, 1] - r1[i2] * K[i1, 1]
-        m2 = r1[i1] * K[i2, 2] - r1[i2] * K[i1, 2]
-        J[bi, rr, bj, 0] += sign * k0
-        J[bi, rr, bj, 1] += sign * k1
-        J[bi, rr, bj, 2] += sign * k2
-        J[bi, rr, bj, 3] += sign * (r2[1] * k2 - r2[2] * k1)
-        J[bi, rr, bj, 4] += sign * (r2[2] * k0 - r2[0] * k2)
-        J[bi, rr, bj, 5] += sign * (r2[0] * k1 - r2[1] * k0)
-        J[bi, 3 + rr, bj, 0] += sign * m0
-        J[bi, 3 + rr, bj, 1] += sign * m1
-        J[bi, 3 + rr, bj, 2] += sign * m2
-        J[bi, 3 + rr, bj, 3] += sign * (r2[1] * m2 - r2[2] * m1)
-        J[bi, 3 + rr, bj, 4] += sign * (r2[2] * m0 - r2[0] * m2)
-        J[bi, 3 + rr, bj, 5] += sign * (r2[0] * m1 - r2[1] * m0)
-
-
-@_inner
-def _add_hatprod(J, bi, bj, a, b, sign):
-    """J[bi, 3:, bj, 3:] += sign * [a]x [b]x = sign * (b a^T - (a.b) I)."""
-    ab = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-    for i in range(3):
-        for j in range(3):
-            J[bi, 3 + i, bj, 3 + j] += sign * (b[i] * a[j] - (ab if i == j else 0.0))
-
-
-@_inner
-def _add_hat(J, bi, bj, f, sign, o1, o2):
-    """J[bi, o1:o1+3, bj, o2:o2+3] += sign * [f]x."""
-    J[bi, o1 + 0, bj, o2 + 1] += -sign * f[2]
-    J[bi, o1 + 0, bj, o2 + 2] += sign * f[1]
-    J[bi, o1 + 1, bj, o2 + 0] += sign * f[2]
-    J[bi, o1 + 1, bj, o2 + 2] += -sign * f[0]
-    J[bi, o1 + 2, bj, o2 + 0] += -sign * f[1]
-    J[bi, o1 + 2, bj, o2 + 1] += sign * f[0]
-
-
-@_inner
-def _fibre_block(J, bi, bj, sign, beta, alpha, u, p, q):
-    """J[bi, :, bj, :] += sign * G1 K G2^T for a fibre's K = beta u u^T + alpha I (G = [I; [r]x], r1 = p of body
-    bi, r2 = q of body bj): beta g1 g2^T with g = (u, r x u), plus alpha [[I, -[q]x], [[p]x, (p.q) I - q p^T]]
-    (the same block as _add_gkg, from scalars)."""
-    g1 = (u[0], u[1], u[2], p[1] * u[2] - p[2] * u[1], p[2] * u[0] - p[0] * u[2], p[0] * u[1] - p[1] * u[0])
-    g2 = (u[0], u[1], u[2], q[1] * u[2] - q[2] * u[1], q[2] * u[0] - q[0] * u[2], q[0] * u[1] - q[1] * u[0])
-    sb, sa = sign * beta, sign * alpha
-    for k in range(6):
-        for m in range(6):
-            J[bi, k, bj, m] += sb * g1[k] * g2[m]
-    pq = p[0] * q[0] + p[1] * q[1] + p[2] * q[2]
-    for k in range(3):
-        J[bi, k, bj, k] += sa
-        J[bi, 3 + k, bj, 3 + k] += sa * pq
-        for m in range(3):
-            J[bi, 3 + k, bj, 3 + m] -= sa * q[k] * p[m]
-    J[bi, 0, bj, 4] += sa * q[2]
-    J[bi, 0, bj, 5] -= sa * q[1]
-    J[bi, 1, bj, 3] -= sa * q[2]
-    J[bi, 1, bj, 5] += sa * q[0]
-    J[bi, 2, bj, 3] += sa * q[1]
-    J[bi, 2, bj, 4] -= sa * q[0]
-    J[bi, 3, bj, 1] -= sa * p[2]
-    J[bi, 3, bj, 2] += sa * p[1]
-    J[bi, 4, bj, 0] += sa * p[2]
-    J[bi, 4, bj, 2] -= sa * p[0]
-    J[bi, 5, bj, 0] -= sa * p[1]
-    J[bi, 5, bj, 1] += sa * p[0]
-
-
-@_inner
-def _fibre_hatprod(J, body, sign, f, r):
-    """J[body, 3:, body, 3:] += sign * [f]x [r]x = sign * (r f^T - (f.r) I) (the fibre's geometric stiffness)."""
-    fr = f[0] * r[0] + f[1] * r[1] + f[2] * r[2]
-    for k in range(3):
-        J[body, 3 + k, body, 3 + k] -= sign * fr
-        for m in range(3):
-            J[body, 3 + k, body, 3 + m] += sign * r[k] * f[m]
-
-
-@_inner
-def _assemble_j(J, a, b, f, ra, rb, K, body_relative):
-    """Jacobian blocks of one point element with force f on body a (lever ra), -f on body b (lever rb) and
-    stiffness K = df/dp (world); ``body_relative``: the law is fixed in body b (facets, disc translation)."""
-    if a >= 0:
-        _add_gkg(J, a, a, K, ra, ra, 1.0)
-        _add_hatprod(J, a, a, f, ra, 1.0)
-    if b >= 0:
-        _add_gkg(J, b, b, K, rb, rb, 1.0)
-        if body_relative:
-            _add_hat(J, b, b, f, 1.0, 0, 3)
-            _add_hat(J, b, b, f, -1.0, 3, 0)
-            _add_hatprod(J, b, b, rb, f, 1.0)
-        else:
-            _add_hatprod(J, b, b, f, rb, -1.0)
-    if a >= 0 and b >= 0:
-        _add_gkg(J, a, b, K, ra, rb, -1.0)
-        _add_gkg(J, b, a, K, rb, ra, -1.0)
-        if body_relative:
-            _add_hat(J, a, b, f, -1.0, 0, 3)
-            _add_hatprod(J, a, b, ra, f, -1.0)
-            _add_hat(J, b, a, f, 1.0, 3, 0)
-            _add_hatprod(J, b, a, f, ra, -1.0)
-
-
-@_inner
-def _assemble(Q, J, jac, a, b, f, ra, rb, K, body_relative):
-    """One point element (see SpineModel._assemble of the reference path)."""
-    _add_force(Q, a, f, ra, 1.0)
-    _add_force(Q, b, f, rb, -1.0)
-    if jac:
-        _assemble_j(J, a, b, f, ra, rb, K, body_relative)
-
-
-@_inner
-def _screen_map(x, R, c, a, b, orig, ax):
-    """Affine map (G, t) from a point's reference coordinates S - c_a on body ``a`` (S on ground) to its coordinates
-    (u, v, w) in the frame (origin ``orig``, rows ``ax``) of a surface fixed in body ``b``: the composition of _point,
-    _in_body and the surface frame, G = ax R_b^T R_a, t = ax (R_b^T (x_a - x_b) + c_b - orig); twelve scalars, G by
-    rows, then t."""
-    # A = ax R_b^T (ax for ground), then G = A R_a (A for ground)
-    a00, a01, a02 = ax[0, 0], ax[0, 1], ax[0, 2]
-    a10, a11, a12 = ax[1, 0], ax[1, 1], ax[1, 2]
-    a20, a21, a22 = ax[2, 0], ax[2, 1], ax[2, 2]
-    e0 = x[a, 0] if a >= 0 else 0.0
-    e1 = x[a, 1] if a >= 0 else 0.0
-    e2 = x[a, 2] if a >= 0 else 0.0
-    if b >= 0:
-        e0, e1, e2 = e0 - x[b, 0], e1 - x[b, 1], e2 - x[b, 2]
-        d0 = R[b, 0, 0] * e0 + R[b, 1, 0] * e1 + R[b, 2, 0] * e2 + c[b, 0] - orig[0]
-        d1 = R[b, 0, 1] * e0 + R[b, 1, 1] * e1 + R[b, 2, 1] * e2 + c[b, 1] - orig[1]
-        d2 = R[b, 0, 2] * e0 + R[b, 1, 2] * e1 + R[b, 2, 2] * e2 + c[b, 2] - orig[2]
-        Rb = R[b]
-        a00, a01, a02 = (a00 * Rb[0, 0] + a01 * Rb[0, 1] + a02 * Rb[0, 2], a00 * Rb[1, 0] + a01 * Rb[1, 1]
-                         + a02 * Rb[1, 2], a00 * Rb[2, 0] + a01 * Rb[2, 1] + a02 * Rb[2, 2])
-        a10, a11, a12 = (a10 * Rb[0, 0] + a11 * Rb[0, 1] + a12 * Rb[0, 2], a10 * Rb[1, 0] + a11 * Rb[1, 1]
-                         + a12 * Rb[1, 2], a10 * Rb[2, 0] + a11 * Rb[2, 1] + a12 * Rb[2, 2])
-        a20, a21, a22 = (a20 * Rb[0, 0] + a21 * Rb[0, 1] + a22 * Rb[0, 2], a20 * Rb[1, 0] + a21 * Rb[1, 1]
-                         + a22 * Rb[1, 2], a20 * Rb[2, 0] + a21 * Rb[2, 1] + a22 * Rb[2, 2])
-    else:
-        d0, d1, d2 = e0 - orig[0], e1 - orig[1], e2 - orig[2]
-    t0 = ax[0, 0] * d0 + ax[0, 1] * d1 + ax[0, 2] * d2
-    t1 = ax[1, 0] * d0 + ax[1, 1] * d1 + ax[1, 2] * d2
-    t2 = ax[2, 0] * d0 + ax[2, 1] * d1 + ax[2, 2] * d2
-    if a >= 0:
-        Ra = R[a]
-        return (a00 * Ra[0, 0] + a01 * Ra[1, 0] + a02 * Ra[2, 0], a00 * Ra[0, 1] + a01 * Ra[1, 1] + a02 * Ra[2, 1],
-                a00 * Ra[0, 2] + a01 * Ra[1, 2] + a02 * Ra[2, 2],
-                a10 * Ra[0, 0] + a11 * Ra[1, 0] + a12 * Ra[2, 0], a10 * Ra[0, 1] + a11 * Ra[1, 1] + a12 * Ra[2, 1],
-                a10 * Ra[0, 2] + a11 * Ra[1, 2] + a12 * Ra[2, 2],
-                a20 * Ra[0, 0] + a21 * Ra[1, 0] + a22 * Ra[2, 0], a20 * Ra[0, 1] + a21 * Ra[1, 1] + a22 * Ra[2, 1],
-                a20 * Ra[0, 2] + a21 * Ra[1, 2] + a22 * Ra[2, 2], t0, t1, t2)
-    return a00, a01, a02, a10, a11, a12, a20, a21, a22, t0, t1, t2
-
-
-@_inner
-def _tension(law, length, l0, P, row, width):
-    """Fibre law value and derivative d/d(length) before the fibre's scale (SpineModel._tension_raw); the law's
-    parameters are row ``row`` of P."""
-    par0, par1, par2, par3, par4 = P[row, 0], P[row, 1], P[row, 2], P[row, 3], P[row, 4]
-    if law == LAW_SOFTPLUS:
-        eps = (length / l0 - 1.0) * 100.0
-        if eps <= 0.0:
-            return 0.0, 0.0
-        z = (eps + par1) / par3
-        e = np.exp(-abs(z))                  # softplus and its derivative, the logistic function, from one exp
-        F = par0 * (max(z, 0.0) + np.log1p(e)) + par2
-        dF = par0 / par3 * (1.0 / (1.0 + e) if z >= 0.0 else e / (1.0 + e))
-        if not F > 0.0:
-            F, dF = 0.0, 0.0
-        if width <= 0.0:
-            s, ds = 1.0, 0.0
-        else:
-            t = min(eps / width, 1.0)
-            s = t * t * (3.0 - 2.0 * t)
-            ds = 6.0 * t * (1.0 - t) / width if eps < width else 0.0
-        return s * F, (ds * F + s * dF) * 100.0 / l0
-    if law == LAW_RUPP:
-        dl = length - l0
-        if dl > 0.0 and dl < par0:
-            return par3 * dl ** par2, par2 * par3 * dl ** (par2 - 1.0)
-        if dl >= par0:
-            return par1 + par4 * (dl - par0), par4
-        return 0.0, 0.0
-    return par0, 0.0
-
-
-@_inner
-def _torque_angle(phi, p):
-    z = phi ** 3 / p[1]
-    t = np.tanh(z)
-    return p[0] * t + p[2] * phi, p[0] * (1.0 - t ** 2) * 3.0 * phi ** 2 / p[1] + p[2]
-
-
-@_inner
-def _eval_one(x, R, Q, J, jac, md, fm, cm, l0, kt, off, w3, w33):
-    """Residual Q (nb, 6) (pre-filled with the loads) and Jacobian J (nb, 6, nb, 6) (zeroed) of one scenario;
-    w3 (16, 4) and w33 (8, 3, 3) are work space."""
-    (c, f_a, f_b, f_sa, f_sb, f_extra, f_law, f_par, f_scale, width,
-     k_a, k_b, k_s, k_surf, k_stiff, ceps, s_orig, s_axes, s_coef,
-     d_up, d_lo, d_centre, d_frame, d_k, d_torque) = md
-    pa, ra, rb, P, f, tmp, v0, v1, v2 = w3[0], w3[2], w3[3], w3[4], w3[5], w3[6], w3[7], w3[8], w3[9]
-    K = w33[0]
-    # ---- fibres: K = dT u u^T + T/|d| (I - u u^T) with the sign of a pulling element
-    for n in range(f_a.shape[0]):
-        a, b = f_a[n], f_b[n]
-        pa0, pa1, pa2, ra0, ra1, ra2 = _point(x, R, c, a, f_sa, n)
-        pb0, pb1, pb2, rb0, rb1, rb2 = _point(x, R, c, b, f_sb, n)
-        d0, d1, d2 = pa0 - pb0, pa1 - pb1, pa2 - pb2
-        dn = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        T, dT = _tension(f_law[n], dn + f_extra[n], l0[n], f_par, n, width)
-        T = T * f_scale[n] * fm[n]
-        dT = dT * f_scale[n] * fm[n]
-        if T == 0.0 and dT == 0.0:
-            continue
-        u0, u1, u2 = d0 / dn, d1 / dn, d2 / dn
-        f0, f1, f2 = -T * u0, -T * u1, -T * u2
-        if a >= 0:
-            Q[a, 0] += f0
-            Q[a, 1] += f1
-            Q[a, 2] += f2
-            Q[a, 3] += ra1 * f2 - ra2 * f1
-            Q[a, 4] += ra2 * f0 - ra0 * f2
-            Q[a, 5] += ra0 * f1 - ra1 * f0
-        if b >= 0:
-            Q[b, 0] -= f0
-            Q[b, 1] -= f1
-            Q[b, 2] -= f2
-            Q[b, 3] -= rb1 * f2 - rb2 * f1
-            Q[b, 4] -= rb2 * f0 - rb0 * f2
-            Q[b, 5] -= rb0 * f1 - rb1 * f0
-        if not jac:
-            continue
-        alpha = -T / dn
-        beta = T / dn - dT
-        ut, ft = (u0, u1, u2), (f0, f1, f2)
-        rat, rbt = (ra0, ra1, ra2), (rb0, rb1, rb2)
-        if a >= 0:
-            _fibre_block(J, a, a, 1.0, beta, alpha, ut, rat, rat)
-            _fibre_hatprod(J, a, 1.0, ft, rat)
-        if b >= 0:
-            _fibre_block(J, b, b, 1.0, beta, alpha, ut, rbt, rbt)
-            _fibre_hatprod(J, b, -1.0, ft, rbt)
-        if a >= 0 and b >= 0:
-            _fibre_block(J, a, b, -1.0, beta, alpha, ut, rat, rbt)
-            _fibre_block(J, b, a, -1.0, beta, alpha, ut, rbt, rat)
-    # ---- facet contact: penalty on the gap to the lower body's cubic surface
-    # screen: the surface coordinates (u, v, w) of a point are one affine map of its reference coordinates, G (S - c_a)
-    # + t, built once per (surface, upper body, lower body); a point whose screened penetration is below -SCREEN_M
-    # is open (round-off of the two formulas is ~1e-15 m), every other point is evaluated exactly as before
-    g00 = g01 = g02 = g10 = g11 = g12 = g20 = g21 = g22 = t0 = t1 = t2 = 0.0
-    key_s, key_a, key_b = -1, -2, -2
-    for n in range(k_a.shape[0]):
-        a, b = k_a[n], k_b[n]
-        sid = k_surf[n]
-        if sid != key_s or a != key_a or b != key_b:
-            g00, g01, g02, g10, g11, g12, g20, g21, g22, t0, t1, t2 = _screen_map(x, R, c, a, b, s_orig[sid],
-                                                                                 s_axes[sid])
-            key_s, key_a, key_b = sid, a, b
-        if a >= 0:
-            s0, s1, s2 = k_s[n, 0] - c[a, 0], k_s[n, 1] - c[a, 1], k_s[n, 2] - c[a, 2]
-        else:
-            s0, s1, s2 = k_s[n, 0], k_s[n, 1], k_s[n, 2]
-        us = g00 * s0 + g01 * s1 + g02 * s2 + t0
-        vs = g10 * s0 + g11 * s1 + g12 * s2 + t1
-        ws = g20 * s0 + g21 * s1 + g22 * s2 + t2
-        if (ws - (s_coef[sid, 0] * (us * us * us) + s_coef[sid, 1] * (vs * vs * vs) + s_coef[sid, 2] * (us * us)
-                  + s_coef[sid, 3] * (vs * vs) + s_coef[sid, 4])) > SCREEN_M:
-            continue
-        # scalars until the point is known to touch (array-writing helpers cost more than the arithmetic)
-        p0, p1, p2, q0, q1, q2 = _point(x, R, c, a, k_s, n)
-        e0, e1, e2, P0, P1, P2 = _in_body(x, R, c, b, p0, p1, p2)
-        d0, d1, d2 = P0 - s_orig[sid, 0], P1 - s_orig[sid, 1], P2 - s_orig[sid, 2]
-        u = d0 * s_axes[sid, 0, 0] + d1 * s_axes[sid, 0, 1] + d2 * s_axes[sid, 0, 2]
-        v = d0 * s_axes[sid, 1, 0] + d1 * s_axes[sid, 1, 1] + d2 * s_axes[sid, 1, 2]
-        w = d0 * s_axes[sid, 2, 0] + d1 * s_axes[sid, 2, 1] + d2 * s_axes[sid, 2, 2]
-        u2, v2_ = u * u, v * v
-        delta = -(w - (s_coef[sid, 0] * (u2 * u) + s_coef[sid, 1] * (v2_ * v) + s_coef[sid, 2] * u2
-                       + s_coef[sid, 3] * v2_ + s_coef[sid, 4]))
-        k = k_stiff[n]
-        if delta > 0.0 and delta < ceps:
-            Fm, dFm = k * (delta * delta) / (2 * ceps), k * delta / ceps
-        elif delta >= ceps:
-            Fm, dFm = k * (delta - ceps / 2), k
-        else:
-            continue
-        Fm = Fm * cm[n]
-        dFm = dFm * cm[n]
-        if Fm == 0.0 and dFm == 0.0:
-            continue
-        ax, cf = s_axes[sid], s_coef[sid]
-        ra[0], ra[1], ra[2], rb[0], rb[1], rb[2] = q0, q1, q2, e0, e1, e2
-        fu = 3 * cf[0] * u2 + 2 * cf[2] * u
-        fv = 3 * cf[1] * v2_ + 2 * cf[3] * v
-        fuu = 6 * cf[0] * u + 2 * cf[2]
-        fvv = 6 * cf[1] * v + 2 * cf[3]
-        for i in range(3):
-            tmp[i] = -fu * ax[0, i] - fv * ax[1, i] + ax[2, i]
-        _rot(R, b, tmp, v0)
-        _rot(R, b, ax[0], v1)
-        _rot(R, b, ax[1], v2)
-        w0, w1, w2 = -dFm, -Fm * fuu, -Fm * fvv
-        for i in range(3):
-            f[i] = Fm * v0[i]
-            for j in range(3):
-                K[i, j] = w0 * v0[i] * v0[j] + w1 * v1[i] * v1[j] + w2 * v2[i] * v2[j]
-        _assemble(Q, J, jac, a, b, f, ra, rb, K, True)
-    # ---- discs: translational spring in the disc frame, Eq. 3 torque per project axis
-    Ra, RB, Rrel, M, Ji = w33[1], w33[2], w33[3], w33[4], w33[5]
-    phi, ph, Tq, dTq, tau, q4 = w3[10], w3[11], w3[12], w3[13], w3[14], w3[15]
-    for n in range(d_up.shape[0]):
-        a, b = d_up[n], d_lo[n]
-        _relative_point(x, R, c, a, b, d_centre, n, pa, ra, rb, P)
-        fr = d_frame[n]
-        kq, kl, ks = d_k[n, 0], d_k[n, 1], d_k[n, 2]
-        r0, r1, r2 = _frame_coords(P, d_centre[n], fr)
-        cc = -r2
-        if cc > 0.0:
-            Fz, dFz = kq * (cc * cc) + kl * cc, -(2.0 * kq * cc + kl)
-        else:
-            Fz, dFz = -kt[n] * r2, -kt[n]
-        _rot(R, b, fr[0], v0)
-        _rot(R, b, fr[1], v1)
-        _rot(R, b, fr[2], v2)
-        F0, F1 = -ks * r0, -ks * r1
-        for i in range(3):
-            f[i] = F0 * v0[i] + F1 * v1[i] + Fz * v2[i]
-            for j in range(3):
-                K[i, j] = -ks * v0[i] * v0[j] - ks * v1[i] * v1[j] + dFz * v2[i] * v2[j]
-        _assemble(Q, J, jac, a, b, f, ra, rb, K, True)
-        for i in range(3):
-            for j in range(3):
-                Ra[i, j] = R[a, i, j] if a >= 0 else (1.0 if i == j else 0.0)
-                RB[i, j] = R[b, i, j] if b >= 0 else (1.0 if i == j else 0.0)
-        for i in range(3):
-            for j in range(3):
-                Rrel[i, j] = RB[0, i] * Ra[0, j] + RB[1, i] * Ra[1, j] + RB[2, i] * Ra[2, j]
-        _log(Rrel, phi, q4)
-        for i in range(3):
-            ph[i] = phi[i] - off[i]
-        tor = d_torque[n]
-        Tq[0], dTq[0] = _torque_angle(ph[0], tor[0])
-        if ph[1] >= 0.0:
-            Tq[1], dTq[1] = _torque_angle(ph[1], tor[1])
-        else:
-            Tq[1], dTq[1] = _torque_angle(ph[1], tor[2])
-        Tq[2], dTq[2] = _torque_angle(ph[2], tor[3])
-        for i in range(3):
-            tau[i] = RB[i, 0] * Tq[0] + RB[i, 1] * Tq[1] + RB[i, 2] * Tq[2]
-            if a >= 0:
-                Q[a, 3 + i] -= tau[i]
-            if b >= 0:
-                Q[b, 3 + i] += tau[i]
-        if not jac:
-            continue
-        _jl_inv(phi, Ji, w33[6])
-        for i in range(3):          # Rrel <- diag(dT) Jinv RB^T
-            for j in range(3):
-                Rrel[i, j] = dTq[i] * (Ji[i, 0] * RB[j, 0] + Ji[i, 1] * RB[j, 1] + Ji[i, 2] * RB[j, 2])
-        for i in range(3):
-            for j in range(3):
-                M[i, j] = RB[i, 0] * Rrel[0, j] + RB[i, 1] * Rrel[1, j] + RB[i, 2] * Rrel[2, j]
-        for i in range(3):
-            for j in range(3):
-                if a >= 0:
-                    J[a, 3 + i, a, 3 + j] -= M[i, j]
-                if a >= 0 and b >= 0:
-                    J[a, 3 + i, b, 3 + j] += M[i, j]
-                    J[b, 3 + i, a, 3 + j] += M[i, j]
-                if b >= 0:
-                    J[b, 3 + i, b, 3 + j] -= M[i, j]
-        if b >= 0:
-            _add_hat(J, b, b, tau, -1.0, 3, 3)
-            if a >= 0:
-                _add_hat(J, a, b, tau, 1.0, 3, 3)
-
-
-@_inner
-def _copy(dst, src):
-    """dst[...] = src for C-contiguous arrays of the same size, as one flat loop (numba's slice assignment of an array
-    compiles a broadcasting path with its error handling at every use)."""
-    d, s = dst.reshape(dst.size), src.reshape(src.size)
-    for i in range(d.size):
-        d[i] = s[i]
-
-
-@_inner
-def _zero(a):
-    """a[...] = 0 for a C-contiguous array (one flat loop, see :func:`_copy`)."""
-    f = a.reshape(a.size)
-    for i in range(f.size):
-        f[i] = 0.0
-
-
-@_inner
-def _same(a, b):
-    """a == b element by element (C-contiguous arrays of the same size)."""
-    fa, fb = a.reshape(a.size), b.reshape(b.size)
-    for i in range(fa.size):
-        if fa[i] != fb[i]:
-            return False
-    return True
-
-
-@_inner
-def _same_row(a, s, s0):
-    """Rows s and s0 of a per-scenario array (one shared row when a has a single row) are equal."""
-    return a.shape[0] == 1 or _same(a[s], a[s0])
-
-
-@_jit
-def evaluate_batch(x, R, L, fm, cm, l0, kt, off, jac, md, Q, J):
-    """Q (B, nb, 6) and, with ``jac``, J (B, nb, 6, nb, 6) (both written here) of a batch."""
-    w3, w33 = np.empty((16, 4)), np.empty((8, 3, 3))
-    for s in range(x.shape[0]):
-        _copy(Q[s], L[s if L.shape[0] > 1 else 0])
-        if jac:
-            _zero(J[s])
-        _eval_one(x[s], R[s], Q[s], J[s] if jac else J[0], jac, md, fm[s if fm.shape[0] > 1 else 0],
-                  cm[s if cm.shape[0] > 1 else 0], l0[s if l0.shape[0] > 1 else 0],
-                  kt[s if kt.shape[0] > 1 else 0], off[s if off.shape[0] > 1 else 0], w3, w33)
-
-
 def evaluate(model, x, R, loads=None, fmask=1.0, cmask=1.0, jacobian=True, params=None):
     """Compiled ``SpineModel.evaluate`` (same arguments and results as the reference path)."""
     x, R = _f64(x), _f64(R)
@@ -954,7 +361,7 @@ def _step(J, Q, reg, S, A, sym, W, rhs, d):
         dv[i] = W[0, i] * S[i]
 
 
-@_jit
+@_newton_jit
 def newton_batch(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max_st, max_sr, reg, S, lscale,
                  x, R, conv, res_f, res_m, iters):
     """Damped modified Newton, scenario by scenario (lumbar.mechanics.solve.newton_reference, same steps)."""
@@ -972,7 +379,7 @@ def newton_batch(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max
     # then evaluated without it (the same arithmetic as with it: the results are bit-identical to unshared solves)
     J0 = np.empty((nb, 6, nb, 6))
     s0 = -1
-    # run-time bools: a literal would type (and compile) _eval_one a second time
+    # run-time bools: a literal would type (and compile) eval_one a second time
     want_j = max_iter >= 0
     no_j = not want_j
     for s in range(B):
@@ -980,18 +387,18 @@ def newton_batch(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max
         fms, cms = fm[s if fm.shape[0] > 1 else 0], cm[s if cm.shape[0] > 1 else 0]
         l0s, kts, offs = l0[s if l0.shape[0] > 1 else 0], kt[s if kt.shape[0] > 1 else 0], off[s if off.shape[0] > 1 else 0]
         xs, Rs = x[s], R[s]
-        _copy(xs, x0[s])
-        _copy(Rs, R0[s])
-        _copy(Q, Ls)
-        if s0 < 0 or not (_same(x0[s], x0[s0]) and _same(R0[s], R0[s0]) and _same_row(fm, s, s0)
-                          and _same_row(cm, s, s0) and _same_row(l0, s, s0) and _same_row(kt, s, s0)
-                          and _same_row(off, s, s0)):
-            _zero(J0)
-            _eval_one(xs, Rs, Q, J0, want_j, md, fms, cms, l0s, kts, offs, w3, w33)
+        copy_array(xs, x0[s])
+        copy_array(Rs, R0[s])
+        copy_array(Q, Ls)
+        if s0 < 0 or not (same_array(x0[s], x0[s0]) and same_array(R0[s], R0[s0]) and same_row(fm, s, s0)
+                          and same_row(cm, s, s0) and same_row(l0, s, s0) and same_row(kt, s, s0)
+                          and same_row(off, s, s0)):
+            zero_array(J0)
+            eval_one(xs, Rs, Q, J0, want_j, md, fms, cms, l0s, kts, offs, w3, w33)
             s0 = s
         else:
-            _eval_one(xs, Rs, Q, J0, no_j, md, fms, cms, l0s, kts, offs, w3, w33)
-        _copy(J, J0)
+            eval_one(xs, Rs, Q, J0, no_j, md, fms, cms, l0s, kts, offs, w3, w33)
+        copy_array(J, J0)
         conv[s] = False
         iters[s] = 0
         res_f[s] = np.inf
@@ -1027,27 +434,27 @@ def newton_batch(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max
                     for i in range(3):
                         xt[k, i] = xs[k, i] + alpha * d[k, i]
                         wv[i] = alpha * d[k, 3 + i]
-                    _exp(wv, E)
+                    rotation_exp(wv, E)
                     for i in range(3):
                         for j in range(3):
                             Rt[k, i, j] = E[i, 0] * Rs[k, 0, j] + E[i, 1] * Rs[k, 1, j] + E[i, 2] * Rs[k, 2, j]
-                _copy(Qt, Ls)
+                copy_array(Qt, Ls)
                 if lazy:
-                    _eval_one(xt, Rt, Qt, Jt, no_j, md, fms, cms, l0s, kts, offs, w3, w33)
+                    eval_one(xt, Rt, Qt, Jt, no_j, md, fms, cms, l0s, kts, offs, w3, w33)
                 else:
-                    _zero(Jt)
-                    _eval_one(xt, Rt, Qt, Jt, want_j, md, fms, cms, l0s, kts, offs, w3, w33)
+                    zero_array(Jt)
+                    eval_one(xt, Rt, Qt, Jt, want_j, md, fms, cms, l0s, kts, offs, w3, w33)
                 if _merit(Qt, lscale) < m0 * (1.0 - 1e-4 * alpha) or ls == 9:
                     if lazy and it + 1 < max_iter:
                         rft, rmt = _norms(Qt)
                         if not (rft < tol_f and rmt < tol_m):
-                            _copy(Qt, Ls)
-                            _zero(Jt)
-                            _eval_one(xt, Rt, Qt, Jt, want_j, md, fms, cms, l0s, kts, offs, w3, w33)
+                            copy_array(Qt, Ls)
+                            zero_array(Jt)
+                            eval_one(xt, Rt, Qt, Jt, want_j, md, fms, cms, l0s, kts, offs, w3, w33)
                     break
                 alpha = 1.0 if ls == 8 else alpha * 0.5
-            _copy(xs, xt)
-            _copy(Rs, Rt)
+            copy_array(xs, xt)
+            copy_array(Rs, Rt)
             Q, Qt = Qt, Q
             J, Jt = Jt, J
             iters[s] += 1

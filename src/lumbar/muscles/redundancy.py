@@ -45,55 +45,12 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import lsq_linear
 
 from ..mechanics import so3
 from ..mechanics.solve import solve
+from .qp import box_lsq
 
 log = logging.getLogger(__name__)
-
-
-def box_lsq(alpha, C, d, a, lb, ub, max_iter=50, tol=1e-12):
-    """Exact minimiser of ``alpha |a + z|^2 + |C z - d|^2`` over ``lb <= z <= ub`` (C: k x n, k << n).
-
-    Solved through its dual in the k residual multipliers y (concave, piecewise quadratic):
-    ``z(y) = clip(-a - C^T y / (2 alpha), lb, ub)`` and ``grad = C z(y) - d - y / 2``, maximised by a
-    semismooth Newton method with backtracking (generalised Hessian ``-(C_F C_F^T / (2 alpha) + I / 2)``
-    on the free set F). Strong duality holds (strictly convex primal), so z(y*) is the primal minimiser.
-    Falls back to BVLS (scipy.optimize.lsq_linear) if the dual iteration does not converge."""
-    k = C.shape[0]
-    y = np.zeros(k)
-
-    def zf(y):
-        return np.clip(-a - C.T @ y / (2 * alpha), lb, ub)
-
-    def dual(y, z):
-        return alpha * np.sum((a + z) ** 2) + y @ (C @ z - d) - y @ y / 4
-
-    scale = 1.0 + np.abs(d).max() + np.abs(C).max()
-    z = zf(y)
-    gval = dual(y, z)
-    for _ in range(max_iter):
-        grad = C @ z - d - y / 2
-        if np.abs(grad).max() < tol * scale:
-            return z
-        u = -a - C.T @ y / (2 * alpha)
-        F = (u > lb) & (u < ub)
-        CF = C[:, F]
-        H = CF @ CF.T / (2 * alpha) + 0.5 * np.eye(k)
-        step = np.linalg.solve(H, grad)
-        t = 1.0
-        for _ls in range(40):
-            yn = y + t * step
-            zn = zf(yn)
-            gn = dual(yn, zn)
-            if gn >= gval + 1e-4 * t * (grad @ step) or _ls == 39:
-                break
-            t *= 0.5
-        y, z, gval = yn, zn, gn
-    A = np.vstack([np.sqrt(alpha) * np.eye(len(a)), C])
-    b = np.r_[-np.sqrt(alpha) * a, d]
-    return np.clip(lsq_linear(A, b, bounds=(lb, ub), method="bvls", tol=1e-13).x, lb, ub)
 
 
 @dataclass
@@ -162,6 +119,38 @@ class _ThoraxHeld:
             J[:, :, :, t, 3:] = 0.0
             J[:, t, 3:, t, 3:] = -np.eye(3)
         return Q, J
+
+
+@dataclass
+class _Batch:
+    """The state of a batch of postures during the SQP (RedundancySolver._solve_batch): poses, activations, the
+    model state (``st``: Q, J, cost, ...), per scenario the trust bound, the merit weight, the flags of the two
+    phases (``stop``: phase 0; ``done``, ``optimal``: phase 1), iterations, the QP's warm start and the message."""
+    x: np.ndarray
+    R: np.ndarray
+    a: np.ndarray
+    st: dict
+    params: dict
+    targets: np.ndarray
+    D: np.ndarray
+    mu: np.ndarray
+    done: np.ndarray
+    optimal: np.ndarray
+    stop: np.ndarray
+    iters: np.ndarray
+    warm: list
+    msg: list
+
+
+@dataclass
+class _Trials:
+    """The line search's trial points of one iteration: merit per scenario and step length, poses, activations
+    and model states (rows: scenario x step length)."""
+    m_new: np.ndarray
+    xn: np.ndarray
+    Rn: np.ndarray
+    an: np.ndarray
+    sn: dict
 
 
 class RedundancySolver:
@@ -530,7 +519,25 @@ class RedundancySolver:
         """Solve B postures together. ``params``: per-scenario arrays (leading B) ``force_vec``,
         ``force_pt`` (from ``model.load_arrays``) and optionally ``prop_stack`` (``model.props_stack``), or
         shared ``props`` / ``forces``. Start: ``x0, R0, a0`` (e.g. the baseline solution) or the reference
-        pose with the target spread over the levels and zero activations."""
+        pose with the target spread over the levels and zero activations. Steps: :meth:`_start`, phase 0 (the
+        thorax held) and phase 1 (:meth:`_iterate`), :meth:`_polish`, :meth:`_solutions`."""
+        b = self._start(targets_deg, params, x0, R0, a0)
+        for _ in range(self.phase0_iter if a0 is None else 0):
+            act = np.flatnonzero(~b.stop)
+            if act.size == 0:
+                break
+            self._iterate(b, True, act)
+        for _ in range(self.max_iter):
+            act = np.flatnonzero(~b.done)
+            if act.size == 0:
+                break
+            self._iterate(b, False, act)
+        self._polish(b)
+        return self._solutions(b)
+
+    def _start(self, targets_deg, params, x0, R0, a0) -> _Batch:
+        """The batch's start: poses, activations and state; for a cold start with targets beyond
+        ``start_min_deg``, the free vertebrae first in equilibrium with the thorax held."""
         m = self.m
         targets = np.asarray(targets_deg, float).reshape(-1)
         B = self._B = len(targets)
@@ -551,138 +558,145 @@ class RedundancySolver:
                         max_iter=self.start_iter, tol_force=1e-6, tol_moment=1e-6, retry_load_steps=())
             x[far], R[far] = res.x, res.R
         st = self._state(x, R, a, params, allidx, targets)
-        D = np.full(B, self.trust0)
-        mu = np.full(B, self.mu0)
-        done = np.zeros(B, bool)
-        optimal = np.zeros(B, bool)
-        iters = np.zeros(B, int)
-        warm = [None] * B
-        msg = [""] * B
-        def iterate(held, act):
-            dq = np.zeros((act.size, m.nb, 6))
-            da = np.zeros((act.size, nm))
-            pred = np.zeros(act.size)
-            predc = np.zeros(act.size)
-            skip = np.zeros(act.size, bool)
-            for k, i in enumerate(act):
-                out = self._qp(st, i, a[i], D[i], warm[i], mu[i], held)
-                if out is None:          # QP failed: shrink and retry next iteration
-                    D[i] *= 0.25
-                    continue
-                dqk, da[k], pred[k], warm[i] = out
-                predc[k] = self._pred_cost
-                dq[k] = dqk.reshape(m.nb, 6)
-                if not held and np.abs(st["Q"][i]).max() < self.polish_from and (
-                        abs(predc[k]) < self.rel_cost_tol * (1.0 + st["c"][i]) or self._kkt_ok(st, i)):
-                    done[i] = optimal[i] = True      # stationary: the polish below restores equilibrium
-                    skip[k] = True
-            cap = np.maximum(np.abs(dq[..., :3]).max((-1, -2)) / self.max_step_m,
-                             np.abs(dq[..., 3:]).max((-1, -2)) / self.max_step_rad)
-            fac = 1.0 / np.maximum(1.0, cap)
-            dq *= fac[:, None, None]
-            da *= fac[:, None]
-            pred *= fac
-            ts = self.line_search
-            nt = len(ts)
-            iters[act] += 1
-            m_old = self._merit({k: v[act] for k, v in st.items()}, mu[act], held)
-            # trial points: the full step first, for every scenario at once; the shorter steps only where it
-            # fails the Armijo test (about a quarter of the steps; evaluating all of them in one batch cost
-            # six trial evaluations per iteration). The step chosen is the same as with all of them.
-            m_new = np.full((act.size, nt), np.inf)
-            xn = np.zeros((act.size * nt, m.nb, 3))
-            Rn = np.zeros((act.size * nt, m.nb, 3, 3))
-            an = np.zeros((act.size * nt, nm))
-            sn = {}
+        return _Batch(x, R, a, st, params, targets, D=np.full(B, self.trust0), mu=np.full(B, self.mu0),
+                      done=np.zeros(B, bool), optimal=np.zeros(B, bool), stop=np.zeros(B, bool),
+                      iters=np.zeros(B, int), warm=[None] * B, msg=[""] * B)
 
-            def trial(rows, cols):
-                kk, jj = np.repeat(rows, len(cols)), np.tile(cols, len(rows))
-                r, tt = kk * nt + jj, np.asarray(ts)[jj]
-                an[r] = a[act][kk] + tt[:, None] * da[kk]
-                dqt = tt[:, None, None] * dq[kk]
-                xt, Rt = x[act][kk] + dqt[..., :3], so3.exp(dqt[..., 3:]) @ R[act][kk]
-                if not held and self.restore_iter:
-                    xt, Rt, s_t = self._restored_state(xt, Rt, an[r], params, act[kk], targets[act][kk])
-                else:
-                    s_t = self._state(xt, Rt, an[r], params, act[kk], targets[act][kk])
-                xn[r], Rn[r] = xt, Rt
-                for key, v in s_t.items():
-                    if key not in sn:
-                        sn[key] = np.zeros((act.size * nt,) + v.shape[1:], v.dtype)
-                    sn[key][r] = v
-                m_new[kk, jj] = self._merit(s_t, mu[act][kk], held)
+    def _iterate(self, b: _Batch, held, act):
+        """One SQP iteration of the scenarios ``act``: QP steps, capped, then the line search and its acceptance
+        (``held``: phase 0, the thorax rotation held at its target)."""
+        dq, da, pred, predc, skip = self._qp_steps(b, held, act)
+        cap = np.maximum(np.abs(dq[..., :3]).max((-1, -2)) / self.max_step_m,
+                         np.abs(dq[..., 3:]).max((-1, -2)) / self.max_step_rad)
+        fac = 1.0 / np.maximum(1.0, cap)
+        dq *= fac[:, None, None]
+        da *= fac[:, None]
+        pred *= fac
+        b.iters[act] += 1
+        m_old = self._merit({k: v[act] for k, v in b.st.items()}, b.mu[act], held)
+        tr = self._line_search(b, held, act, dq, da, pred, skip, m_old)
+        self._accept(b, held, act, dq, da, pred, predc, skip, m_old, tr)
 
-            first = np.flatnonzero(~skip)
-            if first.size and not self.full_step_first:        # the former search: all step lengths at once
-                trial(first, np.arange(nt))
-            elif first.size:
-                trial(first, np.arange(1))
-                full = m_new[first, 0] <= m_old[first] - 1e-4 * ts[0] * np.maximum(pred[first], 0.0)
-                rest = first[~full]
-                if rest.size and nt > 1:
-                    trial(rest, np.arange(1, nt))
-            for k, i in enumerate(act):
-                if skip[k]:
-                    continue
-                ok = m_new[k] <= m_old[k] - 1e-4 * np.asarray(ts) * max(pred[k], 0.0)
-                if ok.any():
-                    j = int(np.argmax(ok))
-                elif m_new[k].min() < m_old[k]:
-                    j = int(np.argmin(m_new[k]))
-                else:
-                    j = -1
+    def _qp_steps(self, b: _Batch, held, act):
+        """The QP step of every scenario of ``act`` (:meth:`_qp`): pose and activation steps, predicted merit and
+        cost decreases, and which scenarios are already stationary (``skip``: done, the polish follows)."""
+        m, st = self.m, b.st
+        dq = np.zeros((act.size, m.nb, 6))
+        da = np.zeros((act.size, m.ms.n))
+        pred = np.zeros(act.size)
+        predc = np.zeros(act.size)
+        skip = np.zeros(act.size, bool)
+        for k, i in enumerate(act):
+            out = self._qp(st, i, b.a[i], b.D[i], b.warm[i], b.mu[i], held)
+            if out is None:          # QP failed: shrink and retry next iteration
+                b.D[i] *= 0.25
+                continue
+            dqk, da[k], pred[k], b.warm[i] = out
+            predc[k] = self._pred_cost
+            dq[k] = dqk.reshape(m.nb, 6)
+            if not held and np.abs(st["Q"][i]).max() < self.polish_from and (
+                    abs(predc[k]) < self.rel_cost_tol * (1.0 + st["c"][i]) or self._kkt_ok(st, i)):
+                b.done[i] = b.optimal[i] = True      # stationary: the polish below restores equilibrium
+                skip[k] = True
+        return dq, da, pred, predc, skip
+
+    def _line_search(self, b: _Batch, held, act, dq, da, pred, skip, m_old) -> _Trials:
+        """The trial points of the line search and their merit. The full step first, for every scenario at once;
+        the shorter steps only where it fails the Armijo test (about a quarter of the steps; evaluating all of them
+        in one batch cost six trial evaluations per iteration). The step chosen is the same as with all of them."""
+        m, ts = self.m, self.line_search
+        nt = len(ts)
+        tr = _Trials(m_new=np.full((act.size, nt), np.inf), xn=np.zeros((act.size * nt, m.nb, 3)),
+                     Rn=np.zeros((act.size * nt, m.nb, 3, 3)), an=np.zeros((act.size * nt, m.ms.n)), sn={})
+        first = np.flatnonzero(~skip)
+        if first.size and not self.full_step_first:        # the former search: all step lengths at once
+            self._trial(b, held, act, dq, da, tr, first, np.arange(nt))
+        elif first.size:
+            self._trial(b, held, act, dq, da, tr, first, np.arange(1))
+            full = tr.m_new[first, 0] <= m_old[first] - 1e-4 * ts[0] * np.maximum(pred[first], 0.0)
+            rest = first[~full]
+            if rest.size and nt > 1:
+                self._trial(b, held, act, dq, da, tr, rest, np.arange(1, nt))
+        return tr
+
+    def _trial(self, b: _Batch, held, act, dq, da, tr: _Trials, rows, cols):
+        """Trial points of step lengths ``cols`` for scenarios ``rows`` (of ``act``), each first restored to
+        equilibrium (phase 1), into ``tr``."""
+        nt = len(self.line_search)
+        kk, jj = np.repeat(rows, len(cols)), np.tile(cols, len(rows))
+        r, tt = kk * nt + jj, np.asarray(self.line_search)[jj]
+        tr.an[r] = b.a[act][kk] + tt[:, None] * da[kk]
+        dqt = tt[:, None, None] * dq[kk]
+        xt, Rt = b.x[act][kk] + dqt[..., :3], so3.exp(dqt[..., 3:]) @ b.R[act][kk]
+        if not held and self.restore_iter:
+            xt, Rt, s_t = self._restored_state(xt, Rt, tr.an[r], b.params, act[kk], b.targets[act][kk])
+        else:
+            s_t = self._state(xt, Rt, tr.an[r], b.params, act[kk], b.targets[act][kk])
+        tr.xn[r], tr.Rn[r] = xt, Rt
+        for key, v in s_t.items():
+            if key not in tr.sn:
+                tr.sn[key] = np.zeros((act.size * nt,) + v.shape[1:], v.dtype)
+            tr.sn[key][r] = v
+        tr.m_new[kk, jj] = self._merit(s_t, b.mu[act][kk], held)
+
+    def _accept(self, b: _Batch, held, act, dq, da, pred, predc, skip, m_old, tr: _Trials):
+        """Per scenario: the first step length that passes the Armijo test (else the lowest merit below the old
+        one), the stopping tests, or, where no step decreases the merit away from equilibrium, a raised merit
+        weight."""
+        ts, nt, st = self.line_search, len(self.line_search), b.st
+        for k, i in enumerate(act):
+            if skip[k]:
+                continue
+            ok = tr.m_new[k] <= m_old[k] - 1e-4 * np.asarray(ts) * max(pred[k], 0.0)
+            if ok.any():
+                j = int(np.argmax(ok))
+            elif tr.m_new[k].min() < m_old[k]:
+                j = int(np.argmin(tr.m_new[k]))
+            else:
+                j = -1
+            resid = np.abs(st["Q"][i]).max()
+            if j >= 0:
+                r = k * nt + j
+                b.x[i], b.R[i], b.a[i] = tr.xn[r], tr.Rn[r], tr.an[r]
+                for key in st:
+                    st[key][i] = tr.sn[key][r]
+                stepa = ts[j] * np.abs(da[k]).max()
+                stepq = ts[j] * np.abs(dq[k]).max()
                 resid = np.abs(st["Q"][i]).max()
-                if j >= 0:
-                    r = k * nt + j
-                    x[i], R[i], a[i] = xn[r], Rn[r], an[r]
-                    for key in st:
-                        st[key][i] = sn[key][r]
-                    stepa = ts[j] * np.abs(da[k]).max()
-                    stepq = ts[j] * np.abs(dq[k]).max()
-                    resid = np.abs(st["Q"][i]).max()
-                    if not held and resid < self.tol:
-                        # back at equilibrium: a merit weight raised far from it would let the restored
-                        # trials' round-off residual (mu * |Q|_1) outweigh small true cost decreases
-                        mu[i] = self.mu0
-                    if held:
-                        mom = np.abs(st["Q"][i][self.rot]).max()
-                        if stepa < 10 * self.step_tol and mom < 1e-2:
-                            stop[i] = True
-                    elif resid < self.tol and ((stepa < self.step_tol and stepq < 1e-6)
-                                               or pred[k] < 1e-9 * (1.0 + st["c"][i]) or self._kkt_ok(st, i)):
-                        done[i] = optimal[i] = True
-                elif np.abs(self._qres(st, i, held)).max() >= self.tol and mu[i] < self.mu_max:
-                    # away from equilibrium the SQP step (which satisfies the linearised equilibrium) is a
-                    # descent direction of the L1 merit only if mu exceeds the equilibrium multipliers;
-                    # raise it and retry from the same point (a tenfold step per failed search)
-                    mu[i] *= 10.0
-                elif held:
-                    stop[i] = True
+                if not held and resid < self.tol:
+                    # back at equilibrium: a merit weight raised far from it would let the restored
+                    # trials' round-off residual (mu * |Q|_1) outweigh small true cost decreases
+                    b.mu[i] = self.mu0
+                if held:
+                    mom = np.abs(st["Q"][i][self.rot]).max()
+                    if stepa < 10 * self.step_tol and mom < 1e-2:
+                        b.stop[i] = True
+                elif resid < self.tol and ((stepa < self.step_tol and stepq < 1e-6)
+                                           or pred[k] < 1e-9 * (1.0 + st["c"][i]) or self._kkt_ok(st, i)):
+                    b.done[i] = b.optimal[i] = True
+            elif np.abs(self._qres(st, i, held)).max() >= self.tol and b.mu[i] < self.mu_max:
+                # away from equilibrium the SQP step (which satisfies the linearised equilibrium) is a
+                # descent direction of the L1 merit only if mu exceeds the equilibrium multipliers;
+                # raise it and retry from the same point (a tenfold step per failed search)
+                b.mu[i] *= 10.0
+            elif held:
+                b.stop[i] = True
+            else:
+                b.done[i] = True
+                # at equilibrium: stationary if the QP's predicted cost decrease is below the same
+                # relative tolerance as the regular stop (pred also holds mu |Q|_1, inflated by a raised mu)
+                if resid < self.tol and (pred[k] < 1e-8 * (1.0 + st["c"][i])
+                                         or abs(predc[k]) < self.rel_cost_tol * (1.0 + st["c"][i])):
+                    b.optimal[i] = True
                 else:
-                    done[i] = True
-                    # at equilibrium: stationary if the QP's predicted cost decrease is below the same
-                    # relative tolerance as the regular stop (pred also holds mu |Q|_1, inflated by a raised mu)
-                    if resid < self.tol and (pred[k] < 1e-8 * (1.0 + st["c"][i])
-                                             or abs(predc[k]) < self.rel_cost_tol * (1.0 + st["c"][i])):
-                        optimal[i] = True
-                    else:
-                        msg[i] = "line search failed (no decrease of the merit function)"
+                    b.msg[i] = "line search failed (no decrease of the merit function)"
 
-        stop = np.zeros(B, bool)
-        for it in range(self.phase0_iter if a0 is None else 0):
-            act = np.flatnonzero(~stop)
-            if act.size == 0:
-                break
-            iterate(True, act)
-        for it in range(self.max_iter):
-            act = np.flatnonzero(~done)
-            if act.size == 0:
-                break
-            iterate(False, act)
-        # polish: Newton on the poses with the activations fixed (equilibrium to tol). Steps are capped at
-        # twice the SQP's pose step limits and kept only where they lower the residual, so a posture the
-        # SQP left off the equilibrium manifold (line search failed after a rejected trial) is brought back
-        # onto it; whether its thorax is then on target decides ``reached``.
+    def _polish(self, b: _Batch):
+        """Newton on the poses with the activations fixed (equilibrium to tol). Steps are capped at twice the
+        SQP's pose step limits and kept only where they lower the residual, so a posture the SQP left off the
+        equilibrium manifold (line search failed after a rejected trial) is brought back onto it; whether its
+        thorax is then on target decides ``reached``."""
+        m, st = self.m, b.st
         for _ in range(40):
             bad = np.flatnonzero(np.abs(st["Q"]).max(-1) >= self.tol)
             if bad.size == 0:
@@ -691,16 +705,21 @@ class RedundancySolver:
             cap = np.maximum(np.abs(d[..., :3]).max((-1, -2)) / (2 * self.max_step_m),
                              np.abs(d[..., 3:]).max((-1, -2)) / (2 * self.max_step_rad))
             d /= np.maximum(cap, 1.0)[:, None, None]
-            xt = x[bad] + d[..., :3]
-            Rt = so3.exp(d[..., 3:]) @ R[bad]
-            sb = self._state(xt, Rt, a[bad], params, bad, targets[bad])
+            xt = b.x[bad] + d[..., :3]
+            Rt = so3.exp(d[..., 3:]) @ b.R[bad]
+            sb = self._state(xt, Rt, b.a[bad], b.params, bad, b.targets[bad])
             better = np.abs(sb["Q"]).max(-1) < np.abs(st["Q"][bad]).max(-1)
             if not better.any():
                 break
             keep = bad[better]
-            x[keep], R[keep] = xt[better], Rt[better]
+            b.x[keep], b.R[keep] = xt[better], Rt[better]
             for key in st:
                 st[key][keep] = sb[key][better]
+
+    def _solutions(self, b: _Batch) -> list:
+        """The batch's :class:`PostureSolution` list: equilibrium, reached, certified, converged and the message."""
+        m, st, msg, targets = self.m, b.st, b.msg, b.targets
+        B = len(targets)
         out = []
         Q = st["Q"].reshape(B, m.nb, 6)
         rf = np.abs(Q[..., :3]).max((-1, -2))
@@ -711,7 +730,7 @@ class RedundancySolver:
             eq = bool(rf[i] < 1e-6 and rm[i] < 1e-6)
             reached = bool(eq and terr[i] <= self.max_tracking_deg)
             certified = bool(reached and kkt[i] <= self.kkt_tol)
-            if not optimal[i] and not msg[i]:
+            if not b.optimal[i] and not msg[i]:
                 msg[i] = f"SQP stopped after {self.max_iter} iterations without meeting its tolerances"
             if not eq:
                 msg[i] = msg[i] or "no equilibrium"
@@ -732,10 +751,11 @@ class RedundancySolver:
                 log.info("posture %d (target %.1f deg) not converged by the SQP: %s (residual %.1e N, %.1e N*m, "
                          "tracking error %.2f deg, KKT residual %.1e)", i, targets[i], msg[i], rf[i], rm[i],
                          terr[i], kkt[i])
-            out.append(PostureSolution(x[i].copy(), R[i].copy(), a[i].copy(), conv, eq, float(terr[i]),
-                                       float(rf[i]), float(rm[i]), float(st["c"][i]), int(iters[i]), msg[i],
+            out.append(PostureSolution(b.x[i].copy(), b.R[i].copy(), b.a[i].copy(), conv, eq, float(terr[i]),
+                                       float(rf[i]), float(rm[i]), float(st["c"][i]), int(b.iters[i]), msg[i],
                                        reached, float(kkt[i]), certified))
         return out
+
 
     def initial_pose(self, theta_deg):
         """Reference pose with the thorax rotation spread evenly over the five levels (about each level's

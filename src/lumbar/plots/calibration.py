@@ -12,6 +12,13 @@ from ..inputs.io import save_figure_atomic, subplots
 from ..mechanics.elements.ligament import softplus_force
 
 
+def data_label(table: pd.DataFrame) -> str:
+    """The kinds of data a calibration table was fitted on (its ``data_kind`` column), for a figure's title:
+    ``measured``, ``surrogate (SURROGATE reference data)``, ``measured+surrogate (...)``."""
+    kinds = sorted(set(table["data_kind"]))
+    return "+".join(kinds) + (" (SURROGATE reference data)" if "surrogate" in kinds else "")
+
+
 def plot_disc_torque_angle(disc_points: pd.DataFrame, table: pd.DataFrame, path, data_label="") -> None:
     """Fig. 4 analog: disc torque vs angle [deg], data points (ROM_mean, M) and the fitted Eq. 3."""
     fig, ax = subplots(figsize=(7, 4.5))

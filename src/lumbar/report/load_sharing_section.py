@@ -63,16 +63,31 @@ def _summary_sentence(b: ReportBuilder) -> str:
 
 @report_section("load_sharing", "Load sharing and physical admissibility", after="posterior")
 def load_sharing_section(b: ReportBuilder):
+    """The section, in four parts: admissibility, how the unit shares the moment, the other levels, and the transfer
+    readings with the other levels' admissibility."""
+    _admissibility_part(b)
+    _sharing_part(b)
+    _other_levels_part(b)
+    _readings_part(b)
+
+
+def _admissibility_part(b: ReportBuilder):
+    """Why reaching the ROM is not enough, and the calibrated set's admissibility criteria with the curves."""
     files = _files(b)
     b.para("Reaching the range of motion is not enough: the unit must reach it for the reasons real segments have "
            "(no clamped facets at rest, no ligament switched off, no snap-through, the disc carrying most of a "
            "compression). Method and criteria: docs/load_sharing.md. " + _summary_sentence(b))
     b.heading("Admissibility of the calibrated set")
-    b.csv_table(files["adm"],
-                "Physical admissibility criteria of the calibrated set (value, limit, passed, source)", False,
+    b.csv_table(files["adm"], "Physical admissibility criteria of the calibrated set (value, limit, passed, source)", False,
                 columns=["criterion", "direction", "value", "limit", "unit", "passed", "source"])
     b.figure(b.out("load_sharing", "curves_figure"), "Moment-rotation curves of the intact unit.")
     b.figure(b.out("load_sharing", "shares_figure"), "Moment carried by each structure, calibrated unit.")
+
+
+def _sharing_part(b: ReportBuilder):
+    """How the calibrated unit shares the moment: shares at the largest moment, the unloaded unit, the removal of the
+    posterior ligaments, axial compression, the cable load paths and the Remus et al. (2021) comparison."""
+    files = _files(b)
     b.heading("How the calibrated unit shares the moment")
     if b.has(files["summary"]):
         s = pd.read_csv(b.path(files["summary"]))
@@ -108,13 +123,11 @@ def load_sharing_section(b: ReportBuilder):
                            for st, a, f, i1, i2 in zip(c["stage"], c["rom_from_stage_rest_deg"],
                                                        c["rotation_from_intact_rest_deg"],
                                                        c["increases_from_stage_rest"], c["increases_from_intact_rest"])],
-                          source=files["reduction"],
-                          note="A removed pre-tensioned ligament moves the stage's rest state, "
+                          source=files["reduction"], note="A removed pre-tensioned ligament moves the stage's rest state, "
                           "from which the stepwise-reduction tables measure the ROM; the "
                           "rotation from the intact unit's rest shows the structure's own "
                           "share.")
-    b.csv_table(files["compression"],
-                "Pure axial (follower) load: shares of disc and facets per characteristic set", False,
+    b.csv_table(files["compression"], "Pure axial (follower) load: shares of disc and facets per characteristic set", False,
                 columns=None)
     if b.has(files["cables"]):
         c = pd.read_csv(b.path(files["cables"]))
@@ -125,15 +138,18 @@ def load_sharing_section(b: ReportBuilder):
                       [[r["muscle_setup"].replace("_", " "), fmt(r["cable_total_n"]), fmt(r["disc_n"]),
                         fmt(r["facets_n"]), fmt(r["ligaments_n"]), fmt(100 * r["disc_share"]),
                         fmt(100 * r["facets_share"]), fmt(r["idp_mpa"])] for _, r in n.iterrows()],
-                      source=files["cables"],
-                      note="Forces along the disc normal on L4 (ligaments pull: negative); shares of "
+                      source=files["cables"], note="Forces along the disc normal on L4 (ligaments pull: negative); shares of "
                       "the compression crossing the joint (disc + facets). Every load case: "
                       + files["cables"] + ".")
     else:
         b.missing(f"Cable load paths ({Path(files['cables']).name})")
-    b.csv_table(files["remus"],
-                "The calibrated ligaments beside the Remus et al. (2021) model of the same fibres (tension "
+    b.csv_table(files["remus"], "The calibrated ligaments beside the Remus et al. (2021) model of the same fibres (tension "
                 "under both laws at the same deformation)", False)
+
+
+def _other_levels_part(b: ReportBuilder):
+    """The other lumbar levels with the calibrated characteristics unchanged: ROM against Yamamoto et al. (1989)."""
+    files = _files(b)
     b.heading("Other lumbar levels, calibrated characteristics unchanged")
     if b.has(files["multi"]):
         m = pd.read_csv(b.path(files["multi"]))
@@ -161,14 +177,18 @@ def load_sharing_section(b: ReportBuilder):
                                              if pd.notna(r.get("sim_band_low")) else ""),
                         fmt(r["measured_deg"]), fmt(r["ratio"]), "yes" if r["within"] else "no"]
                        + [fmt(100 * r[c]) for c in share] + [fmt(r["largest_jump_deg"])] for _, r in m.iterrows()],
-                      source=files["multi"],
-                      note="Lateral bending and axial rotation: the mean of both sides (the abstract "
+                      source=files["multi"], note="Lateral bending and axial rotation: the mean of both sides (the abstract "
                       "gives one-side values). Shares of the applied moment about the disc "
                       "centre; largest step: the largest rotation change between two 0.25 N*m "
                       "load steps (a snap-through shows here).")
     else:
         b.missing(f"Other levels ({Path(files['multi']).name})")
     b.figure(b.out("validation", "multilevel_figure"), "Other levels with the L4-L5 characteristics unchanged.")
+
+
+def _readings_part(b: ReportBuilder):
+    """The other levels under other readings of the transfer, and their admissibility criteria."""
+    files = _files(b)
     if b.has(files["readings"]):
         from ..experiments.level_transfer import readings_summary  # noqa: PLC0415
 
@@ -183,8 +203,7 @@ def load_sharing_section(b: ReportBuilder):
                       [[READING_NAMES.get(r["reading"], r["reading"]), f"{r['other_within']} of {r['other_n']}",
                         f"{r['calibrated_within']} of {r['calibrated_n']}", str(r["snap_or_not_converged"]),
                         r["misses"] or "none"] for _, r in s.iterrows()],
-                      source=files["readings"],
-                      note="Readings: " + "; ".join(
+                      source=files["readings"], note="Readings: " + "; ".join(
                           f"{READING_NAMES.get(k, k)}: {v}" for k, v in
                           zip(s["reading"], s["reading_note"])) + ".")
     else:

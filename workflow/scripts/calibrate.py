@@ -1,33 +1,25 @@
-"""Calibration stage: rule calibrate (backward stepwise reduction: Tables 1-3, calibrated characteristic
-set) and the figures fig4_disc_torque_angle, fig5_ligament_characteristics.
+"""Calibration stage, rule calibrate: the backward stepwise reduction (Tables 1-3), the admissibility-constrained
+final fit and its posterior, and the calibrated characteristic set (lumbar.experiments.calibration).
 
-By hand: python workflow/scripts/calibration.py calibrate --configfile config/test/config.yaml
+By hand: python workflow/scripts/calibrate.py calibrate --configfile config/test/config.yaml
 """
 import sys
 from pathlib import Path
 
-import pandas as pd
-
 sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _common.py
 import _common  # noqa: E402
 
-snakemake, log = _common.start(globals())
+import pandas as pd  # noqa: E402
 
 from lumbar.experiments import calibration as cal  # noqa: E402
+from lumbar.experiments.stepwise_reduction import read_experiment_table, reference_table  # noqa: E402
+from lumbar.geometry.configured import load_configured  # noqa: E402
+from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 
 
-def _label(df):
-    kinds = sorted(set(df["data_kind"]))
-    return "+".join(kinds) + (" (SURROGATE reference data)" if "surrogate" in kinds else "")
-
-
-if snakemake.rule == "calibrate":
-    from lumbar.inputs.characteristics import load_characteristic_set
-    from lumbar.geometry import load_geometry
-    from lumbar.experiments.stepwise_reduction import read_experiment_table, reference_table
-
-    g, f, s, sr = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solver, snakemake.params.sr
+def _reference(snakemake, log):
+    """The reference table (experiment, derived disc-only rows, real targets) and its data kind."""
     exp = read_experiment_table(snakemake.input.experiment)
     derived = read_experiment_table(_common.first(snakemake.input.derived)) \
         if _common.first(snakemake.input.derived) else None
@@ -37,7 +29,55 @@ if snakemake.rule == "calibrate":
     data_kind = "surrogate" if (ref["kind"] == "surrogate").any() else "measured"
     log.info("calibrating on %s (%d rows; kinds %s)", snakemake.input.experiment, len(ref),
              dict(ref["kind"].value_counts()))
-    geo = load_geometry(g["kind"], path=g["path"] if g["kind"] == "visible_human" else None, levels=[f["level"]])
+    return ref, real, data_kind
+
+
+def _write_fit_tables(snakemake, log, res, targets):
+    """The final fit's tables: targets, real-target fit, prior, penalties, posterior and its covariance."""
+    (targets if targets is not None else pd.DataFrame(columns=list(cal.TARGET_COLUMNS)))[
+        list(cal.TARGET_COLUMNS)].pipe(write_table_atomic, snakemake.output.targets)
+    rf = res.info.get("real_fit")
+    (rf if rf is not None else pd.DataFrame(columns=["parameter", "start", "value", "unit", "identifiable",
+                                                     "at_bound"])).pipe(write_table_atomic, snakemake.output.real_fit)
+    prior = res.info.get("prior")
+    (prior if prior is not None else pd.DataFrame(columns=["ligament", "a_n", "b_pct", "c_n", "d_pct"])).pipe(
+        write_table_atomic, snakemake.output.prior)
+    ff = res.info.get("final_fit")
+    (ff.penalties if ff is not None else pd.DataFrame(columns=["penalty", "value"])).pipe(
+        write_table_atomic, snakemake.output.penalties)
+    infl = res.info.get("row_influence")
+    write_table_atomic(infl if infl is not None else pd.DataFrame(columns=list(cal.INFLUENCE_COLUMNS)),
+                       snakemake.output.row_influence)
+    post_tab, cov_tab = cal.posterior_tables(ff, res.info.get("prior_name", ""))
+    write_table_atomic(post_tab, snakemake.output.posterior)
+    write_table_atomic(cov_tab, snakemake.output.covariance)
+    if ff is not None and ff.posterior is not None:
+        moved = post_tab[post_tab["data_moved_it"]]
+        log.info("posterior: the data moved %d of %d parameters (%s); the others stay at their prior (%s)",
+                 len(moved), len(post_tab), ", ".join(moved["parameter"]),
+                 ", ".join(post_tab.loc[~post_tab["data_moved_it"], "parameter"]) or "none")
+    return rf
+
+
+def _log_bounds(snakemake, log, res, rf):
+    """Which steps end with a parameter at a bound or unidentifiable, and bounds without a documented reason."""
+    bound = [r for r in res.summary.itertuples() if getattr(r, "at_bound", False)]
+    unidentifiable = [r for r in res.summary.itertuples() if not getattr(r, "identifiable", True)]
+    log.info("calibration: %d of %d steps with a parameter at a bound (%s), %d not identifiable from their stage "
+             "(kept at the start value: %s); see %s", len(bound), len(res.summary),
+             "; ".join(f"{r.structure}: {r.at_bound_parameters}" for r in bound) or "none", len(unidentifiable),
+             ", ".join(str(r.structure) for r in unidentifiable) or "none", snakemake.output.summary)
+    if rf is not None and "bound_reason" in rf:
+        unexplained = rf[rf["at_bound"].astype(bool) & (rf["bound_reason"].fillna("") == "")]
+        if len(unexplained):
+            log.warning("final calibration: parameter(s) %s end at a bound with no documented reason: check the fit "
+                        "(%s)", ", ".join(unexplained["parameter"]), snakemake.output.real_fit)
+
+
+def main(snakemake, log):
+    g, f, s, sr = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solver, snakemake.params.sr
+    ref, real, data_kind = _reference(snakemake, log)
+    geo = load_configured(g, levels=[f["level"]])
     paper = load_characteristic_set("calibrated", data_dir=snakemake.input.characteristics)
     anchor = cal.read_fit_start(_common.first(snakemake.input.generator_fit))
     targets, origin = cal.admissible_fit_targets(ref, real)
@@ -62,39 +102,8 @@ if snakemake.rule == "calibrate":
                               reference_source=f"{snakemake.input.experiment} ({data_kind})")
     load_characteristic_set("calibrated", data_dir=out_dir)   # round trip through the validated loader
     res.summary.assign(data_kind=data_kind).pipe(write_table_atomic, snakemake.output.summary)
-    (targets if targets is not None else pd.DataFrame(columns=list(cal.TARGET_COLUMNS)))[
-        list(cal.TARGET_COLUMNS)].pipe(write_table_atomic, snakemake.output.targets)
-    rf = res.info.get("real_fit")
-    (rf if rf is not None else pd.DataFrame(columns=["parameter", "start", "value", "unit", "identifiable",
-                                                     "at_bound"])).pipe(write_table_atomic, snakemake.output.real_fit)
-    prior = res.info.get("prior")
-    (prior if prior is not None else pd.DataFrame(columns=["ligament", "a_n", "b_pct", "c_n", "d_pct"])).pipe(
-        write_table_atomic, snakemake.output.prior)
-    ff = res.info.get("final_fit")
-    (ff.penalties if ff is not None else pd.DataFrame(columns=["penalty", "value"])).pipe(
-        write_table_atomic, snakemake.output.penalties)
-    infl = res.info.get("row_influence")
-    write_table_atomic(infl if infl is not None else pd.DataFrame(columns=list(cal.INFLUENCE_COLUMNS)),
-                       snakemake.output.row_influence)
-    post_tab, cov_tab = cal.posterior_tables(ff, res.info.get("prior_name", ""))
-    write_table_atomic(post_tab, snakemake.output.posterior)
-    write_table_atomic(cov_tab, snakemake.output.covariance)
-    if ff is not None and ff.posterior is not None:
-        moved = post_tab[post_tab["data_moved_it"]]
-        log.info("posterior: the data moved %d of %d parameters (%s); the others stay at their prior (%s)",
-                 len(moved), len(post_tab), ", ".join(moved["parameter"]),
-                 ", ".join(post_tab.loc[~post_tab["data_moved_it"], "parameter"]) or "none")
-    bound = [r for r in res.summary.itertuples() if getattr(r, "at_bound", False)]
-    unidentifiable = [r for r in res.summary.itertuples() if not getattr(r, "identifiable", True)]
-    log.info("calibration: %d of %d steps with a parameter at a bound (%s), %d not identifiable from their stage "
-             "(kept at the start value: %s); see %s", len(bound), len(res.summary),
-             "; ".join(f"{r.structure}: {r.at_bound_parameters}" for r in bound) or "none", len(unidentifiable),
-             ", ".join(str(r.structure) for r in unidentifiable) or "none", snakemake.output.summary)
-    if rf is not None and "bound_reason" in rf:
-        unexplained = rf[rf["at_bound"].astype(bool) & (rf["bound_reason"].fillna("") == "")]
-        if len(unexplained):
-            log.warning("final calibration: parameter(s) %s end at a bound with no documented reason: check the fit "
-                        "(%s)", ", ".join(unexplained["parameter"]), snakemake.output.real_fit)
+    rf = _write_fit_tables(snakemake, log, res, targets)
+    _log_bounds(snakemake, log, res, rf)
     res.rom_fit.assign(data_kind=data_kind).pipe(write_table_atomic, snakemake.output.rom_fit)
     res.disc_points.assign(data_kind=data_kind).pipe(write_table_atomic, snakemake.output.disc_points)
     res.ligament_points.assign(data_kind=data_kind).pipe(write_table_atomic, snakemake.output.ligament_points)
@@ -102,15 +111,8 @@ if snakemake.rule == "calibrate":
     write_table_atomic(cal.table2(res, paper), snakemake.output.table2)
     write_table_atomic(cal.table3(res, paper), snakemake.output.table3)
     log.info("wrote %s and tables 1-3", out_dir)
-elif snakemake.rule == "fig4_disc_torque_angle":
-    from lumbar.plots.calibration import plot_disc_torque_angle
 
-    pts, tab = pd.read_csv(snakemake.input.points), pd.read_csv(snakemake.input.table)
-    plot_disc_torque_angle(pts, tab, snakemake.output[0], data_label=_label(pts))
-    log.info("wrote %s", snakemake.output[0])
-elif snakemake.rule == "fig5_ligament_characteristics":
-    from lumbar.plots.calibration import plot_ligament_characteristics
 
-    pts, tab = pd.read_csv(snakemake.input.points), pd.read_csv(snakemake.input.table)
-    plot_ligament_characteristics(pts, tab, snakemake.output[0], data_label=_label(tab))
-    log.info("wrote %s", snakemake.output[0])
+if __name__ == "__main__":
+    snakemake, log = _common.start(globals())
+    main(snakemake, log)

@@ -1,0 +1,26 @@
+"""The numba decorators of the compiled cores (lumbar.mechanics.kernel, lumbar.mechanics.kernel_residual,
+lumbar.muscles.compiled): one cache rule, one error model; without numba they return the plain Python function."""
+from __future__ import annotations
+
+try:  # numba is pinned (environment.txt); without it the numpy reference path runs
+    from numba import njit
+    HAVE_NUMBA = True
+except ImportError:  # pragma: no cover - exercised only in an environment without the pin
+    HAVE_NUMBA = False
+
+    def njit(*args, **kwargs):
+        if args and callable(args[0]):
+            return args[0]
+        return lambda f: f
+
+# machine code cached beside the decorated function's file (or in NUMBA_CACHE_DIR); numpy's error model: a division by zero gives
+# inf/nan as in the reference path instead of raising
+_jit = njit(cache=True, error_model="numpy")
+# the helpers, called only from compiled code: no Python (CPython / C) entry point is built for them (about a tenth of
+# the core's compile time, measured in alternating pairs with and without)
+_inner = njit(cache=True, error_model="numpy", no_cpython_wrapper=True, no_cfunc_wrapper=True) if HAVE_NUMBA \
+    else _jit
+#: the decorators of every compiled module of the package: one cache rule, one error model, one switch
+#: (lumbar.mechanics.kernel.active); ``inner_jit`` for functions called only from compiled code
+jit = _jit
+inner_jit = _inner

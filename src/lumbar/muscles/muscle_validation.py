@@ -1,0 +1,206 @@
+"""The muscle model's in-vivo validation (paper 2, Sect. 2.4 and 3.1) and what explains it: the L4-L5 IDP of every
+activity against the in-vivo measurements (:func:`validation`), flexion-relaxation (:func:`flexion_relaxation`),
+facet contact per level (:func:`facet_contact`) and the sagittal moment capacity (:func:`capacity_check`,
+:func:`capacity_table`), on postures solved by :func:`lumbar.muscles.muscle_model.solve_postures`."""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from ..experiments.fsu import facet_surfaces
+from .muscle_model import certificate, get_activity, idp_parts
+from .muscle_set import ABDOMINALS, EXTENSORS
+from .paths import N_PER_CM2
+
+
+def flexion_relaxation(model, sols, names):
+    """Sum of active and passive extensor (and abdominal active) forces [N] per solved posture, with the
+    extensors' sarcomere lengths (PCSA-weighted mean and max [um]) and the PCSA fraction beyond their slack
+    sarcomere length (where passive force starts)."""
+    rows = []
+    ext = np.isin(model.ms.groups, EXTENSORS)
+    abd = np.isin(model.ms.groups, ABDOMINALS)
+    w = model.props.pcsa_m2[ext]
+    for name, s in zip(names, sols):
+        _, _, act, pas, sl = model.muscle_forces(s.x[None], s.R[None], s.a)
+        se = sl[0, ext]
+        rows.append({"activity": name, "extensor_active_n": float(act[0, ext].sum()),
+                     "extensor_passive_n": float(pas[0, ext].sum()),
+                     "abdominal_active_n": float(act[0, abd].sum()), "converged": s.converged,
+                     **certificate(s),
+                     "extensor_sl_mean_um": float(np.sum(w * se) / np.sum(w)), "extensor_sl_max_um": float(se.max()),
+                     "extensor_pcsa_fraction_beyond_ssl": float(np.sum(w[se > model.props.ssl_um[ext]]) / np.sum(w))})
+    return pd.DataFrame(rows)
+
+
+def _facet_gaps(m, x, R):
+    """Smallest gap [m] of each facet surface's contact points (B, n_surfaces); negative = penetration."""
+    p, _ = m._attach(x, R, m.k_a, m.k_s)
+    P = m._to_body(x, R, m.k_b, p)
+    return np.stack([surf.gap(P[:, m.k_surf == sid])[0].min(axis=-1) for sid, surf in enumerate(m.surfaces)],
+                    axis=-1)
+
+
+def face_separation(surface, landmarks) -> float:
+    """Mean distance [m] along the joint normal between the two articular faces fitted to a joint's landmarks
+    (superior-process and inferior-process surfaces of paper 1 Eq. 4), at the inferior-process landmarks: the joint
+    space the landmarks describe (negative: the faces cross, the landmark sets overlap)."""
+    def f(c, q):
+        p30, p03, p20, p02, p00 = c
+        u, v = q[:, 0], q[:, 1]
+        return p30 * u**3 + p03 * v**3 + p20 * u**2 + p02 * v**2 + p00
+
+    q = surface.local(landmarks.inferior)
+    return float(np.mean(f(surface.coef_inferior, q) - f(surface.coef_superior, q)))
+
+
+def facet_contact(model, sols, names) -> pd.DataFrame:
+    """Facet contact per level, side and solved posture: the total normal contact force [N], the smallest gap of
+    the contact points to the contact surface [mm] in the posture and at rest (the as-segmented reference pose;
+    negative = the points lie beyond the surface, i.e. a contact preload before any load), the joint space the
+    landmarks describe (:func:`face_separation`, [mm]; the lumbar facet joint space is 1.4-2.4 mm,
+    data/anatomy) and the facet contact stiffness of the passive set [N/m]. Where the anatomy has the cartilage
+    surfaces touching at rest (gap 0), a geometry whose rest gap is far from 0 makes a level's facets engage late
+    (gap > 0) or preloaded (gap < 0)."""
+    x0, R0 = model.reference_state()
+    rows = []
+    for lv, m, sides in zip(model.levels, model.level_models, model.facet_sides):
+        rest = _facet_gaps(m, x0, R0)[0]
+        space = {side: face_separation(surf, fl) for side, fl, surf in facet_surfaces(model.geo.levels[lv])}
+        for name, s in zip(names, sols):
+            xs, Rs = s.x[None], s.R[None]
+            cf, g = m.contact_forces(xs, Rs)[0], _facet_gaps(m, xs, Rs)[0]
+            for k, side in enumerate(sides):
+                rows.append({"activity": name, "level": lv, "side": side, "contact_n": float(cf[k]),
+                             "min_gap_mm": 1e3 * float(g[k]), "rest_min_gap_mm": 1e3 * float(rest[k]),
+                             "rest_face_separation_mm": 1e3 * space[side],
+                             "facet_stiffness_n_per_m": float(model.charset.facet.stiffness),
+                             "reached": bool(s.reached), "passive_set": model.passive_set})
+    return pd.DataFrame(rows)
+
+
+def capacity_check(model, x, R, activity, a=None, props=None) -> pd.DataFrame:
+    """Sagittal moment balance of the part above each level at one pose: can the muscles hold it?
+
+    Per level, moments (flexion +, about +y, world frame) about the disc centre at the pose ``x, R``
+    (one pose: (nb, 3), (nb, 3, 3)) of everything acting on the vertebrae above the level:
+    ``external_moment_nm`` (weights, crate, IAP of ``activity``), ``passive_muscle_moment_nm`` (passive
+    fascicle forces), ``active_muscle_moment_nm`` (active forces at activations ``a``, zero without),
+    ``intervertebral_moment_nm`` (the level's disc, facets and ligaments). At static equilibrium the four
+    sum to zero (``balance_nm``; the levels above act internally). The capacity columns are the largest
+    extension and flexion moments the active fascicles can add at a = 1 (each fascicle counted on the side
+    its moment arm falls at this pose). ``demand_ratio`` = (external + passive muscle moment) / extension
+    capacity: above 1 the fascicles cannot hold the load without the intervertebral tissues or posture
+    change; the active capacity scales with specific tension, so ``spt_needed_n_per_cm2`` = mean SpT x
+    ``demand_ratio`` is the specific tension at which the extensors alone would just hold it."""
+    props = props or model.props
+    x, R = np.asarray(x, float)[None], np.asarray(R, float)[None]
+    act = get_activity(activity)
+    L, Gd = model.paths.lengths(x, R, gradient=True)
+    a1 = np.ones((1, model.ms.n))
+    _, _, act1, pas = props.tension(L, a1)
+    a = np.zeros(model.ms.n) if a is None else np.asarray(a, float)
+    F, P = model.load_arrays([act])
+    loads = [(b, F[0, k], P[0, k], False) for k, b in enumerate(model.load_bodies)] + list(model.follower_forces())
+    FL, _ = model.level_loads(x, R)
+    rows = []
+    for k, lv in enumerate(model.levels):
+        lev = model.geo.levels[lv]
+        up, lo = model.body_index[lev.upper], model.body_index[lev.lower]
+        above = np.arange(up + 1)          # FREE is ordered L1 (with the thorax) .. L5
+        Rl = R[0, lo] if lo >= 0 else np.eye(3)
+        cl = model.c[lo] if lo >= 0 else np.asarray(model.geo.vertebrae[lev.lower].centroid)
+        xl = x[0, lo] if lo >= 0 else cl
+        pd_ = xl + Rl @ (np.asarray(lev.disc_centre) - cl)
+        # generalised force of a unit tension on the bodies above (force at x_b, moment about x_b)
+        g = -Gd[0][:, above]                                        # (nm, nab, 6)
+        unit = g[..., 4] + np.cross(x[0, above] - pd_, g[..., :3])[..., 1]
+        unit = unit.sum(axis=1)                                     # (nm,) moment per N of tension
+        m_act1 = unit * act1[0]
+        ext_cap = float(-m_act1[m_act1 < 0].sum())
+        flex_cap = float(m_act1[m_act1 > 0].sum())
+        m_pas = float(unit @ pas[0])
+        m_act = float(unit @ (a * act1[0]))
+        m_ext = 0.0
+        for b, f, s, follower in loads:
+            if b > up:
+                continue
+            fw = R[0, b] @ f if follower else np.asarray(f, float)
+            pw = x[0, b] + R[0, b] @ (np.asarray(s, float) - model.c[b])
+            m_ext += float(np.cross(pw - pd_, fw)[1])
+        f, mom = FL[0, k, :3], FL[0, k, 3:]
+        m_iv = float((mom + np.cross(x[0, up] - pd_, f))[1])
+        demand = m_ext + m_pas
+        ratio = demand / ext_cap if ext_cap > 0 else np.inf
+        rows.append({"activity": act.name, "level": lv, "external_moment_nm": m_ext,
+                     "passive_muscle_moment_nm": m_pas, "active_muscle_moment_nm": m_act,
+                     "intervertebral_moment_nm": m_iv, "balance_nm": m_ext + m_pas + m_act + m_iv,
+                     "extension_capacity_nm": ext_cap, "flexion_capacity_nm": flex_cap,
+                     "demand_ratio": ratio,
+                     "spt_needed_n_per_cm2": float(np.mean(props.spt_pa)) / N_PER_CM2 * ratio})
+    return pd.DataFrame(rows)
+
+
+def capacity_table(model, sols, names) -> pd.DataFrame:
+    """:func:`capacity_check` of every solved activity at its own solution (column ``pose``); an activity that
+    did not converge is also checked at the pose of a converged activity with the same thorax target (its
+    loads on that posture, no activations): what the muscles would need to hold the target posture."""
+    out = []
+    for name, s in zip(names, sols):
+        d = capacity_check(model, s.x, s.R, name, s.a)
+        d.insert(1, "pose", "own solution")
+        d.insert(2, "converged", s.converged)
+        d["reached"], d["certified"], d["kkt_residual"] = s.reached, s.certified, s.kkt_residual
+        out.append(d)
+        if s.converged:
+            continue
+        tgt = get_activity(name).thorax_flexion_deg
+        for other, so in zip(names, sols):
+            if so.converged and get_activity(other).thorax_flexion_deg == tgt:
+                d = capacity_check(model, so.x, so.R, name)
+                d.insert(1, "pose", f"{other} solution")
+                d.insert(2, "converged", s.converged)
+                d["reached"], d["certified"], d["kkt_residual"] = so.reached, so.certified, so.kkt_residual
+                out.append(d)
+                break
+    return pd.concat(out, ignore_index=True)
+
+
+def validation(model, sols, names, in_vivo: pd.DataFrame, area_m2=18e-4):
+    """Table 1 analog, Fig. 3 table, metrics and flexion-relaxation from solved activities."""
+    seg = []
+    for name, s in zip(names, sols):
+        d = model.segment_loads(s.x[None], s.R[None]).drop(columns="scenario")
+        d.insert(1, "activity", name)
+        d["converged"] = s.converged
+        for k, v in certificate(s).items():
+            d[k] = v
+        seg.append(d)
+    seg = pd.concat(seg, ignore_index=True)
+    l45 = seg[seg["level"] == "L4-L5"].set_index("activity")
+    iv = in_vivo.set_index("activity")
+    rows = []
+    for name, s in zip(names, sols):
+        act = get_activity(name)
+        tot, fp, mp = idp_parts(l45.loc[name, "compressive_n"], l45.loc[name, "moment_nm"], area_m2)
+        r = iv.loc[act.in_vivo_row]
+        rows.append({"activity": name, "idp_sim_mpa": float(tot), "idp_force_mpa": float(fp),
+                     "idp_moment_mpa": float(mp), "idp_in_vivo_mpa": float(r["idp_mpa"]),
+                     "in_vivo_row": act.in_vivo_row, "source": r["source"], "kind": r["kind"],
+                     "converged": s.converged, "tracking_error_deg": s.tracking_error_deg, **certificate(s),
+                     "note": act.note})
+    val = pd.DataFrame(rows)
+    ok = val[val["converged"]]
+    metrics = {"n": int(len(ok)), "n_total": int(len(val)), "r2": None, "rmse_mpa": None,
+               "r2_definition": "squared Pearson correlation (linear fit of simulated vs in-vivo IDP, as the paper)",
+               "paper_r2": 0.98}
+    for suffix, d in (("", ok), ("_all", val)):
+        if len(d) >= 3:
+            r = np.corrcoef(d["idp_sim_mpa"], d["idp_in_vivo_mpa"])[0, 1]
+            metrics["r2" + suffix] = float(r ** 2)
+            metrics["rmse" + suffix + "_mpa"] = float(np.sqrt(np.mean((d["idp_sim_mpa"] - d["idp_in_vivo_mpa"]) ** 2)))
+        else:
+            metrics["r2" + suffix] = metrics["rmse" + suffix + "_mpa"] = None
+    metrics["all_definition"] = ("r2_all, rmse_all_mpa: every activity, including the IDP of postures flagged as "
+                                 "not converged (their thorax misses the target; not a model prediction)")
+    return seg, val, metrics

@@ -1,0 +1,25 @@
+"""Discrepancy stage, rule discovery_default: discrepancy discovery on the default stepwise-reduction table
+(the calibration's reference; lumbar.discovery.jobs.run_case).
+
+By hand: python workflow/scripts/discovery_default.py discovery_default --configfile config/test/config.yaml \
+    --output /tmp/d/discovery.json /tmp/d/disagreement_map.png /tmp/d/ranking.png /tmp/d/before_after.png \
+             /tmp/d/section.md /tmp/d/scenarios.csv
+"""
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _common.py
+import _common  # noqa: E402
+
+from lumbar.discovery import jobs  # noqa: E402
+
+
+def main(snakemake, log):
+    cfg = jobs.job_config(snakemake.params.cfg, snakemake.input)
+    r = jobs.run_case(cfg, snakemake.input.measured, snakemake.output, Path(snakemake.output.discovery).parent)
+    log.info("%s on %s: %s", snakemake.rule, snakemake.input.measured, jobs.case_summary(r))
+
+
+if __name__ == "__main__":
+    snakemake, log = _common.start(globals())
+    main(snakemake, log)
