@@ -154,16 +154,17 @@ def test_default_target_of_the_mean_says_once_what_it_skips(smk_tree):
 def test_another_calibrated_unit_takes_its_own_yamamoto_targets(smk_tree, tmp_path):
     cfg = tmp_path / "l34.yaml"
     cfg.write_text("fsu: {level: L3-L4}\n")
-    r = snakemake("-n", "-p", "results/calibration/posterior.csv", "--configfile", TEST_CONFIG, MEAN_CONFIG, str(cfg),
-                  cwd=smk_tree, timeout=300)
+    r = snakemake("-n", "-p", "results/morphable_mean/calibration/posterior.csv", "--configfile", TEST_CONFIG,
+                  MEAN_CONFIG, str(cfg), cwd=smk_tree, timeout=300)
     out = r.stdout + r.stderr
     assert r.returncode == 0, out
-    assert "rule specimen_real_targets" in out and "results/geometry/real_targets.csv" in out
+    assert "rule specimen_real_targets" in out and "results/morphable_mean/geometry/real_targets.csv" in out
     assert "yamamoto1989_intact_rom_original_text.csv" not in out     # control: test_default_target_of_the_mean...
 
 
-MEAN_TARGETS = ["results/geometry/levels.csv", "results/calibration/admissibility.csv",
-                "results/tables/multilevel_rom.csv"]
+MEAN_TARGETS = ["results/morphable_mean/geometry/levels.csv",
+                "results/morphable_mean/calibration/admissibility.csv",
+                "results/morphable_mean/tables/multilevel_rom.csv"]
 
 
 @pytest.fixture(scope="module")
@@ -205,7 +206,7 @@ def test_mean_jobs_load_the_cached_geometry(mean_run):
                                            configured.build_tag())
     assert entry is not None and entry.is_file()
     geo = configured.geometry_from_arrays(dict(np.load(entry)))
-    row = pd.read_csv(mean_run / "results/geometry/levels.csv").set_index("level").loc["L4-L5"]
+    row = pd.read_csv(mean_run / "results/morphable_mean/geometry/levels.csv").set_index("level").loc["L4-L5"]
     assert row["disc_height_mm"] == pytest.approx(1e3 * geo.levels["L4-L5"].disc_height, rel=1e-5)
     assert row["disc_height_mm"] != pytest.approx(1e3 * geo.levels["L3-L4"].disc_height, rel=1e-3)   # control
 
@@ -219,13 +220,13 @@ KNOWN_MISSES = {("fitted parameters at a bound without a documented reason", Non
 
 @pytest.mark.workflow
 def test_mean_calibration_admissibility_and_the_other_levels(mean_run):
-    adm = pd.read_csv(mean_run / "results/calibration/admissibility.csv")
+    adm = pd.read_csv(mean_run / "results/morphable_mean/calibration/admissibility.csv")
     assert len(adm) > 30 and (adm["level"] == "L4-L5").all()
     bad = adm[~adm["passed"].astype(bool)]
     failed = {(c, None if pd.isna(d) else d) for c, d in zip(bad["criterion"], bad["direction"])}
     assert failed == KNOWN_MISSES, bad.to_string()
     assert set(bad["note"]) == {"CL:pre_elongation"}
-    ml = pd.read_csv(mean_run / "results/tables/multilevel_rom.csv")
+    ml = pd.read_csv(mean_run / "results/morphable_mean/tables/multilevel_rom.csv")
     assert {"L2-L3", "L3-L4"} == set(ml["level"])          # L1-L2 and L5-S1: no such unit in the mean shape
     assert ml["converged"].astype(bool).all()
 

@@ -10,6 +10,7 @@ from typing import Mapping
 
 from lumbar.inputs import manifests
 
+from .real_loop import TABLE_COLUMNS, cell
 from .document import Bullets, Heading, Para
 from .sections import NOT_BUILT, flatten, norm_path, read_csv, fmt, report_section
 
@@ -108,9 +109,25 @@ def real_data_section(b):
         if sel.any():
             text += (label + ": " + ", ".join(f"{r.dataset} (gap {fmt(r.gap_before, 3)})"
                                               for r in rest[sel].itertuples()) + ". ")
+    target = t[t["role"].astype(str).str.startswith("calibration target")] if "role" in t.columns else t.iloc[:0]
+    if len(target):
+        text += ("Not posed, being calibration targets (the fit was made to them): "
+                 + ", ".join(str(r.dataset) for r in target.itertuples()) + ". ")
+    if "adopted" in t.columns:
+        n_adopted = int(t["adopted"].astype(str).str.lower().isin(["true", "1"]).sum())
+        text += (f"{n_adopted} effect(s) adopted into the model (config adopted_effects). " if n_adopted else
+                 "Nothing is adopted: an effect is adopted only when named on some real rows and judged on others "
+                 "it moves, none of which gets worse. ")
     text = text.rstrip()
     b.doc.add(Para(text))
-    b.csv_table(rel, "Discovery on real measurements", surrogate=False)
+    if all(c in t.columns for c, _ in TABLE_COLUMNS):
+        b.table_block("Discovery on real measurements: each real miss, its decision and what would decide it",
+                      [h for _, h in TABLE_COLUMNS],
+                      [[cell(r[c]) if r[c] != "" else "" for c, _ in TABLE_COLUMNS] for _, r in t.iterrows()],
+                      source=rel, note="Decisions at the assumed spread of each dataset and at half and double it "
+                                       "(the spreads: the CSV's spread column).")
+    else:
+        b.csv_table(rel, "Discovery on real measurements", surrogate=False)
 
 
 def markdown(b, text: str, where: str, surrogate: bool, source: str):

@@ -1,7 +1,7 @@
 """Report text of the discovery loop on real data: one paragraph and one table per run from
 the real-data summary (role ``discovery.real_data_summary``, rule discovery_real_data_summary); every number is read
-from that table, none is typed here. Not yet registered as a section: the caller (lumbar.report.sections) decides where it
-goes."""
+from that table, none is typed here. The table's columns (:data:`TABLE_COLUMNS`) are those of the discrepancy section's
+"What the model is missing, on real data" (lumbar.report.discrepancy_section.real_data_section)."""
 from __future__ import annotations
 
 import math
@@ -15,7 +15,7 @@ TABLE_COLUMNS = (("dataset", "dataset"), ("role", "role"), ("n_rows", "rows"), (
                  ("what_would_decide", "what would decide it"))
 
 
-def _cell(v) -> str:
+def cell(v) -> str:
     if v is None or (isinstance(v, float) and math.isnan(v)):
         return ""
     if isinstance(v, float):
@@ -42,5 +42,5 @@ def real_misses_markdown(summary: pd.DataFrame) -> str:
              f"again at half and double of it.", "",
              "| " + " | ".join(h for _, h in TABLE_COLUMNS) + " |", "|" + "---|" * len(TABLE_COLUMNS)]
     for row in summary.to_dict("records"):
-        lines.append("| " + " | ".join(_cell(row.get(c)) for c, _ in TABLE_COLUMNS) + " |")
+        lines.append("| " + " | ".join(cell(row.get(c)) for c, _ in TABLE_COLUMNS) + " |")
     return "\n".join(lines) + "\n"
