@@ -424,6 +424,9 @@ class ReportBuilder:
                            + (f" (outside: {', '.join(miss)})" if miss else "")
                            + (f"; the ligament roles and the facet share of compression, which the fit also holds "
                               f"as constraints, {wc} of {nc}" if nc else "") + " (Tables R3 and R4).")
+                inf = self._influence_sentence()
+                if inf:
+                    out.append(inf)
             w, n = counts.get(V.TARGET, (0, 0))
             out.append(f"Calibration targets (a fit quality, not a validation): {w} of {n} met." if n else
                        "Calibration targets: none in this configuration.")
@@ -438,6 +441,17 @@ class ReportBuilder:
         else:
             out.append(f"Tables 4 and 5 compare with the configured measured tables; {tail}")
         return " ".join(out)
+
+    def _influence_sentence(self) -> str:
+        """Which real row pulls the internal loads where (the leave-one-row-out refits), in words; empty without
+        the table."""
+        rel = self.out("calibration", "row_influence")
+        if not self.has(rel):
+            return ""
+        from .posterior import influence_sentence  # noqa: PLC0415 - posterior registers a section of this module
+        t = read_csv(self.path(rel))
+        text = influence_sentence(t).rstrip(".")
+        return f"Where those loads come from: {text} (Table P2)." if text else ""
 
     def _null_sentence(self) -> str:
         """What the model adds over a trivial model on the same rows (the validation's null-model table), in words
