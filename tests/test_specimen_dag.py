@@ -181,7 +181,7 @@ def mean_run(tmp_path_factory):
 
 @pytest.mark.workflow
 def test_mean_geometry_rule_writes_landmarks_transform_and_qa(mean_run):
-    g = mean_run / "results" / "geometry"
+    g = mean_run / "results" / "morphable_mean" / "geometry"
     levels = pd.read_csv(g / "levels.csv").set_index("level")
     assert list(levels.index) == ["L2-L3", "L3-L4", "L4-L5"]
     assert ((levels["disc_height_mm"] > 3) & (levels["disc_height_mm"] < 20)).all()

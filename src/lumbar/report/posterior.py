@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from .influence_text import influence_sentence as _influence_sentence
 from .sections import ReportBuilder, fmt, report_section
 
 #: the rows of the band table shown in the report: (direction, moment, quantity, label)
@@ -97,31 +98,6 @@ def posterior_section(b: ReportBuilder):
     influence_block(b)
 
 
-def influence_sentence(t: pd.DataFrame) -> str:
-    """The leave-one-row-out finding in words, read from row_influence.csv: the row whose removal moves the MAP
-    closest to its priors (the smallest largest shift) and what its removal does to the facets and the ITL."""
-    full = t[t["left_out"].fillna("") == ""]
-    loo = t[(t["left_out"].fillna("") != "") & t["converged"].astype(bool)]
-    if full.empty or loo.empty:
-        return ""
-    f = full.iloc[0]
-
-    def top_shift(s):
-        first = str(s).split(";")[0].split()
-        return abs(float(first[-2])) if len(first) >= 2 else np.inf
-    r = loo.loc[loo["largest_shifts"].map(top_shift).idxmin()]
-    return (f"Without the {r['left_out'].replace('_', ' ')} row the MAP stays within "
-            f"{fmt(top_shift(r['largest_shifts']), 2)} prior spreads of every prior (with it: "
-            f"{f['largest_shifts'].split(';')[0]}): the facet stiffness is {fmt(r['facet_stiffness_n_per_m'], 3)} N/m "
-            f"instead of {fmt(f['facet_stiffness_n_per_m'], 3)}, the extension facet force at 7.5 N*m "
-            f"{fmt(r['facet_extension_7_5_n'])} N instead of {fmt(f['facet_extension_7_5_n'])} N, and the largest "
-            f"ligament moment in flexion is the {r['largest_flexion_ligament']}'s instead of the "
-            f"{f['largest_flexion_ligament']}'s; but the unit then predicts {fmt(r['left_out_predicted_deg'])} deg "
-            f"for the left-out row (measured {fmt(r['left_out_measured_deg'])} deg, "
-            f"{fmt(100 * r['left_out_rel_error'])} %). This row is the one the model's structure meets only with "
-            "internal loads outside their sourced ranges; it stays in the fit.")
-
-
 def influence_block(b: ReportBuilder):
     """Table of the leave-one-row-out refits (role calibration.row_influence): the MAP refitted without each real
     row."""
@@ -147,7 +123,7 @@ def influence_block(b: ReportBuilder):
                      fmt(r.facet_axial_rotation_7_5_n), str(r.largest_flexion_ligament), fmt(r.ssl_flexion_tension_n),
                      "yes" if bool(r.flexion_reduction_monotone) else "no", str(r.largest_shifts)])
     b.para("Which measured row decides which internal load: the MAP refitted without each real row in turn (same "
-           "priors, penalties and disc-only rows, started from the MAP). " + influence_sentence(t))
+           "priors, penalties and disc-only rows, started from the MAP). " + _influence_sentence(t, fmt))
     b.table_block("The calibration without each real row: the left-out row's prediction and the internal loads", [
         "fit", "left-out row: predicted vs measured [deg]", "ROM flex / ext / LB / AR, 10 N*m [deg]",
         "facet stiffness [N/m]", "facet force, extension 7.5 N*m [N]", "facet force, axial rotation 7.5 N*m [N]",

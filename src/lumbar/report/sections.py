@@ -27,6 +27,7 @@ from lumbar.inputs import manifests
 
 from lumbar.experiments import validation as V
 
+from .influence_text import influence_sentence
 from .document import Contents, Doc, Figure, Heading, Para, Table
 
 log = logging.getLogger(__name__)
@@ -448,9 +449,8 @@ class ReportBuilder:
         rel = self.out("calibration", "row_influence")
         if not self.has(rel):
             return ""
-        from .posterior import influence_sentence  # noqa: PLC0415 - posterior registers a section of this module
         t = read_csv(self.path(rel))
-        text = influence_sentence(t).rstrip(".")
+        text = influence_sentence(t, fmt).rstrip(".")
         return f"Where those loads come from: {text} (Table P2)." if text else ""
 
     def _null_sentence(self) -> str:
