@@ -144,3 +144,17 @@ def test_every_script_job_by_hand_equals_snakemakes(common, in_root):
     for rule in scripted - seen:                  # not in this configuration's DAG (discovery_idp_model): builds
         wildcards = {w: "0" for w in rules[rule].wildcard_names}      # e.g. the part of a fixture stream
         assert list(common._job(workflow, rule, wildcards).output), rule
+
+
+@pytest.mark.parametrize("preset", [None, "3"])
+def test_by_hand_scripts_use_one_blas_thread_as_snakemake_jobs(preset):
+    """Importing the scripts' _common sets the BLAS/OpenMP thread variables to 1 (a rule's one thread) before numpy
+    is loaded, and keeps a value already set (Snakemake's, or the user's): control, preset 3 stays 3."""
+    import os
+    env = {k: v for k, v in os.environ.items() if not k.endswith(("_NUM_THREADS", "_MAXIMUM_THREADS"))}
+    if preset:
+        env["OPENBLAS_NUM_THREADS"] = preset
+    code = ("import sys; sys.path.insert(0, 'workflow/scripts'); import _common, os; "
+            "print(os.environ['OPENBLAS_NUM_THREADS'], os.environ['OMP_NUM_THREADS'])")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, check=True)
+    assert out.stdout.split() == [preset or "1", "1"]

@@ -25,8 +25,19 @@ from __future__ import annotations
 import argparse
 import inspect
 import logging
+import os
 import sys
 from pathlib import Path
+
+#: A script run by hand uses one BLAS/OpenMP thread, as Snakemake gives a rule of one thread (it sets these variables
+#: for each job), so that a by-hand run reproduces the workflow's numbers: the last digits of a multithreaded BLAS
+#: differ, and a solve at the edge of convergence can turn on them (measured: the muscle model's crate-close posture
+#: converged with the machine's default BLAS threads and not with one). Set before numpy is imported (scripts import
+#: this module first); a value already in the environment is kept.
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS",
+                    "NUMEXPR_NUM_THREADS")
+for _name in THREAD_VARIABLES:
+    os.environ.setdefault(_name, "1")
 
 ROOT = Path(__file__).resolve().parents[2]
 SNAKEFILE = ROOT / "Snakefile"

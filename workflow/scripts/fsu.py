@@ -5,10 +5,9 @@ By hand: python workflow/scripts/fsu.py fsu_rom --configfile config/test/config.
 import sys
 from pathlib import Path
 
-import pandas as pd
-
 sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _common.py
 import _common  # noqa: E402
+import pandas as pd  # noqa: E402
 
 snakemake, log = _common.start(globals())
 
