@@ -88,7 +88,8 @@ def real_data_section(b):
     t = read_csv(b.path(rel))
     t = t.astype(object).where(t.notna(), "")            # empty cells as "" (fillna("") on float columns warns)
     named = t[t["named_effect"].astype(str) != ""]
-    few = t[t["note"].astype(str).str.contains("too few rows")]
+    few = t[t["note"].astype(str).str.contains("too few rows") | t["decision"].astype(str).str.contains("too few rows")]
+    target = t[t["role"].astype(str).str.startswith("calibration target")] if "role" in t.columns else t.iloc[:0]
     text = (f"The discrepancy discovery ran on {len(t)} published dataset(s) the model is compared with. ")
     if len(named):
         text += "Named: " + "; ".join(
@@ -99,7 +100,7 @@ def real_data_section(b):
     if len(few):
         text += ("Too few rows to name anything: " + ", ".join(f"{r.dataset} ({r.n_rows} row(s))"
                                                                for r in few.itertuples()) + ". ")
-    rest = t[(t["named_effect"].astype(str) == "") & ~t.index.isin(few.index)]
+    rest = t[(t["named_effect"].astype(str) == "") & ~t.index.isin(few.index) & ~t.index.isin(target.index)]
     dec = rest["decision"].astype(str)
     for label, sel in (("Tested, nothing named (consistent with the model and specimen variation, or a nuisance "
                         "explains it)", ~dec.str.startswith("unexplained")),
@@ -109,7 +110,6 @@ def real_data_section(b):
         if sel.any():
             text += (label + ": " + ", ".join(f"{r.dataset} (gap {fmt(r.gap_before, 3)})"
                                               for r in rest[sel].itertuples()) + ". ")
-    target = t[t["role"].astype(str).str.startswith("calibration target")] if "role" in t.columns else t.iloc[:0]
     if len(target):
         text += ("Not posed, being calibration targets (the fit was made to them): "
                  + ", ".join(str(r.dataset) for r in target.itertuples()) + ". ")
