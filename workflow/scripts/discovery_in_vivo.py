@@ -15,9 +15,7 @@ from lumbar.discovery import jobs  # noqa: E402
 
 
 def main(snakemake, log):
-    cfg = jobs.job_config(snakemake.params.cfg, snakemake.input)
-    r = jobs.run_case(cfg, snakemake.input.measured, snakemake.output, Path(snakemake.output.discovery).parent)
-    log.info("%s on %s: %s", snakemake.rule, snakemake.input.measured, jobs.case_summary(r))
+    jobs.run_case_job(snakemake, log)
 
 
 if __name__ == "__main__":

@@ -64,3 +64,14 @@ def case_summary(r: dict) -> str:
     """The log line of one discovery's result record: what it named, the estimate, the gaps and the decision."""
     return (f"named {r['named_effect']} (estimate {r['parameter_estimate']}), gap {r['gap_before']:.2f} -> "
             f"{r['gap_after']:.2f}; {r['decision']}")
+
+
+def run_case_job(job, log) -> dict:
+    """The job of one discovery case rule (``discovery_default``, ``_va_artefact``, ``_intact_rom``, ``_in_vivo``):
+    the rule's configuration completed by its inputs (:func:`job_config`), the discovery on ``input.measured`` with
+    its files beside ``output.discovery`` (:func:`run_case`), one log line (:func:`case_summary`). ``job``: the
+    Snakemake object (or the scripts' command-line stand-in)."""
+    cfg = job_config(job.params.cfg, job.input)
+    r = run_case(cfg, job.input.measured, job.output, Path(job.output.discovery).parent)
+    log.info("%s on %s: %s", job.rule, job.input.measured, case_summary(r))
+    return r
