@@ -160,6 +160,39 @@ def test_facet_gap_gradient_matches_finite_differences():
         np.testing.assert_allclose(hess[:, :, k], (s.gap(P + e)[1] - s.gap(P - e)[1]) / 2e-7, rtol=1e-4, atol=1e-4)
 
 
+def test_facet_beyond_extent_is_outside_the_landmarks_uv_extent_only():
+    sup, inf = _facet_sets([200.0, -300.0, 8.0, 5.0])
+    s = fit_surface(sup, inf)
+    assert not s.beyond_extent(np.vstack([sup, inf])).any()           # every landmark inside its own extent
+    (u0, u1), (v0, v1) = s.u_range, s.v_range
+    q = np.array([[0.5 * (u0 + u1), 0.5 * (v0 + v1), 0.0], [u0 - 1e-4, 0.0, 0.0], [0.0, v1 + 1e-4, 0.0],
+                  [u1 + 1e-3, 0.0, 0.0]])
+    P = s.origin + q @ s.axes                                           # local (u, v, w) back to the reference frame
+    np.testing.assert_array_equal(s.beyond_extent(P), [False, True, True, True])
+    np.testing.assert_array_equal(s.beyond_extent(P, margin=5e-4), [False, False, False, True])
+
+
+def test_contact_force_beyond_extent_splits_the_total_by_where_the_points_touch():
+    from lumbar.mechanics.model import SpineModel
+    sup, inf = _facet_sets([0.0, 0.0, 8.0, 5.0])
+    s = fit_surface(sup, inf)
+    (u0, u1), (v0, v1) = s.u_range, s.v_range
+    pen = -2e-4                                                        # 0.2 mm into the surface
+    forces = []
+    for u, v in ((0.5 * (u0 + u1), 0.5 * (v0 + v1)), (u1 + 1e-3, 0.0)):
+        point = s.origin + np.array([u, v, s.surface(u, v)[0] + pen]) @ s.axes
+        m = SpineModel()
+        low = m.add_body("low", np.zeros(3), fixed=True)
+        up = m.add_body("up", np.array([0.0, 0.0, 0.03]))
+        m.add_facet(up, low, s, point[None], 12000.0)
+        m.finalize()
+        x, R = m.reference_state(1)
+        forces.append((m.contact_forces(x, R)[0, 0], m.contact_forces(x, R, beyond_extent=True)[0, 0]))
+    (t_in, b_in), (t_out, b_out) = forces
+    assert t_in > 0 and b_in == 0.0                                    # pressed inside: nothing beyond
+    assert t_out > 0 and b_out == t_out                                # pressed beyond the extent: all of it
+
+
 @settings(max_examples=60, deadline=None)
 @given(a=st.floats(0.1, 500), b=st.floats(-40, 20), c=st.floats(-100, 100), d=st.floats(0.05, 80),
        eps=st.floats(-30, 60))

@@ -155,8 +155,12 @@ def _loads_table(model, fsu: FSU, x, R, fmask, cmask, structures, loads):
     out["disc_shear_ap_n"] = dl["force"][:, structures.disc, 0]
     out["disc_shear_lat_n"] = dl["force"][:, structures.disc, 1]
     cf = model.contact_forces(x, R, cmask)
+    off = model.contact_forces(x, R, cmask, beyond_extent=True)
     for side, sid in structures.surfaces.items():
         out[f"facet_{side}_contact_n"] = cf[:, sid]
+    for side, sid in structures.surfaces.items():
+        # the part carried by contact points beyond the fitted articular surface (Eq. 4 extrapolated there)
+        out[f"facet_{side}_beyond_surface_n"] = off[:, sid]
     gf = model.group_forces(x, R, fmask)
     for kind, gs in structures.groups.items():
         out[f"{kind}_tension_n"] = gf[:, gs].sum(1)

@@ -214,6 +214,14 @@ def _curve_at(curves, direction, moment_nm, stage="intact"):
     return sel.iloc[0] if len(sel) else None
 
 
+
+def _beyond_note(sim, off) -> str:
+    """The part of a facet force carried beyond the fitted articular surface, said in the scoreboard's note."""
+    if not (np.isfinite(sim) and np.isfinite(off) and sim > 0 and off > 0):
+        return ""
+    return (f" ({off:.0f} N of it, {100 * off / sim:.0f} %, from contact points beyond the fitted articular surface, "
+            "where Eq. 4 is extrapolated)")
+
 def internal_load_rows(curves: pd.DataFrame, compression: pd.DataFrame | None, literature: pd.DataFrame,
                        set_name="calibrated") -> list[dict]:
     """Scoreboard rows of the unit's internal loads against sourced values (``data/load_sharing``): facet contact
@@ -235,8 +243,9 @@ def internal_load_rows(curves: pd.DataFrame, compression: pd.DataFrame | None, l
         at = _curve_at(curves, d, 7.5)
         if r is None or at is None:
             continue
-        sim = max(float(at["facet_left_contact_n"]), float(at["facet_right_contact_n"])) if bool(at["converged"]) \
-            else np.nan
+        side = "left" if float(at["facet_left_contact_n"]) >= float(at["facet_right_contact_n"]) else "right"
+        sim = float(at[f"facet_{side}_contact_n"]) if bool(at["converged"]) else np.nan
+        off = float(at.get(f"facet_{side}_beyond_surface_n", np.nan))
         m, sd = float(r["value"]), float(r["high"]) - float(r["value"])      # the low end may be floored at 0
         lo, hi = max(m - FACET_FORCE_SD_BAND * sd, 0.0), m + FACET_FORCE_SD_BAND * sd
         ok = bool(np.isfinite(sim) and lo <= sim <= hi)
@@ -244,8 +253,8 @@ def internal_load_rows(curves: pd.DataFrame, compression: pd.DataFrame | None, l
                      "sim": sim, "measured": m, "measured_low": lo, "measured_high": hi, "kind": r["kind"],
                      "source": r["source"], "within": ok,
                      "tolerance_rule": f"mean +- {FACET_FORCE_SD_BAND:g} SD (in vitro, T12-L2)", "set": set_name,
-                     "role": INTERNAL, "note": f"larger of the two facets of the model; 1-SD band {float(r['low']):g}"
-                                               f"-{float(r['high']):g} N; {r['note']}"})
+                     "role": INTERNAL, "note": f"larger of the two facets of the model{_beyond_note(sim, off)}; 1-SD "
+                                               f"band {float(r['low']):g}-{float(r['high']):g} N; {r['note']}"})
     f10 = _curve_at(curves, "flexion", 10.0)
     if f10 is not None and bool(f10["converged"]):
         isl, ssl = float(f10["ISL_tension_n"]), float(f10["SSL_tension_n"])

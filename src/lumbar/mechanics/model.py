@@ -467,8 +467,12 @@ class SpineModel:
             out["torque"].append(-T)
         return {k: np.stack(v, axis=1) for k, v in out.items()}
 
-    def contact_forces(self, x, R, cmask=1.0):
-        """Total normal contact force [N] per facet surface (B, n_surfaces)."""
+    def contact_forces(self, x, R, cmask=1.0, beyond_extent=False):
+        """Total normal contact force [N] per facet surface (B, n_surfaces).
+
+        ``beyond_extent``: only the force of the contact points that lie outside the surface's landmark extent
+        (:meth:`lumbar.mechanics.elements.facet.FacetSurface.beyond_extent`), where Eq. 4 is extrapolated: the part of
+        the contact force that the fitted articular surface does not cover."""
         p, _ = self._attach(x, R, self.k_a, self.k_s)
         P = self._to_body(x, R, self.k_b, p)
         out = np.zeros((x.shape[0], len(self.surfaces)))
@@ -477,6 +481,8 @@ class SpineModel:
             g, grad, _ = surf.gap(P[:, sel])
             Fm, _ = contact_penalty(-g, self.k_stiff[sel], self.contact_eps)
             Fm = Fm * (cmask[..., sel] if np.ndim(cmask) else cmask)
+            if beyond_extent:
+                Fm = Fm * surf.beyond_extent(P[:, sel])
             out[:, sid] = (Fm * np.linalg.norm(grad, axis=-1)).sum(-1)
         return out
 

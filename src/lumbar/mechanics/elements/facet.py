@@ -62,6 +62,15 @@ class FacetSurface:
         hess = self.axes.T @ hess_q @ self.axes
         return g, grad, hess
 
+    def beyond_extent(self, P, margin=0.0):
+        """True where reference-frame points P (..., 3) lie outside the landmarks' (u, v) extent grown by ``margin``
+        [m]: there the Eq. 4 surface is an extrapolation of its regression, outside the law's validity (no
+        articular surface was fitted there)."""
+        q = self.local(P)
+        (u0, u1), (v0, v1) = self.u_range, self.v_range
+        return ((q[..., 0] < u0 - margin) | (q[..., 0] > u1 + margin)
+                | (q[..., 1] < v0 - margin) | (q[..., 1] > v1 + margin))
+
     def grid(self, n=12):
         """(n, n, 3) reference-frame points of the mean surface over the landmark extent."""
         u = np.linspace(*self.u_range, n)
