@@ -428,6 +428,9 @@ class ReportBuilder:
                 inf = self._influence_sentence()
                 if inf:
                     out.append(inf)
+                edge = self._facet_edge_sentence()
+                if edge:
+                    out.append(edge)
             w, n = counts.get(V.TARGET, (0, 0))
             out.append(f"Calibration targets (a fit quality, not a validation): {w} of {n} met." if n else
                        "Calibration targets: none in this configuration.")
@@ -452,6 +455,26 @@ class ReportBuilder:
         t = read_csv(self.path(rel))
         text = influence_sentence(t, fmt).rstrip(".")
         return f"Where those loads come from: {text} (Table P2)." if text else ""
+
+    def _facet_edge_sentence(self) -> str:
+        """Where the calibrated unit's extension facet force sits (inside the fitted articular surface or beyond it,
+        where Eq. 4 is extrapolated), in words; empty without the curves or their beyond-surface columns."""
+        rel = self.out("load_sharing", "curves", set="calibrated")
+        if not self.has(rel):
+            return ""
+        c = read_csv(self.path(rel))
+        r = c[(c["stage"] == "intact") & (c["direction"] == "extension") & np.isclose(c["moment_nm"], 7.5)]
+        if r.empty or "facet_left_beyond_surface_n" not in c.columns:
+            return ""
+        r = r.iloc[0]
+        side = "left" if r["facet_left_contact_n"] >= r["facet_right_contact_n"] else "right"
+        total, off = float(r[f"facet_{side}_contact_n"]), float(r[f"facet_{side}_beyond_surface_n"])
+        if not total > 0:
+            return ""
+        return (f"In extension at 7.5 N*m, {fmt(off)} N of the larger facet force of {fmt(total)} N "
+                f"({fmt(100 * off / total, 2)} %) comes from contact beyond the fitted articular surface (the "
+                "cartilage grid of the geometry), where Eq. 4 is extrapolated: the extension facet force and ROM depend "
+                "on a part of the joint that no landmark describes (docs/validity.md).")
 
     def _null_sentence(self) -> str:
         """What the model adds over a trivial model on the same rows (the validation's null-model table), in words
