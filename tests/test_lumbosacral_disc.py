@@ -151,3 +151,19 @@ def test_multilevel_problem_tries_the_candidate_and_reports_its_range(problem):
     assert f"{NAME} (estimate 1.2 outside its sourced range" in text and "axial_rotation" in text
     # control: without a sourced candidate the text says none was found
     assert "no candidate with a sourced magnitude range was found" in RD.why_not_named(r, {1.0: "x"}, "independent")
+
+
+def test_power_check_names_a_large_planted_candidate_and_not_one_at_its_sourced_size(problem):
+    """Planted tables (model at the magnitude + noise at the rows' sigma): at the sourced bound the candidate moves the
+    four L5-S1 rows by a fraction of their sigma and is never named; the control, planted at the fit's upper bound (a
+    disc of 2.5 times the height), is named in some tables, so the count can be non-zero."""
+    from lumbar.discovery.detect import discovery_settings
+    s = discovery_settings(config())
+    rec = RD.sourced_candidates(problem, {"estimates": {NAME: fx.EFFECTS[NAME].bounds[1]}}, problem.forward({})[0])
+    RD.sourced_power(problem, rec, s, n_tables=6, cache={})
+    pw = rec[NAME]["power"]
+    assert pw["sourced_bound"]["magnitude"] == pytest.approx(fx.sourced_range(NAME)[0])    # the end farther from 0
+    assert pw["sourced_bound"]["named"] == 0 and pw["sourced_bound"]["tables"] == 6
+    assert pw["estimate"]["magnitude"] == fx.EFFECTS[NAME].bounds[1] and pw["estimate"]["named"] >= 1
+    text = RD.why_not_named({"decision": "unexplained"}, {1.0: "unexplained"}, "independent", rec)
+    assert "planted at its sourced bound" in text and "named in 0 of 6 tables" in text

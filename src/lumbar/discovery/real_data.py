@@ -61,6 +61,8 @@ Z90 = 1.6448536269514722
 FACET_SHARE_ASSUMED_SD = 8.0
 #: the compressive load [N] at which the model's facet share is read (the scoreboard's row)
 FACET_SHARE_FORCE_N = 1000.0
+#: planted tables per magnitude of the power check of a candidate with a sourced range (sourced_power)
+SOURCED_POWER_TABLES = 10
 
 #: per real dataset: its role for the calibration, and the measurement that would decide it
 REAL_CASES = {
@@ -304,6 +306,7 @@ def run_case(case: str, problem: Problem, config, out_dir, measured_label: str, 
     where, z = localise(out["problem"], _base_from(out))
     base = _base_from(out)
     sourced = sourced_candidates(problem, out["result"], base)
+    sourced_power(problem, sourced, s, cache=cache)
     rec = case_record(case, out["result"], problem.meta.get("spread", ""), where, z,
                       {f: outs[f]["result"]["decision"] for f in SPREAD_FACTORS}, config, sourced)
     sens = candidate_sensitivity(problem, base)
@@ -364,6 +367,31 @@ def sourced_candidates(problem: Problem, result: dict, base: np.ndarray) -> dict
     return out
 
 
+def sourced_power(problem: Problem, sourced: dict, settings: dict, n_tables: int = SOURCED_POWER_TABLES,
+                  cache=None) -> dict:
+    """Could the discovery name a sourced candidate on these rows? Per entry of ``sourced`` (sourced_candidates, edited
+    in place: key ``power``): tables planted with the candidate at the end of its sourced range farthest from 0 (the
+    most detectable size a source allows) and at the discovery's estimate, each the model's prediction plus Gaussian
+    noise at the rows' sigma (``n_tables`` seeds from the configuration's seed), decided with the case's settings;
+    ``named`` counts the tables that name the candidate. None named at the sourced size means the rows cannot show the
+    candidate at a size a source allows, whatever the decision on the measured table."""
+    seed = int(settings.get("seed", 0))
+    for c, rec in sourced.items():
+        sizes = {"sourced_bound": rec["hi"] if abs(rec["hi"]) >= abs(rec["lo"]) else rec["lo"]}
+        if rec["estimate"] is not None:
+            sizes["estimate"] = rec["estimate"]
+        rec["power"] = {}
+        for label, m in sizes.items():
+            pred = problem.forward({c: np.array([float(m)])})[0]
+            named = 0
+            for k in range(int(n_tables)):
+                y = pred + np.random.default_rng([seed, k]).normal(0.0, problem.sigma)
+                r = discover(dataclasses.replace(problem, y=y), settings, cache=cache)["result"]
+                named += r.get("named_effect") == c
+            rec["power"][label] = {"magnitude": float(m), "named": int(named), "tables": int(n_tables)}
+    return sourced
+
+
 def _sourced_text(r) -> str:
     """'; sourced range [lo, hi], estimate e (inside|outside)' of a sourced_candidates entry ('' without one)."""
     if not r:
@@ -411,7 +439,9 @@ def why_not_named(r: dict, decisions: dict, role: str, sourced: dict | None = No
                        f"{c} (estimate {'none' if v['estimate'] is None else format(v['estimate'], '.3g')} "
                        f"{'inside' if v['inside'] else 'outside'} its sourced range [{v['lo']:.3g}, {v['hi']:.3g}]"
                        + (f"; worse at the estimate: {' / '.join(v['rows_worse_at_estimate'])}"
-                          if v.get("rows_worse_at_estimate") else "") + ")"
+                          if v.get("rows_worse_at_estimate") else "")
+                       + "".join(f"; planted at its {k.replace('_', ' ')} {w['magnitude']:.3g}, named in {w['named']} "
+                                 f"of {w['tables']} tables" for k, w in (v.get("power") or {}).items()) + ")"
                        for c, v in sourced.items())
                       if sourced else "; no candidate with a sourced magnitude range was found for the mechanisms "
                                       "that could"))
