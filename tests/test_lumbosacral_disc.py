@@ -66,7 +66,9 @@ def test_sourced_range_refuses_a_table_without_both_levels_or_in_other_units(tmp
 
 
 # ------------------------------------------------------------------ the scaled disc
-def test_disc_model_scales_every_disc_stiffness_by_the_inverse_height(units):
+def test_disc_model_is_the_disc_law_per_unit_height(units):
+    """A disc 1 + d times as tall of the same material: every law takes its argument divided by 1 + d, so under the
+    same torque the disc alone rotates 1 + d times as far (the nonlinear Eq. 3 included)."""
     u = units["L5-S1"]
     d = 0.25
     before = {k: tuple(v) for k, v in u.model.discs[0].torque.items()}
@@ -75,7 +77,10 @@ def test_disc_model_scales_every_disc_stiffness_by_the_inverse_height(units):
     assert m1 is not m0 and u.disc_model(d) is m1                       # one copy per value
     phi = np.random.default_rng(3).normal(0, 0.05, (20, 3))
     for a, b in zip(m0.discs, m1.discs):
-        np.testing.assert_allclose(disc_torque(phi, b.torque)[0], disc_torque(phi, a.torque)[0] / (1 + d), rtol=1e-12)
+        np.testing.assert_allclose(disc_torque(phi, b.torque)[0], disc_torque(phi / (1 + d), a.torque)[0],
+                                   rtol=1e-12, atol=1e-12)
+        # control: the amplitude scaling T / (1 + d) is another law (Eq. 3 is not linear)
+        assert np.abs(disc_torque(phi, b.torque)[0] - disc_torque(phi, a.torque)[0] / (1 + d)).max() > 1e-3
         rz = -np.linspace(1e-5, 1e-3, 7)                                 # compression
         np.testing.assert_allclose(disc_axial_force(rz, b.k_quadratic, b.k_linear)[0],
                                    disc_axial_force(rz / (1 + d), a.k_quadratic, a.k_linear)[0], rtol=1e-12)

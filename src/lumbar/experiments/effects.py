@@ -26,9 +26,11 @@ asked for; add such extra effects with :func:`register_effect` and turn a {name:
 params with :func:`effect_params`.
 
 ``lumbosacral_disc_height`` is a level-specific candidate: the L5-S1 disc's height relative to the L4-L5 disc the
-transferred laws were calibrated on, ``delta = h(L5-S1) / h(L4-L5) - 1``, turned into the disc's stiffness as a disc of
-the same material and cross-section (every disc stiffness per unit height: rotational, linear axial and shear times
-``1 / (1 + delta)``, the quadratic axial term times ``1 / (1 + delta)**2``). It acts only on a unit of level
+transferred laws were calibrated on, ``delta = h(L5-S1) / h(L4-L5) - 1``, turned into the disc's laws as a disc of
+the same material and cross-section: its strains are the L4-L5 disc's at ``1 + delta`` times the angle or displacement,
+so every law takes its argument divided by ``1 + delta`` (Eq. 3: ``T(phi) -> T(phi / (1 + delta))``, i.e. p2 times
+``(1 + delta)**3`` and p3 divided by ``1 + delta``; axial ``F(c) -> F(c / (1 + delta))``; shear stiffness divided by
+``1 + delta``): the disc alone rotates ``1 + delta`` times as far under the same moment. It acts only on a unit of level
 :data:`LUMBOSACRAL_LEVEL` (anywhere else it is the identity) and is solved on a copy of the unit's model with the
 scaled disc (:meth:`FsuVariants.disc_model`), so the numpy reference and the compiled kernel both see it without a
 change of the kernel. Its sourced range (:func:`sourced_range`) is read from
@@ -175,8 +177,8 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in [
     Effect("lumbosacral_disc_height", "delta_height", "1 (relative height)", (-0.5, 1.5), (0.045, 0.09),
            ("multilevel_rom",), "solver",
            "the L5-S1 disc's height relative to the L4-L5 disc whose laws are transferred, delta = h(L5-S1)/h(L4-L5) "
-           "- 1: every disc stiffness at L5-S1 per unit height (rotation, axial linear and shear x 1/(1+delta), "
-           "quadratic axial x 1/(1+delta)^2); no effect at another level",
+           "- 1: the L5-S1 disc's laws per unit height (every law's angle or displacement divided by 1+delta: the "
+           "disc alone rotates 1+delta times as far under the same moment); no effect at another level",
            "validation: the calibrated set is carried to the other levels unchanged; the lumbosacral disc's "
            "morphometry differs from L4-L5's (data/anatomy/lumbosacral_disc_height_original_text.csv)",
            sourced=lumbosacral_disc_height_range),
@@ -307,10 +309,11 @@ class FsuVariants:
         self._disc_models: dict = {}
 
     def disc_model(self, delta):
-        """The unit's model with every disc stiffness scaled as a disc of relative height ``1 + delta`` (effect
-        lumbosacral_disc_height): the Eq. 3 torque (p1 and p3, so T -> T / (1 + delta)), the linear axial and the shear
-        stiffness x 1 / (1 + delta), the quadratic axial term x 1 / (1 + delta)**2. The unit's own model at
-        ``delta`` 0 and at any level but LUMBOSACRAL_LEVEL (the same object: bit-identical results)."""
+        """The unit's model with its discs' laws as those of a disc of relative height ``1 + delta`` and the same
+        material (effect lumbosacral_disc_height): every law takes its argument divided by ``1 + delta`` (Eq. 3
+        T(phi) -> T(phi / (1 + delta)): p1 kept, p2 x (1 + delta)**3, p3 / (1 + delta); axial F(c) -> F(c / (1 +
+        delta)): k_linear / (1 + delta), k_quadratic / (1 + delta)**2; k_shear / (1 + delta)). The unit's own model
+        at ``delta`` 0 and at any level but LUMBOSACRAL_LEVEL (the same object: bit-identical results)."""
         d = float(delta)
         check_effect("lumbosacral_disc_height", d)
         if d == 0.0 or not self.acts_disc_height:
@@ -319,12 +322,12 @@ class FsuVariants:
             m = copy.deepcopy(self.model)
             for k in ("_group_cache", "_kernel_model_data", "_kernel_defaults"):
                 m.__dict__.pop(k, None)
-            s = 1.0 / (1.0 + d)
+            a = 1.0 + d
             for spec in m.discs:
-                spec.k_linear *= s
-                spec.k_shear *= s
-                spec.k_quadratic *= s * s
-                spec.torque = {k: (p1 * s, p2, p3 * s) for k, (p1, p2, p3) in spec.torque.items()}
+                spec.k_linear /= a
+                spec.k_shear /= a
+                spec.k_quadratic /= a * a
+                spec.torque = {k: (p1, p2 * a ** 3, p3 / a) for k, (p1, p2, p3) in spec.torque.items()}
             if len(self._disc_models) >= 64:                # a discovery grid's values, bounded
                 self._disc_models.pop(next(iter(self._disc_models)))
             self._disc_models[d] = m
