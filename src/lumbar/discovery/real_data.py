@@ -61,6 +61,8 @@ Z90 = 1.6448536269514722
 FACET_SHARE_ASSUMED_SD = 8.0
 #: the compressive load [N] at which the model's facet share is read (the scoreboard's row)
 FACET_SHARE_FORCE_N = 1000.0
+#: planted tables per magnitude of the power check of a candidate with a sourced range (sourced_power)
+SOURCED_POWER_TABLES = 10
 
 #: per real dataset: its role for the calibration, and the measurement that would decide it
 REAL_CASES = {
@@ -190,7 +192,8 @@ def multilevel_problem(config, yamamoto_path, multilevel_rom=None, units=None, l
     assumed = np.full(len(rows), float(s["no_range_sd_deg"]))
     model_sd = model_band_sd_levels(rows, multilevel_rom)
     keys = rows[["level", "direction", "moment_nm"]]
-    cands = [c for c in fx.effect_names("stepwise_rom") if not s.get("effects") or c in s["effects"]]
+    cands = [c for c in fx.effect_names("stepwise_rom") + fx.effect_names("multilevel_rom")
+             if not s.get("effects") or c in s["effects"]]
     return Problem("stepwise_rom", keys, rows["measured_deg"].to_numpy(float), np.hypot(assumed, model_sd), "deg",
                    fwd, cands, "level", ["direction", "moment_nm"], np.arange(len(rows)) % max(2, int(s["cv_folds"])),
                    meta={"quantity": "range of motion at the row's moment, other levels [deg]",
@@ -301,13 +304,17 @@ def run_case(case: str, problem: Problem, config, out_dir, measured_label: str, 
     outs = {f: discover(with_spread(problem, f), s, cache=cache) for f in SPREAD_FACTORS}
     out = outs[1.0]
     where, z = localise(out["problem"], _base_from(out))
-    rec = case_record(case, out["result"], problem.meta.get("spread", ""), where, z,
-                      {f: outs[f]["result"]["decision"] for f in SPREAD_FACTORS}, config)
     base = _base_from(out)
+    sourced = sourced_candidates(problem, out["result"], base)
+    sourced_power(problem, sourced, s, cache=cache)
+    rec = case_record(case, out["result"], problem.meta.get("spread", ""), where, z,
+                      {f: outs[f]["result"]["decision"] for f in SPREAD_FACTORS}, config, sourced)
     sens = candidate_sensitivity(problem, base)
     rec["candidates_tried"] = ", ".join(f"{c} (largest |dz| {v['largest_abs_dz']:.2g} at {v['value']:.3g} "
-                                        f"{fx.EFFECTS[c].unit})" for c, v in sens.items())
+                                        f"{fx.EFFECTS[c].unit}{_sourced_text(sourced.get(c))})"
+                                        for c, v in sens.items())
     rec["candidate_sensitivity"] = sens
+    rec["sourced_ranges"] = sourced
     rec["gap_by_group"] = gap_by_group(problem, base)
     out["result"]["real_data"] = rec
     write_outputs(out, out_dir, measured_label)
@@ -334,6 +341,65 @@ def candidate_sensitivity(problem: Problem, base: np.ndarray) -> dict:
     return out
 
 
+def sourced_candidates(problem: Problem, result: dict, base: np.ndarray) -> dict:
+    """Per candidate of ``problem`` with a sourced magnitude range (lumbar.experiments.effects.sourced_range): the range
+    and its source, the discovery's estimate (its refit on these rows), whether the estimate lies inside the range, and
+    the rows the estimate makes worse (|z| up by more than 0.1 against the nominal model ``base``; one forward batch).
+    A candidate is adoptable only if named with an estimate inside its range and no row it moves gets worse."""
+    est = result.get("estimates") or {}
+    z0 = (np.asarray(base, float) - problem.y) / problem.sigma
+    out = {}
+    for c in problem.candidates:
+        rng = fx.sourced_range(c)
+        if rng is None:
+            continue
+        lo, hi, src = rng
+        e = est.get(c)
+        e = None if e is None or not np.isfinite(float(e)) else float(e)
+        rec = {"lo": lo, "hi": hi, "source": src, "estimate": e, "inside": e is not None and lo <= e <= hi,
+               "rows_worse_at_estimate": []}
+        if e is not None:
+            z1 = (problem.forward({c: np.array([e])})[0] - problem.y) / problem.sigma
+            worse = np.flatnonzero(np.abs(z1) > np.abs(z0) + 0.1)
+            rec["rows_worse_at_estimate"] = [", ".join(f"{k} {problem.keys.iloc[i][k]}" for k in problem.keys.columns)
+                                             for i in worse]
+        out[c] = rec
+    return out
+
+
+def sourced_power(problem: Problem, sourced: dict, settings: dict, n_tables: int = SOURCED_POWER_TABLES,
+                  cache=None) -> dict:
+    """Could the discovery name a sourced candidate on these rows? Per entry of ``sourced`` (sourced_candidates, edited
+    in place: key ``power``): tables planted with the candidate at the end of its sourced range farthest from 0 (the
+    most detectable size a source allows) and at the discovery's estimate, each the model's prediction plus Gaussian
+    noise at the rows' sigma (``n_tables`` seeds from the configuration's seed), decided with the case's settings;
+    ``named`` counts the tables that name the candidate. None named at the sourced size means the rows cannot show the
+    candidate at a size a source allows, whatever the decision on the measured table."""
+    seed = int(settings.get("seed", 0))
+    for c, rec in sourced.items():
+        sizes = {"sourced_bound": rec["hi"] if abs(rec["hi"]) >= abs(rec["lo"]) else rec["lo"]}
+        if rec["estimate"] is not None:
+            sizes["estimate"] = rec["estimate"]
+        rec["power"] = {}
+        for label, m in sizes.items():
+            pred = problem.forward({c: np.array([float(m)])})[0]
+            named = 0
+            for k in range(int(n_tables)):
+                y = pred + np.random.default_rng([seed, k]).normal(0.0, problem.sigma)
+                r = discover(dataclasses.replace(problem, y=y), settings, cache=cache)["result"]
+                named += r.get("named_effect") == c
+            rec["power"][label] = {"magnitude": float(m), "named": int(named), "tables": int(n_tables)}
+    return sourced
+
+
+def _sourced_text(r) -> str:
+    """'; sourced range [lo, hi], estimate e (inside|outside)' of a sourced_candidates entry ('' without one)."""
+    if not r:
+        return ""
+    e = "none" if r["estimate"] is None else f"{r['estimate']:.3g} ({'inside' if r['inside'] else 'outside'})"
+    return f"; sourced range [{r['lo']:.3g}, {r['hi']:.3g}] ({r['source']}), estimate {e}"
+
+
 def gap_by_group(problem: Problem, base: np.ndarray) -> dict:
     """RMS z of the nominal model per value of the problem's row key (per level for the other levels' ROM)."""
     z = (np.asarray(base, float) - problem.y) / problem.sigma
@@ -353,7 +419,7 @@ def adopted_effects(config) -> list:
     return list((config or {}).get("adopted_effects") or [])
 
 
-def why_not_named(r: dict, decisions: dict, role: str) -> str:
+def why_not_named(r: dict, decisions: dict, role: str, sourced: dict | None = None) -> str:
     """Why a case names nothing, by kind: circularity (a calibration target), power (too few rows; a table the null
     hypothesis explains), spread (the decision changes within half to double the assumed spread), or no candidate
     (the library's candidates do not account for the miss)."""
@@ -369,7 +435,16 @@ def why_not_named(r: dict, decisions: dict, role: str) -> str:
         out.append("no candidate: the table differs from the model beyond its spread and no library candidate "
                    "or nuisance explanation accounts for it"
                    + (f" (best {best}, p = {r.get('p_value'):.3g})" if best and r.get("p_value") is not None else "")
-                   + "; no candidate with a sourced magnitude range was found for the mechanisms that could")
+                   + ("; the candidate(s) with a sourced magnitude range, tried: " + "; ".join(
+                       f"{c} (estimate {'none' if v['estimate'] is None else format(v['estimate'], '.3g')} "
+                       f"{'inside' if v['inside'] else 'outside'} its sourced range [{v['lo']:.3g}, {v['hi']:.3g}]"
+                       + (f"; worse at the estimate: {' / '.join(v['rows_worse_at_estimate'])}"
+                          if v.get("rows_worse_at_estimate") else "")
+                       + "".join(f"; planted at its {k.replace('_', ' ')} {w['magnitude']:.3g}, named in {w['named']} "
+                                 f"of {w['tables']} tables" for k, w in (v.get("power") or {}).items()) + ")"
+                       for c, v in sourced.items())
+                      if sourced else "; no candidate with a sourced magnitude range was found for the mechanisms "
+                                      "that could"))
     else:
         out.append("power: the table does not differ from the model beyond its spread")
     if len(set(decisions.values())) > 1:
@@ -377,7 +452,8 @@ def why_not_named(r: dict, decisions: dict, role: str) -> str:
     return "; ".join(out)
 
 
-def case_record(case, r: dict, spread: str, where: str, z: float, decisions: dict, config) -> dict:
+def case_record(case, r: dict, spread: str, where: str, z: float, decisions: dict, config,
+                sourced: dict | None = None) -> dict:
     meta = REAL_CASES.get(case, {"role": "", "what_would_decide": ""})
     adopted = adopted_effects(config)
     return {"dataset": case, "role": meta["role"], "spread": spread, "largest_miss": where, "largest_z": z,
@@ -385,7 +461,7 @@ def case_record(case, r: dict, spread: str, where: str, z: float, decisions: dic
             "decision_double_spread": decisions.get(2.0, ""),
             "adopted": bool(r.get("named_effect")) and r.get("named_effect") in adopted,
             "candidates_tried": ", ".join(r.get("estimates") or {}),
-            "why_not_named": why_not_named(r, decisions, meta["role"]),
+            "why_not_named": why_not_named(r, decisions, meta["role"], sourced),
             "what_would_decide": meta["what_would_decide"]}
 
 

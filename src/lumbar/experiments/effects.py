@@ -6,7 +6,8 @@ unchanged, bit for bit) and acts on some of the project's experiments:
 * ``stepwise_rom``  L4-L5 range of motion of the stepwise-reduction experiment (re-solved, batched);
 * ``neutral_angle`` L4-L5 sagittal angle at 0 N*m per reduction stage (the vertebral-arch artefact);
 * ``idp_invitro``   L4-L5 IDP of the L2-S1 wire-cable experiment (from the solved internal loads);
-* ``in_vivo``       L4-L5 IDP of the muscle-driven model against in-vivo values (from segment loads).
+* ``in_vivo``       L4-L5 IDP of the muscle-driven model against in-vivo values (from segment loads);
+* ``multilevel_rom`` range of motion of the levels the calibration did not fit (the real-data case of the same name).
 
 Two families:
 
@@ -24,6 +25,18 @@ This module is the one effect registry of the package (``EFFECTS``). An effect m
 asked for; add such extra effects with :func:`register_effect` and turn a {name: value} dict into solver
 params with :func:`effect_params`.
 
+``lumbosacral_disc_height`` is a level-specific candidate: the L5-S1 disc's height relative to the L4-L5 disc the
+transferred laws were calibrated on, ``delta = h(L5-S1) / h(L4-L5) - 1``, turned into the disc's laws as a disc of
+the same material and cross-section: its strains are the L4-L5 disc's at ``1 + delta`` times the angle or displacement,
+so every law takes its argument divided by ``1 + delta`` (Eq. 3: ``T(phi) -> T(phi / (1 + delta))``, i.e. p2 times
+``(1 + delta)**3`` and p3 divided by ``1 + delta``; axial ``F(c) -> F(c / (1 + delta))``; shear stiffness divided by
+``1 + delta``): the disc alone rotates ``1 + delta`` times as far under the same moment. It acts only on a unit of level
+:data:`LUMBOSACRAL_LEVEL` (anywhere else it is the identity) and is solved on a copy of the unit's model with the
+scaled disc (:meth:`FsuVariants.disc_model`), so the numpy reference and the compiled kernel both see it without a
+change of the kernel. Its sourced range (:func:`sourced_range`) is read from
+``data/anatomy/lumbosacral_disc_height_original_text.csv`` (radiographic/MRI morphometry, independent of the ROM rows
+it is judged on).
+
 ``disc_tension`` is registered for completeness (paper 1, Sect. 4.3 hypothesis) but no scenario of the
 available experiments loads the L4-L5 disc in tension (the effect changes no ROM by more than 1e-8 deg
 and no IDP by more than 0.1 N of disc force), so it is not identifiable there and is not benchmarked.
@@ -40,13 +53,14 @@ import numpy as np
 import pandas as pd
 
 from ..mechanics import so3
+from ..inputs import resources
 from ..inputs.characteristics import default_data_dir, load_characteristic_set
 from ..mechanics.elements.ligament import rupp_shape, slack_length
 from .fsu import DIRECTIONS, STAGES, moment_loads
 from ..mechanics.idp import K_FLEXION_PA_PER_NM
 from ..mechanics.solve import solve
 
-EXPERIMENTS = ("stepwise_rom", "neutral_angle", "idp_invitro", "in_vivo")
+EXPERIMENTS = ("stepwise_rom", "neutral_angle", "idp_invitro", "in_vivo", "multilevel_rom")
 # stages after the vertebral arches were sawn off where the neutral-angle offset acts; at w/o ALL the disc
 # alone is shift invariant (the ROM about the stage's own 0 N*m state cannot change), and its flexion law
 # (Eq. 3 with p3 < 0) has an unstable neutral, so the offset is not applied there
@@ -56,7 +70,11 @@ PRELOAD_CABLE_LENGTH_M = 1000.0                      # far fixed point: the prel
 PASSIVE_CABLE_LENGTH_M = 1.0
 # effects with a form inside the L4-L5 equilibrium (FsuVariants); axial_preload also has an IDP form
 SOLVER_EFFECTS = ("ligament_prestrain", "va_neutral_offset", "itl", "passive_muscle", "disc_tension",
-                  "axial_preload")
+                  "axial_preload", "lumbosacral_disc_height")
+#: the level whose disc the level-specific candidate lumbosacral_disc_height changes
+LUMBOSACRAL_LEVEL = "L5-S1"
+#: the sourced morphometry of the lumbosacral disc (package data, relative to the data folder)
+LUMBOSACRAL_DISC_TABLE = "anatomy/lumbosacral_disc_height_original_text.csv"
 
 
 @dataclass(frozen=True)
@@ -71,6 +89,7 @@ class Effect:
     description: str
     basis: str                    # where the papers point at it
     params: Callable | None = None  # (fsu, value) -> dict of solver params (may edit fsu.model); None: none
+    sourced: Callable | None = None  # () -> (lo, hi, source text): the magnitude range a source measured; None: none
 
 
 def _disc_tension_params(fsu, value):
@@ -79,6 +98,39 @@ def _disc_tension_params(fsu, value):
     if not np.isfinite(v) or v < 0:
         raise ValueError(f"effect disc_tension: k_tension must be finite and >= 0 N/m, got {value!r}")
     return {"k_tension": v}
+
+
+def lumbosacral_disc_height_range(path=None) -> tuple:
+    """(lo, hi, source) of ``delta = h(L5-S1) / h(L4-L5) - 1`` from the sourced middle disc heights: the ratio of the
+    two levels' mean middle heights of each source (rows ``disc_height_middle`` at L4-L5 and L5-S1 of
+    :data:`LUMBOSACRAL_DISC_TABLE`), lo/hi the smallest and largest over the sources (the spread between the
+    populations' means; a range of the mean of a group of specimens, as the judged rows are means)."""
+    p = Path(path) if path is not None else resources.data_dir() / LUMBOSACRAL_DISC_TABLE
+    if not p.is_file():
+        raise ValueError(f"lumbosacral disc table not found: {p}; expected columns quantity, level, value, unit, "
+                         f"kind, source")
+    t = pd.read_csv(p)
+    need = {"quantity", "level", "value", "unit", "kind", "source"}
+    if need - set(t.columns):
+        raise ValueError(f"{p}: column(s) {sorted(need - set(t.columns))} missing; expected {sorted(need)}")
+    t = t[t["quantity"] == "disc_height_middle"]
+    if (t["unit"] != "mm").any():
+        raise ValueError(f"{p}, column 'unit': {sorted(set(t['unit']) - {'mm'})} not understood; expected mm")
+    ratios, sources = [], []
+    for src, g in t.groupby("source", sort=False):
+        by = dict(zip(g["level"], g["value"].astype(float)))
+        if "L4-L5" in by and LUMBOSACRAL_LEVEL in by:
+            ratios.append(by[LUMBOSACRAL_LEVEL] / by["L4-L5"])
+            sources.append(src)
+    if not ratios:
+        raise ValueError(f"{p}: no source gives disc_height_middle at both L4-L5 and {LUMBOSACRAL_LEVEL}")
+    return float(min(ratios) - 1.0), float(max(ratios) - 1.0), f"{LUMBOSACRAL_DISC_TABLE} ({len(ratios)} sources)"
+
+
+def sourced_range(name):
+    """(lo, hi, source) of an effect's sourced magnitude range, or None when no source measured one."""
+    e = check_effect(name)
+    return e.sourced() if e.sourced is not None else None
 
 
 EFFECTS: dict[str, Effect] = {e.name: e for e in [
@@ -122,6 +174,14 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in [
            "disc tensile (traction) stiffness k_tension (the published disc transmits no traction)",
            "paper 1 Sect. 4.3: outliers with the cranial multifidus attributed partly to the disc's "
            "inability to transmit traction", params=_disc_tension_params),
+    Effect("lumbosacral_disc_height", "delta_height", "1 (relative height)", (-0.5, 1.5), (0.045, 0.09),
+           ("multilevel_rom",), "solver",
+           "the L5-S1 disc's height relative to the L4-L5 disc whose laws are transferred, delta = h(L5-S1)/h(L4-L5) "
+           "- 1: the L5-S1 disc's laws per unit height (every law's angle or displacement divided by 1+delta: the "
+           "disc alone rotates 1+delta times as far under the same moment); no effect at another level",
+           "validation: the calibrated set is carried to the other levels unchanged; the lumbosacral disc's "
+           "morphometry differs from L4-L5's (data/anatomy/lumbosacral_disc_height_original_text.csv)",
+           sourced=lumbosacral_disc_height_range),
 ]}
 
 
@@ -245,6 +305,60 @@ class FsuVariants:
         self.is_lig = np.zeros(m.nf, bool)
         self.is_lig[: self.nf_base] = m.f_law[: self.nf_base] != 2
         self.is_lig[self.extra_cols["itl"]] = True
+        self.acts_disc_height = lev.name == LUMBOSACRAL_LEVEL
+        self._disc_models: dict = {}
+
+    def disc_model(self, delta):
+        """The unit's model with its discs' laws as those of a disc of relative height ``1 + delta`` and the same
+        material (effect lumbosacral_disc_height): every law takes its argument divided by ``1 + delta`` (Eq. 3
+        T(phi) -> T(phi / (1 + delta)): p1 kept, p2 x (1 + delta)**3, p3 / (1 + delta); axial F(c) -> F(c / (1 +
+        delta)): k_linear / (1 + delta), k_quadratic / (1 + delta)**2; k_shear / (1 + delta)). The unit's own model
+        at ``delta`` 0 and at any level but LUMBOSACRAL_LEVEL (the same object: bit-identical results)."""
+        d = float(delta)
+        check_effect("lumbosacral_disc_height", d)
+        if d == 0.0 or not self.acts_disc_height:
+            return self.model
+        if d not in self._disc_models:
+            m = copy.deepcopy(self.model)
+            for k in ("_group_cache", "_kernel_model_data", "_kernel_defaults"):
+                m.__dict__.pop(k, None)
+            a = 1.0 + d
+            for spec in m.discs:
+                spec.k_linear /= a
+                spec.k_shear /= a
+                spec.k_quadratic /= a * a
+                spec.torque = {k: (p1, p2 * a ** 3, p3 / a) for k, (p1, p2, p3) in spec.torque.items()}
+            if len(self._disc_models) >= 64:                # a discovery grid's values, bounded
+                self._disc_models.pop(next(iter(self._disc_models)))
+            self._disc_models[d] = m
+        return self._disc_models[d]
+
+    def _by_disc_model(self, values: dict, fn):
+        """``fn(model, values)`` per distinct value of lumbosacral_disc_height (one model per value, see
+        :meth:`disc_model`), its per-variant outputs (arrays with G rows) put back in the order of ``values``."""
+        values = dict(values)
+        dh = values.pop("lumbosacral_disc_height", None)
+        if dh is None:
+            return fn(self.model, values)
+        dh = np.asarray(dh, float).reshape(-1)
+        for u in np.unique(dh):
+            check_effect("lumbosacral_disc_height", u)
+        G = len(dh)
+        values = {k: np.asarray(v, float).reshape(G) for k, v in values.items()} or \
+            {"ligament_prestrain": np.zeros(G)}         # keeps G variants (a zero prestrain is no change)
+        if not self.acts_disc_height or not dh.any():
+            return fn(self.model, values)
+        out = None
+        for u in np.unique(dh):
+            idx = np.flatnonzero(dh == u)
+            res = fn(self.disc_model(u), {k: v[idx] for k, v in values.items()})
+            if out is None:
+                out = [np.empty((G,) + r.shape[1:], r.dtype) if isinstance(r, np.ndarray) and r.shape[:1] == (len(idx),)
+                       else r for r in res]
+            for o, r in zip(out, res):
+                if isinstance(o, np.ndarray):
+                    o[idx] = r
+        return tuple(out)
 
     def masks_params(self, stages, values: dict):
         """fmask (G*S, nf), cmask (G*S, nc), params for variants ``values`` {effect: (G,)} x stages."""
@@ -254,6 +368,9 @@ class FsuVariants:
             check_effect(k)
             if k not in SOLVER_EFFECTS:
                 raise ValueError(f"effect {k!r} does not act on the solver")
+        if "lumbosacral_disc_height" in values and np.any(values["lumbosacral_disc_height"]) and self.acts_disc_height:
+            raise ValueError("effect lumbosacral_disc_height changes the model, not the masks: solve it with "
+                             "FsuVariants.simulate or neutral_lordosis (one model per value, FsuVariants.disc_model)")
         fb, cb = self.fsu.masks(stages)
         S, m = len(stages), self.model
         fm = np.zeros((G, S, m.nf))
@@ -292,9 +409,12 @@ class FsuVariants:
         """``retry_load_steps``: load continuation for scenarios that fail at first (the solver's default; the
         virtual-specimen banks of the discrepancy null pass fewer, a failing specimen scenario is a NaN there)."""
         scen = scen.reset_index(drop=True)
+        return self._by_disc_model(values, lambda m, v: self._simulate(m, scen, v, max_iter, tol, retry_load_steps))
+
+    def _simulate(self, m, scen, values, max_iter, tol, retry_load_steps):
         stages = list(dict.fromkeys(scen["stage"]))
         fm, cm, params, G = self.masks_params(stages, values)
-        S, n, m = len(stages), len(scen), self.model
+        S, n = len(stages), len(scen)
         kw = dict(max_iter=max_iter, tol_force=tol, tol_moment=tol, retry_load_steps=tuple(retry_load_steps))
         r0 = solve(m, np.zeros((G * S, m.nb, 6)), *self._start(params, G * S), fmask=fm, cmask=cm,
                    params=params, **kw)
@@ -313,8 +433,11 @@ class FsuVariants:
 
     def neutral_lordosis(self, stages, values: dict, max_iter=50, tol=1e-7):
         """Lordotic angle change [deg] at 0 N*m per stage (G, S): -(sagittal rotation) from the reference."""
+        return self._by_disc_model(values, lambda m, v: self._neutral_lordosis(m, stages, v, max_iter, tol))
+
+    def _neutral_lordosis(self, m, stages, values, max_iter, tol):
         fm, cm, params, G = self.masks_params(stages, values)
-        r0 = solve(self.model, np.zeros((fm.shape[0], self.model.nb, 6)), *self._start(params, fm.shape[0]),
+        r0 = solve(m, np.zeros((fm.shape[0], m.nb, 6)), *self._start(params, fm.shape[0]),
                    fmask=fm, cmask=cm, params=params, max_iter=max_iter, tol_force=tol, tol_moment=tol)
         phi = so3.log(r0.R[:, 0]).reshape(G, len(stages), 3)
         return -np.degrees(phi[..., 1]), r0.converged.reshape(G, len(stages))
