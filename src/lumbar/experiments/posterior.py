@@ -193,7 +193,7 @@ def linearised_band(predict, charset, names, cov, shift, step: float = BAND_STEP
 #: larger facet force and, for lateral bending and axial rotation, the mean of the two sides)
 BAND_QUANTITIES = ("rotation_deg", "facet_left_contact_n", "facet_right_contact_n", "disc_axial_force_n",
                    "ALL_tension_n", "PLL_tension_n", "FL_tension_n", "CL_tension_n", "ISL_tension_n",
-                   "SSL_tension_n", "ITL_tension_n")
+                   "SSL_tension_n", "ITL_tension_n", "facet_left_beyond_surface_n", "facet_right_beyond_surface_n")
 BAND_COLUMNS = ("direction", "moment_nm", "quantity", "map", "sd", "low90", "high90", "converged")
 
 

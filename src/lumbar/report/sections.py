@@ -458,17 +458,16 @@ class ReportBuilder:
 
     def _facet_edge_sentence(self) -> str:
         """Where the calibrated unit's extension facet force sits (inside the fitted articular surface or beyond it,
-        where Eq. 4 is extrapolated), in words; empty without the curves or their beyond-surface columns."""
-        rel = self.out("load_sharing", "curves", set="calibrated")
+        where Eq. 4 is extrapolated), in words, from the MAP values of the load-sharing band table; empty without it."""
+        rel = self.out("load_sharing", "bands")
         if not self.has(rel):
             return ""
-        c = read_csv(self.path(rel))
-        r = c[(c["stage"] == "intact") & (c["direction"] == "extension") & np.isclose(c["moment_nm"], 7.5)]
-        if r.empty or "facet_left_beyond_surface_n" not in c.columns:
+        b = read_csv(self.path(rel))
+        b = b[(b["direction"] == "extension") & np.isclose(b["moment_nm"], 7.5)].set_index("quantity")["map"]
+        if "facet_left_beyond_surface_n" not in b.index:
             return ""
-        r = r.iloc[0]
-        side = "left" if r["facet_left_contact_n"] >= r["facet_right_contact_n"] else "right"
-        total, off = float(r[f"facet_{side}_contact_n"]), float(r[f"facet_{side}_beyond_surface_n"])
+        side = "left" if b["facet_left_contact_n"] >= b["facet_right_contact_n"] else "right"
+        total, off = float(b[f"facet_{side}_contact_n"]), float(b[f"facet_{side}_beyond_surface_n"])
         if not total > 0:
             return ""
         return (f"In extension at 7.5 N*m, {fmt(off)} N of the larger facet force of {fmt(total)} N "

@@ -493,6 +493,11 @@ BOUND_REASONS = {
     "disc_shear": "upper end of the sourced motion-segment range (53-140 N/mm): axial rotation turns about the "
                   "contacting facet, so the disc's shear stiffness (not its torsion law) resists it; the measured "
                   "axial rotation needs at least this stiffness (docs/validity.md)",
+    "CL:pre_elongation": "the upper bound is the prestrain cap MAX_PRESTRAIN_PCT (2.5 x the largest prestrain of paper "
+                         "1, Sect. 2.2.4), a limit of the model's validity, not a value the data chose: the fit presses "
+                         "the capsules' pre-tension against it when the ROM rows ask for more stiffness than the other "
+                         "structures give within their priors (the rows that pushed it: column moved_by; on the "
+                         "morphable lumbar mean, the axial-rotation row, as for the facet stiffness; docs/specimen.md)",
     "facet_stiffness": "the facet contact acts as a stiff pivot (cartilage contact); the ROM does not change between "
                        "1e6 and 1e7 N/m (docs/validity.md)",
 }
