@@ -186,7 +186,8 @@ def moment_rotation_curves(fsu: FSU, moments_nm=None, directions=CURVE_DIRECTION
     (the same rotation from the first stage's 0 N*m state, e.g. the intact unit's neutral position), and the
     internal loads of
     :func:`structure_loads` (tensions, facet contact forces, disc axial force and shear, moments about the disc
-    centre per structure) with ``moment_balance_residual_nm`` (|sum of the structures' moments + the applied
+    centre per structure), ``facet_<side>_beyond_surface_n`` (the part of a facet's contact force from points outside
+    the landmarks' extent of its Eq. 4 surface, where the regression is extrapolated) and ``moment_balance_residual_nm`` (|sum of the structures' moments + the applied
     moment|, 0 at an equilibrium).
     """
     m = fsu.model
