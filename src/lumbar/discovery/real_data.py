@@ -70,7 +70,8 @@ REAL_CASES = {
         role="independent (the calibration fits L4-L5 only)",
         what_would_decide="the per-level ROM with its specimens' spread (Yamamoto's abstract gives none) and, at L5-S1, "
                           "the disc's own stiffness and the facet gap measured on the same specimens (level-specific "
-                          "properties the transfer rule carries over from L4-L5)"),
+                          "properties the transfer rule carries over from L4-L5), whether the specimens kept their "
+                          "iliolumbar ligaments, and per-level facet orientation from the same CTs"),
     "in_vivo_lying": dict(
         role="independent (no in-vivo value is fitted)",
         what_would_decide="IDP of more volunteers in each posture (the between-subject spread; one volunteer here) and "
