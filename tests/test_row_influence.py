@@ -83,3 +83,60 @@ def test_row_influence_table_predicts_the_left_out_row_and_reports_failures(geo,
     assert ok["left_out_rel_error"] == pytest.approx((ok["left_out_predicted_deg"] - 2.2) / 2.2)
     assert ok["largest_shifts"].startswith("a +2.5 sd")
     assert np.isnan(tab.iloc[0]["left_out_measured_deg"])
+
+
+def test_facet_profile_holds_each_value_and_starts_from_the_map(geo, paper):
+    calls = []
+
+    def refit_held(targets, start, value):
+        calls.append((list(targets["direction"]), start, value))
+        if value > 5e5:
+            raise RuntimeError("no equilibrium")
+        return _fake_fit(dataclasses.replace(paper, facet=dataclasses.replace(paper.facet, stiffness=value)))
+
+    tab = INF.facet_profile(_fake_fit(paper), TARGETS, refit_held, geo, values=(1e4, 1e6))
+    assert list(tab.columns) == list(INF.COLUMNS)
+    assert [c[2] for c in calls] == [1e4, 1e6]
+    assert all(c[0] == ["flexion", "axial_rotation"] and c[1] == {"a": 0.0, "b": 0.0} for c in calls)   # every row
+    ok, failed = tab.iloc[0], tab.iloc[1]
+    assert ok["facet_stiffness_held"] == 1e4 and ok["facet_stiffness_n_per_m"] == pytest.approx(1e4)
+    assert ok["left_out"] == "" and ok["converged"]
+    assert not failed["converged"] and "failed: no equilibrium" in failed["largest_shifts"]
+    # the held value reaches the unit: a softer facet carries less in extension than the paper's set
+    soft = INF.internal_loads(geo, dataclasses.replace(paper, facet=dataclasses.replace(paper.facet, stiffness=1e4)))
+    assert ok["facet_extension_7_5_n"] == pytest.approx(soft["facet_extension_7_5_n"])
+
+
+def test_profile_sentence_names_the_stiffest_value_with_physiological_loads():
+    from lumbar.report.influence_text import influence_sentence, profile_sentence
+    base = {"converged": True, "cost": 1.0, "rom_flexion_deg": 7.0, "rom_extension_deg": 4.6,
+            "rom_lateral_bending_deg": 5.3, "facet_axial_rotation_7_5_n": 100.0, "facet_flexion_7_5_n": 0.0,
+            "itl_flexion_moment_nm": 1.0, "isl_flexion_moment_nm": 2.0, "flexion_reduction_monotone": True,
+            "largest_shifts": "facet_stiffness +1.0 sd"}
+    rows = [dict(base, fit="all rows (MAP)", left_out="", facet_stiffness_held=np.nan, facet_stiffness_n_per_m=2.7e6,
+                 facet_extension_7_5_n=127.0, largest_flexion_ligament="ITL", ssl_flexion_tension_n=4.7,
+                 rom_axial_rotation_deg=2.73),
+            dict(base, fit="without axial_rotation", left_out="axial_rotation", facet_stiffness_held=np.nan,
+                 facet_stiffness_n_per_m=1e4, facet_extension_7_5_n=6.0, largest_flexion_ligament="CL",
+                 ssl_flexion_tension_n=9.0, rom_axial_rotation_deg=5.3, left_out_measured_deg=2.2,
+                 left_out_predicted_deg=5.3, left_out_rel_error=1.4),
+            dict(base, fit="held 1e5", left_out="", facet_stiffness_held=1e5, facet_stiffness_n_per_m=1e5,
+                 facet_extension_7_5_n=35.0, largest_flexion_ligament="ISL", ssl_flexion_tension_n=6.1,
+                 rom_axial_rotation_deg=2.91),
+            dict(base, fit="held 3e5", left_out="", facet_stiffness_held=3e5, facet_stiffness_n_per_m=3e5,
+                 facet_extension_7_5_n=66.0, largest_flexion_ligament="ISL", ssl_flexion_tension_n=5.6,
+                 rom_axial_rotation_deg=2.84),
+            dict(base, fit="held 1e6", left_out="", facet_stiffness_held=1e6, facet_stiffness_n_per_m=1e6,
+                 facet_extension_7_5_n=104.0, largest_flexion_ligament="ISL", ssl_flexion_tension_n=2.8,
+                 rom_axial_rotation_deg=2.76)]
+    t = pd.DataFrame(rows)
+    fmt = lambda v, d=3: f"{float(v):.{d}g}"            # noqa: E731
+    s = profile_sentence(t, fmt)
+    assert "Held at 3e+05 N/m" in s and "2.84 deg" in s and "29 %" in s        # 1e6 fails the facet force
+    # the held rows are neither the MAP nor a left-out row of the influence sentence
+    assert "instead of 2.7e+06" in influence_sentence(t, fmt)
+    # control: without a row in range the sentence says so, and without profile rows it is empty
+    t2 = t.copy()
+    t2.loc[t2["facet_stiffness_held"].notna(), "ssl_flexion_tension_n"] = 1.0
+    assert "does not bring" in profile_sentence(t2, fmt)
+    assert profile_sentence(t[t["facet_stiffness_held"].isna()], fmt) == ""

@@ -10,7 +10,8 @@ def influence_sentence(t: pd.DataFrame, fmt) -> str:
     """The leave-one-row-out finding in words, read from the calibration's row_influence table: the row whose removal moves the MAP
     closest to its priors (the smallest largest shift) and what its removal does to the facets and the ITL. ``fmt``: the
     report's number formatter (value, significant digits)."""
-    full = t[t["left_out"].fillna("") == ""]
+    held = t["facet_stiffness_held"].notna() if "facet_stiffness_held" in t.columns else False
+    full = t[(t["left_out"].fillna("") == "") & ~held]
     loo = t[(t["left_out"].fillna("") != "") & t["converged"].astype(bool)]
     if full.empty or loo.empty:
         return ""
@@ -30,3 +31,42 @@ def influence_sentence(t: pd.DataFrame, fmt) -> str:
             f"for the left-out row (measured {fmt(r['left_out_measured_deg'])} deg, "
             f"{fmt(100 * r['left_out_rel_error'])} %). This row is the one the model's structure meets only with "
             "internal loads outside their sourced ranges; it stays in the fit.")
+
+
+def profile_sentence(t: pd.DataFrame, fmt, facet_ext_max_n=90.5, ssl_min_n=5.0, rom_band=0.25,
+                     measured_ar_deg=None) -> str:
+    """The facet-stiffness profile in words (the rows of the calibration's row_influence table with
+    ``facet_stiffness_held``): the stiffest held value at which the judged internal loads are in their ranges (extension
+    facet force at most ``facet_ext_max_n``, the ITL not the largest flexion ligament, the SSL at least ``ssl_min_n``)
+    and the axial rotation it then predicts, beside the MAP's. ``facet_ext_max_n``: the in-vitro mean + 1 SD of
+    data/load_sharing (Jaumard et al. 2011: 51.5 + 39.0 N). Empty without profile rows."""
+    if "facet_stiffness_held" not in t.columns:
+        return ""
+    prof = t[t["facet_stiffness_held"].notna() & t["converged"].astype(bool)].sort_values("facet_stiffness_held")
+    full = t[(t["left_out"].fillna("") == "") & t["facet_stiffness_held"].isna()]
+    if prof.empty or full.empty:
+        return ""
+    f = full.iloc[0]
+    ok = prof[(prof["facet_extension_7_5_n"] <= facet_ext_max_n) & (prof["largest_flexion_ligament"] != "ITL")
+              & (prof["ssl_flexion_tension_n"] >= ssl_min_n)]
+    ar = measured_ar_deg
+    if ar is None:
+        rows = t[t["left_out"].fillna("") == "axial_rotation"]
+        ar = float(rows.iloc[0]["left_out_measured_deg"]) if len(rows) else np.nan
+
+    def err(v):
+        return f"{fmt(100 * (v - ar) / ar, 2)} %" if np.isfinite(ar) else "-"
+    if ok.empty:
+        return (f"Holding the facet stiffness at {', '.join(fmt(v, 2) for v in prof['facet_stiffness_held'])} N/m "
+                "(every other parameter refitted) does not bring the judged internal loads into their ranges either "
+                "(Table P2).")
+    r = ok.iloc[-1]
+    return (f"Held at {fmt(r['facet_stiffness_held'], 2)} N/m with every other parameter refitted, the facet stiffness "
+            f"gives an extension facet force of {fmt(r['facet_extension_7_5_n'])} N, the "
+            f"{r['largest_flexion_ligament']} as the largest flexion ligament and an SSL tension of "
+            f"{fmt(r['ssl_flexion_tension_n'])} N, all in their ranges, with an axial rotation of "
+            f"{fmt(r['rom_axial_rotation_deg'])} deg ({err(r['rom_axial_rotation_deg'])} from Yamamoto's); the MAP "
+            f"({fmt(f['facet_stiffness_n_per_m'], 3)} N/m) gains {fmt(r['rom_axial_rotation_deg'] - f['rom_axial_rotation_deg'], 2)} "
+            f"deg of it ({err(f['rom_axial_rotation_deg'])}) at the cost of those loads: the {fmt(100 * rom_band, 2)} % "
+            "band on the axial rotation and physiological internal loads exclude each other in this model's structure "
+            "(Table P2).")

@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 
 from .influence_text import influence_sentence as _influence_sentence
+from .influence_text import profile_sentence as _profile_sentence
 from .sections import ReportBuilder, fmt, report_section
 
 #: the rows of the band table shown in the report: (direction, moment, quantity, label)
@@ -123,8 +124,10 @@ def influence_block(b: ReportBuilder):
                      fmt(r.facet_axial_rotation_7_5_n), str(r.largest_flexion_ligament), fmt(r.ssl_flexion_tension_n),
                      "yes" if bool(r.flexion_reduction_monotone) else "no", str(r.largest_shifts)])
     b.para("Which measured row decides which internal load: the MAP refitted without each real row in turn (same "
-           "priors, penalties and disc-only rows, started from the MAP). " + _influence_sentence(t, fmt))
-    b.table_block("The calibration without each real row: the left-out row's prediction and the internal loads", [
+           "priors, penalties and disc-only rows, started from the MAP), and on every row with the facet stiffness "
+           "held at fixed values. " + _influence_sentence(t, fmt) + " " + _profile_sentence(t, fmt))
+    b.table_block("The calibration without each real row, and with the facet stiffness held: the left-out row's "
+                  "prediction and the internal loads", [
         "fit", "left-out row: predicted vs measured [deg]", "ROM flex / ext / LB / AR, 10 N*m [deg]",
         "facet stiffness [N/m]", "facet force, extension 7.5 N*m [N]", "facet force, axial rotation 7.5 N*m [N]",
         "largest ligament moment, flexion 10 N*m", "SSL tension, flexion 10 N*m [N]",

@@ -27,7 +27,7 @@ from lumbar.inputs import manifests
 
 from lumbar.experiments import validation as V
 
-from .influence_text import influence_sentence
+from .influence_text import influence_sentence, profile_sentence
 from .document import Contents, Doc, Figure, Heading, Para, Table
 
 log = logging.getLogger(__name__)
@@ -454,7 +454,8 @@ class ReportBuilder:
             return ""
         t = read_csv(self.path(rel))
         text = influence_sentence(t, fmt).rstrip(".")
-        return f"Where those loads come from: {text} (Table P2)." if text else ""
+        prof = profile_sentence(t, fmt)
+        return (f"Where those loads come from: {text} (Table P2). {prof}".strip()) if text else prof
 
     def _facet_edge_sentence(self) -> str:
         """Where the calibrated unit's extension facet force sits (inside the fitted articular surface or beyond it,

@@ -28,7 +28,13 @@ DIRECTIONS = ("flexion", "extension", "lateral_bending_right", "axial_rotation_l
 LIGAMENTS = ("ALL", "PLL", "FL", "CL", "ISL", "SSL", "ITL")
 #: the posterior-ligament reduction stages whose flexion ROM at 10 N*m is listed (from the intact rest state)
 REDUCTION = ("intact", "wo_ssl", "wo_isl", "wo_fl", "wo_cl")
-COLUMNS = ("fit", "left_out", "n_rows", "converged", "cost", "left_out_measured_deg", "left_out_predicted_deg",
+#: facet contact stiffnesses [N/m] at which the MAP is refitted with the stiffness held (every other parameter free):
+#: half-decades between ten times the paper's value (12,000 N/m, Sect. 2.2.3) and the cartilage-contact range the
+#: full fit reaches (about 1e6-1e7 N/m); the profile shows what the real rows and the internal loads each ask of it
+FACET_PROFILE_N_PER_M = (1.0e5, 3.0e5, 1.0e6)
+#: log10 spread of the zero-width prior that holds the facet stiffness in :func:`facet_profile`'s refits
+HELD_LOG10_SD = 1e-4
+COLUMNS = ("fit", "left_out", "facet_stiffness_held", "n_rows", "converged", "cost", "left_out_measured_deg", "left_out_predicted_deg",
            "left_out_rel_error", "rom_flexion_deg", "rom_extension_deg", "rom_lateral_bending_deg",
            "rom_axial_rotation_deg", "facet_extension_7_5_n", "facet_axial_rotation_7_5_n", "facet_flexion_7_5_n",
            "largest_flexion_ligament", "itl_flexion_moment_nm", "isl_flexion_moment_nm", "ssl_flexion_tension_n",
@@ -73,9 +79,9 @@ def _shifts(fit, top=3) -> str:
     return "; ".join(f"{p.names[i]} {z[i]:+.1f} sd" for i in order)
 
 
-def _row(label, left_out, fit, loads, targets, measured=np.nan, predicted=np.nan) -> dict:
+def _row(label, left_out, fit, loads, targets, measured=np.nan, predicted=np.nan, held=np.nan) -> dict:
     rom = loads["rom"]
-    return {"fit": label, "left_out": left_out, "n_rows": len(targets),
+    return {"fit": label, "left_out": left_out, "facet_stiffness_held": held, "n_rows": len(targets),
             "converged": bool(loads["converged"] and fit.optimizer.get("converged", True)),
             "cost": float(fit.cost), "left_out_measured_deg": measured, "left_out_predicted_deg": predicted,
             "left_out_rel_error": (predicted - measured) / measured if np.isfinite(measured) else np.nan,
@@ -114,4 +120,27 @@ def row_influence(full_fit, targets: pd.DataFrame, refit: Callable, geometry, le
         loads = internal_loads(geometry, fit.charset, level)
         pred = loads["rom"].get(CURVE_DIRECTION.get(str(r["direction"]), str(r["direction"])), np.nan)
         rows.append(_row(label, r["direction"], fit, loads, rest, float(r["rom_mean_deg"]), pred))
+    return pd.DataFrame(rows).reindex(columns=list(COLUMNS))
+
+
+def facet_profile(full_fit, targets: pd.DataFrame, refit_held: Callable, geometry, level="L4-L5",
+                  values=FACET_PROFILE_N_PER_M) -> pd.DataFrame:
+    """Rows of :data:`COLUMNS` for the MAP refitted on every real row with the facet stiffness held at each of
+    ``values`` [N/m] (``refit_held(targets, start, value)``, started from the full fit's optimum; every other parameter
+    free, with the same priors and penalties): a profile of the fit along the one parameter the rows push furthest
+    from its prior, with the judged internal loads of each refit. ``left_out`` is empty and ``facet_stiffness_held``
+    the held value; a refit that fails is a row with ``converged`` False and its error, never a silent gap."""
+    t = targets.reset_index(drop=True)
+    start = dict(zip(full_fit.posterior.names, np.asarray(full_fit.posterior.map_q, float)))
+    rows = []
+    for v in values:
+        label = f"facet stiffness held at {v:.3g} N/m"
+        try:
+            fit = refit_held(t, start, float(v))
+        except (RuntimeError, ValueError) as e:
+            log.warning("facet profile: the fit %s failed: %s", label, e)
+            rows.append({"fit": label, "left_out": "", "facet_stiffness_held": float(v), "n_rows": len(t),
+                         "converged": False, "largest_shifts": f"failed: {e}"})
+            continue
+        rows.append(_row(label, "", fit, internal_loads(geometry, fit.charset, level), t, held=float(v)))
     return pd.DataFrame(rows).reindex(columns=list(COLUMNS))

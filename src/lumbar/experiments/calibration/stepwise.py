@@ -360,10 +360,21 @@ def _final_fit(geometry, cal, base, published, reference, real_targets, info, fa
                                   prior_spread=spreads, disc_rows=stage_rows(reference, DISC_STAGE),
                                   **(real_fit_kw or {}))
 
+        def refit_held(targets, start, stiffness):
+            # the facet stiffness held at ``stiffness``: a prior of (numerically) zero width centred on it
+            held = replace_fields(prior_set, facet=replace_fields(prior_set.facet, stiffness=stiffness))
+            return fit_admissible(geometry, held, targets, level=level, published=published,
+                                  geometry_path=geometry_path, k_shear=k_shear, max_iter=max_iter,
+                                  start={**start, "facet_stiffness": math.log10(stiffness)},
+                                  prior_spread={**(spreads or {}), "facet_stiffness": influence.HELD_LOG10_SD},
+                                  disc_rows=stage_rows(reference, DISC_STAGE), **(real_fit_kw or {}))
+
         rf = refit(real_targets, st)
         info["final_fit"] = rf
         if row_influence:
-            info["row_influence"] = influence.row_influence(rf, real_targets, refit, geometry, level)
+            info["row_influence"] = pd.concat(
+                [influence.row_influence(rf, real_targets, refit, geometry, level),
+                 influence.facet_profile(rf, real_targets, refit_held, geometry, level)], ignore_index=True)
     else:
         rf = fit_real_targets(geometry, final_start, real_targets, level=level, k_shear=k_shear,
                               max_iter=max_iter, secondary=reference if final_surrogate_weight > 0 else None,
