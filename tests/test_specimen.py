@@ -263,8 +263,49 @@ def test_process_fit_places_a_facet_face_moved_along_its_plane(vh):
     assert np.linalg.norm(unfitted.mean(0) - (grid + d).mean(0)) > 1.4e-3
 
 
+@pytest.mark.parametrize("gap_mm, touching", [(1.5, False), (-0.5, True)])
+def test_inferior_face_lies_on_the_joint_side_of_the_superior_face(gap_mm, touching):
+    """Two blocks facing each other across z = 0 (lower block's top face: the superior face, outward normal +z): with
+    a joint space the inferior face is the upper block's face across it (gap_mm above); with the blocks
+    interpenetrating (upper block reaching 0.5 mm below the superior face) the closest upper-bone points lie behind the
+    superior face and the faces touch: the inferior face is the superior one. Control: the parametrisation's other
+    case gives the other answer."""
+    import trimesh
+
+    from lumbar.geometry.specimen_landmarks import _facing_face
+    lower = trimesh.creation.box(extents=[0.02, 0.02, 0.01]).apply_translation([0, 0, -0.005])
+    upper = trimesh.creation.box(extents=[0.03, 0.03, 0.01]).apply_translation([0, 0, 0.005 + 1e-3 * gap_mm])
+    g = np.linspace(-0.003, 0.003, 3)
+    sup = np.array([[x, y, 0.0] for x in g for y in g])
+    inf = _facing_face(upper, lower, sup)
+    if touching:
+        assert np.array_equal(inf, sup)
+    else:
+        assert np.allclose(inf, sup + [0.0, 0.0, 1e-3 * gap_mm], atol=1e-9)
+
+
+@pytest.mark.slow
+def test_automatic_facet_contact_surfaces_face_the_joint(monkeypatch, vh):
+    """Every facet contact surface of the automatic landmarks (Visible Human meshes as a user gives them, leave one
+    out; lumbar.experiments.fsu.facet_surfaces) has its normal towards the joint's medial side (from the superior to
+    the inferior process), as the reference's do; control: with the upper bone's closest points as the inferior face
+    also where they lie behind the superior face (the meshes interpenetrate at the Visible Human facet joints) the
+    surfaces are turned around (the facet then resists the wrong motions: no facet force in axial rotation)."""
+    import lumbar.geometry.specimen_landmarks as sl
+    from lumbar.experiments.fsu import facet_surfaces
+
+    def medial_components(geo):
+        return [float(surf.axes[2] @ [0.0, -1.0 if side == "left" else 1.0, 0.0])
+                for lev in geo.levels.values() for side, _, surf in facet_surfaces(lev)]
+
+    assert min(medial_components(vh)) > 0.5
+    assert min(medial_components(visible_human_accuracy(seed=0)["specimen"].geometry)) > 0.5
+    monkeypatch.setattr(sl, "_facing_face", lambda upper, lower, sup: sl._closest(upper, sup))
+    assert min(medial_components(visible_human_accuracy(seed=0)["specimen"].geometry)) < 0
+
+
 #: what the leave-one-out measurement reaches (docs/specimen.md, "Accuracy"), with a small margin
-ACCURACY = dict(overall_median_mm=2.0, structure_median_mm=3.5, facet_bone_median_mm=1.25, facet_cartilage_median_mm=2.0,
+ACCURACY = dict(overall_median_mm=2.0, structure_median_mm=3.5, facet_bone_median_mm=1.25, facet_cartilage_median_mm=1.7,
                 length_rel=0.15, length_exempt=("CL_L", "CL_R"), exempt_length_rel=0.3)
 
 

@@ -254,10 +254,30 @@ def level_landmarks(meshes: dict, level: str, atlas: dict, leave_one_out: bool =
             # the upper face is the upper vertebra's bone facing the carried lower face across the joint (closest
             # points): the inferior articular processes vary more between levels than the superior ones, and the
             # carried upper face missed its own bone points by 3 mm (median, Visible Human, leave one out)
-            facets[side] = (lo[ks]["points"], _closest(meshes[U], lo[ks]["points"]))
+            sup = lo[ks]["points"]
+            facets[side] = (sup, _facing_face(meshes[U], meshes[L], sup))
             spread[f"facet_{side}"] = (lo[ks]["spread_m"], up[ki]["spread_m"])
     templates = {"upper": next(iter(up.values()))["templates"], "lower": next(iter(lo.values()))["templates"]}
     return dict(ligaments=ligs, facets=facets, spread=spread, templates=templates)
+
+
+def _facing_face(upper_mesh, lower_mesh, sup):
+    """The upper vertebra's inferior articular face across the joint from the lower vertebra's superior face ``sup``:
+    the upper bone's closest points, where they lie on the joint side of ``sup`` (along the lower face's outward
+    normal, from the lower bone's own face normals there); where they lie behind it (the two bone surfaces
+    interpenetrate at the joint: surfaces modelled or segmented without a joint space, as the Visible Human meshes
+    are at every lumbar level), the faces touch: the inferior face is ``sup`` itself. An inferior face behind the
+    superior one turns the joint's contact surface around (its normal is oriented from the superior to the inferior
+    face): the facet then resists the wrong motions (Visible Human L4-L5, leave one out: no facet force in axial
+    rotation, twice the reference's axial range of motion)."""
+    import trimesh  # noqa: PLC0415 - mesh library, imported where used (docs/design.md)
+    inf = _closest(upper_mesh, sup)
+    tri = trimesh.proximity.closest_point(lower_mesh, sup)[2]
+    n = np.asarray(lower_mesh.face_normals)[tri].sum(0)
+    n /= np.linalg.norm(n) or 1.0
+    if float((inf.mean(0) - np.asarray(sup).mean(0)) @ n) < 0:
+        return np.array(sup, float)
+    return inf
 
 
 def _closest(mesh, P):
