@@ -65,3 +65,19 @@ def test_dag_baseline_tree_is_the_revision_and_a_bad_revision_is_named(tmp_path)
     assert not list(tree.rglob("__pycache__")) and not (tree / ".snakemake").exists()
     with pytest.raises(SystemExit, match="no-such-revision"):
         bench_dag.export_tree("no-such-revision", tmp_path / "bad")
+
+
+def test_specimen_dag_credits_each_job_to_its_rule():
+    """bench_specimen_dag: a benchmark file (rule, rule_<set>, rule/<chunk>) is credited to the longest rule name it
+    starts with, so a rule whose name extends another's keeps its own time; control: with only the shorter name
+    known, the longer rule's job falls to it."""
+    bench = _load("bench_specimen_dag")
+    per_job = {"calibrate": 2.0, "stepwise_reduction_sim_calibrated": 3.0, "stepwise_reduction_sim_rupp2015": 4.0,
+               "stepwise_reduction_surrogate": 1.0, "muscle_sobol_chunk/flexion_0": 5.0, "specimen_geometry": 7.0}
+    rules = {"calibrate", "stepwise_reduction_sim", "stepwise_reduction_surrogate", "muscle_sobol_chunk",
+             "specimen_geometry"}
+    assert bench.per_rule_seconds(per_job, rules) == {
+        "calibrate": 2.0, "muscle_sobol_chunk": 5.0, "specimen_geometry": 7.0, "stepwise_reduction_sim": 7.0,
+        "stepwise_reduction_surrogate": 1.0}
+    fewer = bench.per_rule_seconds(per_job, {"stepwise_reduction"})
+    assert fewer["stepwise_reduction"] == 8.0

@@ -245,19 +245,79 @@ def test_all_path_follows_the_targets_disc_height(vh):
     assert total("PLL", taller) == pytest.approx(total("PLL", meshes), rel=1e-12)
 
 
+def test_process_fit_places_a_facet_face_moved_along_its_plane(vh):
+    """The rigid fit of the articular process (lumbar.geometry.specimen_landmarks._process_fit) carries a facet grid
+    onto a target vertebra that is the template moved by 1.5 mm (mostly along the face) with an identity warp: the
+    grid lands where the move puts it (within 0.1 mm); control: with the fit off (radius 0) it stays 1.6 mm away."""
+    from scipy.spatial import cKDTree
+
+    from lumbar.geometry.specimen_landmarks import _process_fit
+    mesh = vh.vertebrae["L5"].mesh
+    grid = np.asarray(vh.levels["L4-L5"].facets["left"].superior)
+    d = np.array([0.0005, 0.0014, 0.0003])
+    target = np.asarray(mesh.vertices) + d
+    tree = cKDTree(target)
+    fitted = _process_fit(mesh, grid, lambda P: np.asarray(P, float), target, tree)
+    assert np.linalg.norm(fitted - (grid + d), axis=1).max() < 1e-4
+    unfitted = _process_fit(mesh, grid, lambda P: np.asarray(P, float), target, tree, radius=0.0)
+    assert np.linalg.norm(unfitted.mean(0) - (grid + d).mean(0)) > 1.4e-3
+
+
+@pytest.mark.parametrize("gap_mm, touching", [(1.5, False), (-0.5, True)])
+def test_inferior_face_lies_on_the_joint_side_of_the_superior_face(gap_mm, touching):
+    """Two blocks facing each other across z = 0 (lower block's top face: the superior face, outward normal +z): with
+    a joint space the inferior face is the upper block's face across it (gap_mm above); with the blocks
+    interpenetrating (upper block reaching 0.5 mm below the superior face) the closest upper-bone points lie behind the
+    superior face and the faces touch: the inferior face is the superior one. Control: the parametrisation's other
+    case gives the other answer."""
+    import trimesh
+
+    from lumbar.geometry.specimen_landmarks import _facing_face
+    lower = trimesh.creation.box(extents=[0.02, 0.02, 0.01]).apply_translation([0, 0, -0.005])
+    upper = trimesh.creation.box(extents=[0.03, 0.03, 0.01]).apply_translation([0, 0, 0.005 + 1e-3 * gap_mm])
+    g = np.linspace(-0.003, 0.003, 3)
+    sup = np.array([[x, y, 0.0] for x in g for y in g])
+    inf = _facing_face(upper, lower, sup)
+    if touching:
+        assert np.array_equal(inf, sup)
+    else:
+        assert np.allclose(inf, sup + [0.0, 0.0, 1e-3 * gap_mm], atol=1e-9)
+
+
+@pytest.mark.slow
+def test_automatic_facet_contact_surfaces_face_the_joint(monkeypatch, vh):
+    """Every facet contact surface of the automatic landmarks (Visible Human meshes as a user gives them, leave one
+    out; lumbar.experiments.fsu.facet_surfaces) has its normal towards the joint's medial side (from the superior to
+    the inferior process), as the reference's do; control: with the upper bone's closest points as the inferior face
+    also where they lie behind the superior face (the meshes interpenetrate at the Visible Human facet joints) the
+    surfaces are turned around (the facet then resists the wrong motions: no facet force in axial rotation)."""
+    import lumbar.geometry.specimen_landmarks as sl
+    from lumbar.experiments.fsu import facet_surfaces
+
+    def medial_components(geo):
+        return [float(surf.axes[2] @ [0.0, -1.0 if side == "left" else 1.0, 0.0])
+                for lev in geo.levels.values() for side, _, surf in facet_surfaces(lev)]
+
+    assert min(medial_components(vh)) > 0.5
+    assert min(medial_components(visible_human_accuracy(seed=0)["specimen"].geometry)) > 0.5
+    monkeypatch.setattr(sl, "_facing_face", lambda upper, lower, sup: sl._closest(upper, sup))
+    assert min(medial_components(visible_human_accuracy(seed=0)["specimen"].geometry)) < 0
+
+
 #: what the leave-one-out measurement reaches (docs/specimen.md, "Accuracy"), with a small margin
-ACCURACY = dict(overall_median_mm=2.0, structure_median_mm=3.5, facet_bone_median_mm=1.5,
+ACCURACY = dict(overall_median_mm=2.0, structure_median_mm=3.5, facet_bone_median_mm=1.25, facet_cartilage_median_mm=1.7,
                 length_rel=0.15, length_exempt=("CL_L", "CL_R"), exempt_length_rel=0.3)
 
 
 @pytest.mark.slow
-def test_accuracy_on_the_visible_human_set_leave_one_out():
+def test_accuracy_on_the_visible_human_set_leave_one_out(monkeypatch):
     r = visible_human_accuracy(seed=0, length_level="all")
     s = r["summary"].set_index("structure")
     assert s.loc["all ligament groups", "median_mm"] <= ACCURACY["overall_median_mm"]
     kinds = ["ALL", "PLL", "FL", "CL", "ISL", "SSL", "ITL"]
     assert (s.loc[kinds, "median_mm"] <= ACCURACY["structure_median_mm"]).all()
     assert s.loc["facet faces vs their bone points", "median_mm"] <= ACCURACY["facet_bone_median_mm"]
+    assert s.loc["facet faces vs cartilage nodes", "median_mm"] <= ACCURACY["facet_cartilage_median_mm"]
     every = r["lengths"]
     assert set(every["level"]) == {"L1-L2", "L2-L3", "L3-L4", "L4-L5", "L5-S1"}
     # the via-point fibres at every level: the ALL's path follows each level's own disc height
@@ -271,3 +331,9 @@ def test_accuracy_on_the_visible_human_set_leave_one_out():
     # control: the atlas without the registration step (templates only moved onto the target's centroid)
     c = visible_human_accuracy(seed=0, method="translation")["summary"].set_index("structure")
     assert c.loc["all ligament groups", "median_mm"] > ACCURACY["overall_median_mm"]
+    # control of the facet faces: without the rigid fit of the articular process (the warp alone) they miss both
+    import lumbar.geometry.specimen_landmarks as sl
+    monkeypatch.setattr(sl, "FACET_PROCESS_RADIUS_M", 0.0)
+    f = visible_human_accuracy(seed=0)["summary"].set_index("structure")
+    assert f.loc["facet faces vs cartilage nodes", "median_mm"] > ACCURACY["facet_cartilage_median_mm"]
+    assert f.loc["facet faces vs their bone points", "median_mm"] > ACCURACY["facet_bone_median_mm"]

@@ -110,6 +110,18 @@ def test_level_targets_are_yamamotos_rows_of_that_level():
     assert set(l34.columns) == set(l45.columns) and (l34["kind"] == "original_text").all()
 
 
+def test_discovery_multilevel_units_are_built_on_the_specimen():
+    """The discovery's multilevel units (lumbar.discovery.real_data.level_units, rule discovery_multilevel_rom) are
+    built on the configured geometry, a user's specimen included: the morphable mean's L3-L4 unit has the mean's own
+    disc; control: the embedded Visible Human configuration gives another disc."""
+    from lumbar.discovery import real_data as RD
+    unit = RD.level_units({"geometry": MEAN_G}, ["L3-L4"])["L3-L4"]
+    mean = configured.load_configured(MEAN_G, levels=["L3-L4"]).levels["L3-L4"]
+    assert unit.fsu.level.disc_height == pytest.approx(mean.disc_height, rel=1e-9)
+    vh = RD.level_units({"geometry": {"kind": "visible_human"}}, ["L3-L4"])["L3-L4"]
+    assert vh.fsu.level.disc_height != pytest.approx(mean.disc_height, rel=1e-3)
+
+
 # ------------------------------------------------------------------ the workflow
 def _tree(tmp_path_factory, name):
     return copy_repo(tmp_path_factory.mktemp(name) / "repo")

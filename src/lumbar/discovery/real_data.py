@@ -42,7 +42,7 @@ import pandas as pd
 from ..experiments import effects as fx
 from ..experiments.fsu import build_fsu
 from ..experiments.validation import MULTILEVEL_DIRECTIONS
-from ..geometry import load_geometry
+from ..geometry.configured import load_configured
 from ..inputs.io import write_json_atomic, write_table_atomic
 from ..inputs.tables import read_kind
 from .detect import DiscoveryInputError, discovery_settings
@@ -143,8 +143,8 @@ def level_units(config, levels) -> dict:
     s = discovery_settings(config)
     key = json.dumps([g, f, c, s["characteristic_set"], list(levels)], sort_keys=True, default=str)
     if key not in _UNITS:
-        kind = g.get("kind", "visible_human")
-        geo = load_geometry(kind, path=g.get("path") if kind == "visible_human" else None, levels=list(levels))
+        # the configured geometry, a user's specimen included (from the geometry cache its rule filled)
+        geo = load_configured(dict(g), levels=list(levels))
         cs = resolve_charset(s["characteristic_set"], c.get("data_dir"), c.get("calibrated_dir"))
         _UNITS[key] = {lv: fx.FsuVariants(build_fsu(geo, cs, lv, facet_stiffness=f.get("facet_stiffness_n_per_m"),
                                                     k_shear=f.get("disc_shear_stiffness_n_per_m")))

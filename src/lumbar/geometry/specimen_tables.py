@@ -154,7 +154,8 @@ def read_landmark_table(path, meshes: dict, alignment=None, units: str = "m") ->
     Checks: the columns ``TABLE_COLUMNS`` (``extra_length_m`` and the input columns may be left empty); level,
     structure, side and body from their vocabularies, the body one of the level's two vertebrae (the upper one
     for ``facet_inferior``, the lower one for ``facet_superior``); finite coordinates; every point within 1 mm of
-    its body's surface (5 mm for a capsule fibre end, 10 mm for a via point, ``extra_length_m`` > 0); where both the project (``x_m``..) and the
+    its body's surface (5 mm for a capsule fibre end, 10 mm for a via point, ``extra_length_m`` > 0; a
+    ``facet_inferior`` point: of either vertebra of its level, the faces of a joint may touch); where both the project (``x_m``..) and the
     input (``x_input``..) coordinates of a row are given and ``alignment`` is, they describe the same point (edit
     both, or empty one set: it is computed from the other); fibres pair up by point_index; 9 points per facet face.
     """
@@ -210,6 +211,14 @@ def read_landmark_table(path, meshes: dict, alignment=None, units: str = "m") ->
     df[["x_m", "y_m", "z_m"]] = df[["x_m", "y_m", "z_m"]].astype(float)
     for body, sub in df.groupby("body"):
         d = cKDTree(np.asarray(meshes[body].vertices)).query(sub[["x_m", "y_m", "z_m"]].to_numpy())[0]
+        # the inferior face of a joint whose bone surfaces interpenetrate is the lower vertebra's superior face
+        # (the faces touch: lumbar.geometry.specimen_landmarks._facing_face): on either vertebra of its level
+        for lv, rows in sub[sub["structure"] == "facet_inferior"].groupby("level"):
+            lower = level_vertebrae(lv)[1]
+            if lower in meshes:
+                k = sub.index.get_indexer(rows.index)
+                d[k] = np.minimum(d[k], cKDTree(np.asarray(meshes[lower].vertices)).query(
+                    rows[["x_m", "y_m", "z_m"]].to_numpy())[0])
         tol = np.where(sub["extra_length_m"].to_numpy() > 0, VIA_POINT_TOL_M,
                        np.where(sub["structure"].str.startswith("CL").to_numpy(), CAPSULE_TOL_M, ON_BONE_TOL_M))
         # the nearest vertex over-estimates the surface distance by up to half an edge: a 0.5 mm allowance
