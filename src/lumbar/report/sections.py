@@ -363,7 +363,8 @@ class ReportBuilder:
     def first_page(self):
         """Title, a five-sentence abstract read from the result files, and the validation scoreboard figure."""
         self.doc.add(Heading(TITLE, 0))
-        self.doc.add(Para(self.abstract(), "abstract"))
+        for part in self.abstract_paragraphs():
+            self.doc.add(Para(part, "abstract"))
         self.figure(self.out("validation", "scoreboard"), "Validation scoreboard: every distinct comparison with data "
                     "this model did not generate.", label="Fig. R")
         self.figure(self.out("validation", "internal_loads"), "Internal loads of the calibrated unit against "
@@ -383,8 +384,14 @@ class ReportBuilder:
         return V.distinct_comparisons(df) if len(df) else df
 
     def abstract(self) -> str:
-        """Five sentences: what is compared, the independent checks, the calibration targets, the muscle model,
-        what is only a method check and how many warnings need attention."""
+        """The first page's summary as one text (:meth:`abstract_paragraphs` joined)."""
+        return " ".join(self.abstract_paragraphs())
+
+    def abstract_paragraphs(self) -> list[str]:
+        """The first page's summary in three paragraphs: what is compared and the independent checks (beside a
+        trivial model); the internal loads of the calibrated unit and where they come from; the calibration targets,
+        the muscle model, what is only a method check and how many warnings need attention."""
+        paras = []
         d = self.distinct()
         geo = human_value(fmt(self.cfg("geometry", "kind")))
         out = []
@@ -416,12 +423,15 @@ class ReportBuilder:
             if nulls:
                 out.append(nulls)
             w, n = counts.get(V.INTERNAL, (0, 0))
+            paras.append(" ".join(out))
+            out = []
             if n:
                 g = d[d["role"] == V.INTERNAL]
                 miss = [f"{V.condition_label(r.condition)}" for r in g.itertuples() if not r.within]
                 wc, nc = counts.get(V.CONSTRAINT, (0, 0))
                 out.append(f"Internal loads of the calibrated unit (facet contact forces against in-vitro "
-                           f"measurements; judged, never fitted): {w} of {n} within"
+                           f"measurements, within their mean +- {V.FACET_FORCE_SD_BAND:g} SD; judged, never fitted): "
+                           f"{w} of {n} within"
                            + (f" (outside: {', '.join(miss)})" if miss else "")
                            + (f"; the ligament roles and the facet share of compression, which the fit also holds "
                               f"as constraints, {wc} of {nc}" if nc else "") + " (Tables R3 and R4).")
@@ -431,6 +441,9 @@ class ReportBuilder:
                 edge = self._facet_edge_sentence()
                 if edge:
                     out.append(edge)
+            if out:
+                paras.append(" ".join(out))
+                out = []
             w, n = counts.get(V.TARGET, (0, 0))
             out.append(f"Calibration targets (a fit quality, not a validation): {w} of {n} met." if n else
                        "Calibration targets: none in this configuration.")
@@ -444,7 +457,7 @@ class ReportBuilder:
                        f"this model), a method check, not a reproduction of the paper; {tail}")
         else:
             out.append(f"Tables 4 and 5 compare with the configured measured tables; {tail}")
-        return " ".join(out)
+        return [p for p in paras + [" ".join(out)] if p]
 
     def _influence_sentence(self) -> str:
         """Which real row pulls the internal loads where (the leave-one-row-out refits), in words; empty without
