@@ -284,8 +284,15 @@ def test_inferior_face_lies_on_the_joint_side_of_the_superior_face(gap_mm, touch
         assert np.allclose(inf, sup + [0.0, 0.0, 1e-3 * gap_mm], atol=1e-9)
 
 
+@pytest.fixture(scope="module")
+def vh_accuracy():
+    """The Visible Human meshes as a user gives them through the whole path, leave one out, scored at every level
+    (seed 0), shared by the tests that read it (each ~8 s)."""
+    return visible_human_accuracy(seed=0, length_level="all")
+
+
 @pytest.mark.slow
-def test_automatic_facet_contact_surfaces_face_the_joint(monkeypatch, vh):
+def test_automatic_facet_contact_surfaces_face_the_joint(monkeypatch, vh, vh_accuracy):
     """Every facet contact surface of the automatic landmarks (Visible Human meshes as a user gives them, leave one
     out; lumbar.experiments.fsu.facet_surfaces) has its normal towards the joint's medial side (from the superior to
     the inferior process), as the reference's do; control: with the upper bone's closest points as the inferior face
@@ -299,7 +306,7 @@ def test_automatic_facet_contact_surfaces_face_the_joint(monkeypatch, vh):
                 for lev in geo.levels.values() for side, _, surf in facet_surfaces(lev)]
 
     assert min(medial_components(vh)) > 0.5
-    assert min(medial_components(visible_human_accuracy(seed=0)["specimen"].geometry)) > 0.5
+    assert min(medial_components(vh_accuracy["specimen"].geometry)) > 0.5
     monkeypatch.setattr(sl, "_facing_face", lambda upper, lower, sup: sl._closest(upper, sup))
     assert min(medial_components(visible_human_accuracy(seed=0)["specimen"].geometry)) < 0
 
@@ -310,8 +317,8 @@ ACCURACY = dict(overall_median_mm=2.0, structure_median_mm=3.5, facet_bone_media
 
 
 @pytest.mark.slow
-def test_accuracy_on_the_visible_human_set_leave_one_out(monkeypatch):
-    r = visible_human_accuracy(seed=0, length_level="all")
+def test_accuracy_on_the_visible_human_set_leave_one_out(monkeypatch, vh_accuracy):
+    r = vh_accuracy
     s = r["summary"].set_index("structure")
     assert s.loc["all ligament groups", "median_mm"] <= ACCURACY["overall_median_mm"]
     kinds = ["ALL", "PLL", "FL", "CL", "ISL", "SSL", "ITL"]
