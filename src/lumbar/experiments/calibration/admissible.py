@@ -183,6 +183,14 @@ class _Objective:
         self.prior_q, self.prior_sd, self.limit, self.nz = prior_q, prior_sd, limit, nz
         self.directions, self.measured, self.dr, self.torque = directions, measured, dr, torque
         self.data_sd_rel = data_sd_rel
+        # the disc-only rows of one direction are points of one published curve (derived from the paper's Eq. 3
+        # fit), not independent measurements: together they count as one observation of spread data_sd_rel (each
+        # row's residual divided by sqrt(rows of its direction)); counted as independent rows they would pin the
+        # disc torque scale sqrt(n) times tighter than the one curve they come from
+        n_dir = {}
+        for d, _, _ in dr:
+            n_dir[d] = n_dir.get(d, 0) + 1
+        self.dr_weight = np.array([1.0 / math.sqrt(n_dir[d]) for d, _, _ in dr])
         m = probe.fsu.model
         self.groups = {k: [g for g, (_, kk, _lv) in enumerate(m.fibre_groups) if kk == k] for k in base.ligaments}
         self.k0 = m.k_stiff.copy()
@@ -211,7 +219,7 @@ class _Objective:
             p1, p2, p3 = self.torque[d]
             sc = 10.0 ** q[self.torque_idx[d]] if d in self.torque_idx else 1.0
             out.append((float(eq3(phi, (p1 * sc, p2, p3 * sc))) - M) / (self.data_sd_rel * M))
-        return np.array(out)
+        return np.array(out) * self.dr_weight
 
     def reach_directions(self):
         """(direction, largest moment [N*m], largest angle [rad]) of the disc-only rows per direction."""
@@ -350,7 +358,8 @@ def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", publ
     - prior centre) / prior spread for every parameter (``prior_spread``: {name: spread in fit units}, default
     :func:`lumbar.experiments.priors.default_spreads`; the centre is ``charset``'s own value, i.e. force scale 1 and
     no pre-elongation change for the ligaments). The data rows enter as (sim - measured) / (``data_sd_rel`` x
-    measured). The minimum is a MAP estimate (penalties = soft constraints); its Laplace posterior (the Gauss-Newton
+    measured); the disc-only rows of one direction, points of one published curve, together as one observation
+    (each divided by the square root of their number). The minimum is a MAP estimate (penalties = soft constraints); its Laplace posterior (the Gauss-Newton
     Hessian of the same stacked residuals at the optimum) is :attr:`AdmissibleFit.posterior`. The Jacobian is finite
     differences of the linearised equilibria (one Newton step per parameter, :class:`.probe.Probe`). ``start``: {parameter
     name: value in fit units} to start from (e.g. a previous fit). The admissibility of the result is checked
