@@ -340,8 +340,11 @@ def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", publ
                    k_shear=None, max_iter=50, tol=1e-8, max_nfev=MAX_NFEV,
                    nz_reference=None, start: dict | None = None, prior_spread: dict | None = None,
                    data_sd_rel: float = DATA_SD_REL, fit_disc_torque: bool = True,
-                   disc_rows: pd.DataFrame | None = None) -> AdmissibleFit:
+                   disc_rows: pd.DataFrame | None = None, diagnostic: bool = False) -> AdmissibleFit:
     """Fit a characteristic set to real ROM rows AND the admissibility criteria (constrained least squares).
+
+    ``diagnostic``: a refit that only feeds a diagnostic table (leave one row out, a held parameter), whose table
+    records whether it converged: its non-convergence is logged at INFO, not as a WARNING for the user.
 
     Parameters (bounded; ``least_squares(method="trf")``): per ligament on elongation, log10 of its force scale in
     FIT_SCALE_BOUNDS (a and c scaled; a scale outside the admissible 0.1-10 x of
@@ -415,7 +418,7 @@ def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", publ
     optimizer = {"status": int(sol.status), "message": str(sol.message), "nfev": int(sol.nfev),
                  "optimality": float(sol.optimality), "converged": bool(sol.status > 0)}
     if not optimizer["converged"]:
-        log.warning("admissible fit NOT converged: %s after %d evaluations (first-order optimality %.3g); the MAP "
+        (log.info if diagnostic else log.warning)("admissible fit NOT converged: %s after %d evaluations (first-order optimality %.3g); the MAP "
                     "and its posterior are those of the last iterate (the posterior table, role calibration.posterior, "
                     "column map_converged)", sol.message, sol.nfev, sol.optimality)
     q = sol.x

@@ -32,6 +32,9 @@ REDUCTION = ("intact", "wo_ssl", "wo_isl", "wo_fl", "wo_cl")
 #: half-decades between ten times the paper's value (12,000 N/m, Sect. 2.2.3) and the cartilage-contact range the
 #: full fit reaches (about 1e6-1e7 N/m); the profile shows what the real rows and the internal loads each ask of it
 FACET_PROFILE_N_PER_M = (1.0e5, 3.0e5, 1.0e6)
+#: evaluations of a diagnostic refit (started from the MAP; the full fit converges in about 100-200): one that stops
+#: there is a row with ``converged`` False, not a longer default DAG
+DIAGNOSTIC_MAX_NFEV = 150
 #: log10 spread of the zero-width prior that holds the facet stiffness in :func:`facet_profile`'s refits
 HELD_LOG10_SD = 1e-4
 COLUMNS = ("fit", "left_out", "facet_stiffness_held", "n_rows", "converged", "cost", "left_out_measured_deg", "left_out_predicted_deg",

@@ -354,11 +354,15 @@ def _final_fit(geometry, cal, base, published, reference, real_targets, info, fa
                                    disc=replace_fields(cal.disc, k_shear=info["prior_set"].disc.k_shear))
         a0 = info.get("anchor_fit")
         st = None if a0 is None else dict(zip(a0.parameters["parameter"], a0.parameters["fit_value"]))
-        def refit(targets, start):
+        def refit(targets, start, **diag):
             return fit_admissible(geometry, prior_set, targets, level=level, published=published,
                                   geometry_path=geometry_path, k_shear=k_shear, max_iter=max_iter, start=start,
                                   prior_spread=spreads, disc_rows=stage_rows(reference, DISC_STAGE),
-                                  **(real_fit_kw or {}))
+                                  **diag, **(real_fit_kw or {}))
+
+        def refit_left_out(targets, start):
+            # a diagnostic refit from the MAP: its table says whether it converged (influence.DIAGNOSTIC_MAX_NFEV)
+            return refit(targets, start, diagnostic=True, max_nfev=influence.DIAGNOSTIC_MAX_NFEV)
 
         def refit_held(targets, start, stiffness):
             # the facet stiffness held at ``stiffness``: a prior of (numerically) zero width centred on it
@@ -367,13 +371,14 @@ def _final_fit(geometry, cal, base, published, reference, real_targets, info, fa
                                   geometry_path=geometry_path, k_shear=k_shear, max_iter=max_iter,
                                   start={**start, "facet_stiffness": math.log10(stiffness)},
                                   prior_spread={**(spreads or {}), "facet_stiffness": influence.HELD_LOG10_SD},
-                                  disc_rows=stage_rows(reference, DISC_STAGE), **(real_fit_kw or {}))
+                                  disc_rows=stage_rows(reference, DISC_STAGE), diagnostic=True,
+                                  max_nfev=influence.DIAGNOSTIC_MAX_NFEV, **(real_fit_kw or {}))
 
         rf = refit(real_targets, st)
         info["final_fit"] = rf
         if row_influence:
             info["row_influence"] = pd.concat(
-                [influence.row_influence(rf, real_targets, refit, geometry, level),
+                [influence.row_influence(rf, real_targets, refit_left_out, geometry, level),
                  influence.facet_profile(rf, real_targets, refit_held, geometry, level)], ignore_index=True)
     else:
         rf = fit_real_targets(geometry, final_start, real_targets, level=level, k_shear=k_shear,
