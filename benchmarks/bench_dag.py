@@ -37,6 +37,18 @@ STAGES_TARGET_S = 60.0
 STAGES = {"calibration": r"calibrate", "forward": r"stepwise_reduction_sim_.+", "idp": r"l2s1_idp_.+"}
 
 
+def scratch_copy(prefix: str) -> tuple[Path, Path]:
+    """A scratch copy of the repository (no results, logs, caches or git) with ../shared linked beside it, as a clean
+    checkout sits: (its temporary folder, the copy)."""
+    tmp = Path(tempfile.mkdtemp(prefix=prefix))
+    work = tmp / ROOT.name
+    shutil.copytree(ROOT, work, ignore=IGNORE, symlinks=True)
+    shared = ROOT.parent / "shared"
+    if shared.is_dir():
+        (tmp / "shared").symlink_to(shared, target_is_directory=True)
+    return tmp, work
+
+
 def read_benchmarks(bench_dir: Path) -> dict[str, float]:
     """Wall seconds of every job from Snakemake's benchmark TSV files (first row, column ``s``), including those of
     rules that keep theirs in a subfolder (``muscle_sobol_chunk/flexion_0.tsv`` -> ``muscle_sobol_chunk/flexion_0``)."""
@@ -128,12 +140,7 @@ def main(argv=None):
     ap.add_argument("--timeout", type=float, default=3600.0, help="seconds before the run is stopped")
     a = ap.parse_args(argv)
 
-    tmp = Path(tempfile.mkdtemp(prefix="lumbar_bench_dag_"))
-    work = tmp / ROOT.name
-    shutil.copytree(ROOT, work, ignore=IGNORE, symlinks=True)
-    shared = ROOT.parent / "shared"
-    if shared.is_dir():
-        (tmp / "shared").symlink_to(shared, target_is_directory=True)
+    tmp, work = scratch_copy("lumbar_bench_dag_")
     cores = max(1, a.cores // 2) if a.baseline else a.cores
     base = export_tree(a.baseline, tmp / "baseline") if a.baseline else None
     load_before = os.getloadavg()

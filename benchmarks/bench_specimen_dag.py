@@ -35,13 +35,12 @@ import re
 import shutil
 import subprocess
 import sys
-import tempfile
 import time
 from collections import Counter
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_dag import IGNORE, ROOT, finish_dag, read_benchmarks, speed_reference  # noqa: E402
+from bench_dag import finish_dag, read_benchmarks, scratch_copy, speed_reference  # noqa: E402
 
 TARGET_RATIO = 1.20            # the specimen's DAG no more than 20 % slower than the default DAG
 SPECIMEN_POSE_SEED = 0         # ct_pose(seed): the CT-like pose of the Visible Human meshes
@@ -141,12 +140,7 @@ def main(argv=None):
     ap.add_argument("--timeout", type=float, default=3600.0, help="seconds before a run is stopped")
     a = ap.parse_args(argv)
 
-    tmp = Path(tempfile.mkdtemp(prefix="lumbar_bench_specimen_dag_"))
-    work = tmp / ROOT.name
-    shutil.copytree(ROOT, work, ignore=IGNORE, symlinks=True)
-    shared = ROOT.parent / "shared"
-    if shared.is_dir():
-        (tmp / "shared").symlink_to(shared, target_is_directory=True)
+    tmp, work = scratch_copy("lumbar_bench_specimen_dag_")
     if a.specimen == "visible_human":
         geometry = write_visible_human_specimen(tmp / "specimen_meshes")
         extra = None
