@@ -305,3 +305,20 @@ def test_null_model_with_the_models_own_calibrated_level():
     t = V.null_model_counts(pd.DataFrame(rows), yam, model_calibrated_level={"flexion": 12.0})
     own = t[t["null_model"] == "model's L4-L5 copied"].iloc[0]
     assert own["null_within"] == 0 and own["model_within"] == 1          # 12 is outside 8 +- 25 %
+
+
+def test_disc_torque_prior_does_not_count_the_disc_only_curve_a_second_time():
+    """The disc torque scales' prior is centred on the disc-only fit, and the disc-only rows enter the likelihood as
+    data (one observation per direction): the prior must add (almost) nothing to what those rows say, or one
+    published curve counts twice. Precision of the rows of one direction about the scale (log10 units):
+    (ln 10 / DATA_SD_REL)^2 (n rows, each weighted 1/sqrt(n)); the prior's: 1 / sd^2. Control: the former prior
+    (the spread of a measured row) carried about half as much as the rows themselves."""
+    from lumbar.experiments import priors as PR
+    from lumbar.experiments.calibration.admissible import DATA_SD_REL
+    rows = (math.log(10.0) / DATA_SD_REL) ** 2
+    names = ["disc_torque:axial_rotation", "disc_torque:flexion"]
+    sd = PR.default_spreads(names, np.zeros(2), np.ones(2), disc_data_directions={"axial_rotation"})
+    assert (1.0 / sd[0] ** 2) / rows < 0.05
+    assert (1.0 / math.log10(1.0 + DATA_SD_REL) ** 2) / rows > 0.5          # the double count it replaces
+    # a direction without disc-only rows in the likelihood keeps the curve as its prior, at a measured row's spread
+    assert sd[1] == pytest.approx(math.log10(1.0 + DATA_SD_REL))

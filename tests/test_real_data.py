@@ -140,12 +140,21 @@ def test_rest_disc_force_reads_the_unloaded_row_and_refuses_a_table_without_it()
         RD.rest_disc_force(_compression().iloc[1:])
 
 
-def test_lying_rows_are_the_unit_at_rest_with_the_muscle_rows_idp_per_newton():
+def test_lying_rows_are_the_unit_at_rest_with_the_muscle_models_idp_per_newton():
+    """The lying state: the passive unit at rest through the muscle model's paper-2 IDP formula at moment 0
+    (0.85 F / (0.66 A), A = 18 cm^2), whatever the muscle rows did; a failed muscle model still poses them."""
     val, loads, per_n = _muscle_fixture()
     v, sl = RD.lying_tables(LYING, val, loads, 40.0)
     ly = v[v["activity"].str.startswith("lying")]
     assert list(ly["activity"]) == ["lying_prone", "lying_lateral"]
-    np.testing.assert_allclose(ly["idp_sim_mpa"], per_n * 40.0)
+    np.testing.assert_allclose(ly["idp_sim_mpa"], 0.85 * 40.0 / (0.66 * 18e-4) / 1e6)
+    # the disc area enters as the formula says (half the area, twice the pressure)
+    v_half, _ = RD.lying_tables(LYING, val, loads, 40.0, area_m2=9e-4)
+    np.testing.assert_allclose(v_half["idp_sim_mpa"].iloc[4:], 2 * ly["idp_sim_mpa"])
+    # no converged muscle posture: the lying rows are still posed, the muscle rows marked not converged
+    v_none, _ = RD.lying_tables(LYING, val.assign(converged=False), loads, 40.0)
+    np.testing.assert_allclose(v_none["idp_sim_mpa"].iloc[4:], ly["idp_sim_mpa"])
+    assert not v_none["converged"].iloc[:4].any() and v_none["converged"].iloc[4:].all()
     np.testing.assert_allclose(ly["idp_in_vivo_mpa"], [0.1, 0.12])     # the cited rows
     s = sl[sl["activity"].str.startswith("lying")]
     assert (s["moment_nm"] == 0).all() and (s["compressive_n"] == 40.0).all()

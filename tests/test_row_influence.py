@@ -119,7 +119,7 @@ def test_profile_sentence_names_the_stiffest_value_with_physiological_loads():
             dict(base, fit="without axial_rotation", left_out="axial_rotation", facet_stiffness_held=np.nan,
                  facet_stiffness_n_per_m=1e4, facet_extension_7_5_n=6.0, largest_flexion_ligament="CL",
                  ssl_flexion_tension_n=9.0, rom_axial_rotation_deg=5.3, left_out_measured_deg=2.2,
-                 left_out_predicted_deg=5.3, left_out_rel_error=1.4),
+                 left_out_predicted_deg=5.3, left_out_rel_error=1.4, largest_shifts="FL:scale +0.4 sd"),
             dict(base, fit="held 1e5", left_out="", facet_stiffness_held=1e5, facet_stiffness_n_per_m=1e5,
                  facet_extension_7_5_n=35.0, largest_flexion_ligament="ISL", ssl_flexion_tension_n=6.1,
                  rom_axial_rotation_deg=2.91),
@@ -140,3 +140,72 @@ def test_profile_sentence_names_the_stiffest_value_with_physiological_loads():
     t2.loc[t2["facet_stiffness_held"].notna(), "ssl_flexion_tension_n"] = 1.0
     assert "does not bring" in profile_sentence(t2, fmt)
     assert profile_sentence(t[t["facet_stiffness_held"].isna()], fmt) == ""
+
+
+def test_disc_spread_profile_passes_each_spread_and_records_the_disc_scale(geo, paper):
+    calls = []
+
+    def refit_spread(targets, start, spread):
+        calls.append((list(targets["direction"]), start, spread))
+        return _fake_fit(paper)
+
+    tab = INF.disc_spread_profile(_fake_fit(paper), TARGETS, refit_spread, geo, values=(0.35, 0.5))
+    assert list(tab.columns) == list(INF.COLUMNS)
+    assert [c[2] for c in calls] == [0.35, 0.5]
+    assert all(c[0] == ["flexion", "axial_rotation"] and c[1] == {"a": 0.0, "b": 0.0} for c in calls)
+    assert list(tab["disc_row_spread"]) == [0.35, 0.5] and tab["facet_stiffness_held"].isna().all()
+    assert (tab["left_out"] == "").all()
+
+
+def test_spread_sentence_names_the_smallest_spread_with_physiological_loads_and_is_not_the_map():
+    from lumbar.report.influence_text import influence_sentence, profile_sentence, spread_sentence
+    base = {"converged": True, "cost": 1.0, "rom_flexion_deg": 7.0, "rom_extension_deg": 4.6,
+            "rom_lateral_bending_deg": 5.3, "rom_axial_rotation_deg": 2.7, "facet_axial_rotation_7_5_n": 100.0,
+            "facet_flexion_7_5_n": 0.0, "itl_flexion_moment_nm": 1.0, "isl_flexion_moment_nm": 2.0,
+            "flexion_reduction_monotone": True, "largest_shifts": "facet_stiffness +1.0 sd", "left_out": "",
+            "facet_stiffness_held": np.nan, "largest_flexion_ligament": "ISL"}
+    rows = [dict(base, fit="all rows (MAP)", disc_row_spread=np.nan, facet_stiffness_n_per_m=1.4e6,
+                 disc_axial_rotation_scale=1.5, facet_extension_7_5_n=115.0, ssl_flexion_tension_n=2.7),
+            dict(base, fit="without axial_rotation", left_out="axial_rotation", disc_row_spread=np.nan,
+                 facet_stiffness_n_per_m=1e4, disc_axial_rotation_scale=1.0, facet_extension_7_5_n=6.0,
+                 ssl_flexion_tension_n=9.0, left_out_measured_deg=2.2, left_out_predicted_deg=5.3,
+                 left_out_rel_error=1.4, largest_shifts="FL:scale +0.4 sd"),
+            dict(base, fit="35 %", disc_row_spread=0.35, facet_stiffness_n_per_m=1e6, disc_axial_rotation_scale=1.7,
+                 facet_extension_7_5_n=105.0, ssl_flexion_tension_n=3.0),
+            dict(base, fit="50 %", disc_row_spread=0.5, facet_stiffness_n_per_m=7e5, disc_axial_rotation_scale=2.1,
+                 facet_extension_7_5_n=88.0, ssl_flexion_tension_n=5.5)]
+    t = pd.DataFrame(rows)
+    fmt = lambda v, d=3: f"{float(v):.{d}g}"            # noqa: E731
+    s = spread_sentence(t, fmt)
+    assert "50 %: disc axial-rotation law 2.1 x" in s and "from a spread of 50 % on" in s
+    # the spread rows are neither the MAP of the influence sentence nor profile rows
+    assert "instead of 1.4e+06" in influence_sentence(t, fmt)
+    assert profile_sentence(t, fmt) == ""
+    # control: with the SSL below 5 N in every spread row, no spread brings the loads into range
+    t2 = t.copy()
+    t2.loc[t2["disc_row_spread"].notna(), "ssl_flexion_tension_n"] = 3.0
+    assert "no spread tried" in spread_sentence(t2, fmt)
+    assert spread_sentence(t[t["disc_row_spread"].isna()], fmt) == ""
+
+
+def test_influence_sentence_keeps_a_stopped_refit_and_is_silent_when_no_row_moves_the_map_nearer_its_priors():
+    from lumbar.report.influence_text import influence_sentence
+    base = {"cost": 1.0, "rom_flexion_deg": 7.0, "rom_extension_deg": 4.6, "rom_lateral_bending_deg": 5.3,
+            "rom_axial_rotation_deg": 2.7, "facet_axial_rotation_7_5_n": 100.0, "facet_extension_7_5_n": 110.0,
+            "largest_flexion_ligament": "ISL", "facet_stiffness_held": np.nan, "disc_row_spread": np.nan,
+            "facet_stiffness_n_per_m": 1.4e6, "left_out_measured_deg": np.nan, "left_out_predicted_deg": np.nan,
+            "left_out_rel_error": np.nan}
+    t = pd.DataFrame([
+        dict(base, fit="all rows (MAP)", left_out="", converged=True, largest_shifts="facet_stiffness +2.1 sd"),
+        dict(base, fit="without lateral_bending", left_out="lateral_bending", converged=True,
+             largest_shifts="facet_stiffness +2.1 sd", left_out_measured_deg=5.7, left_out_predicted_deg=5.4,
+             left_out_rel_error=-0.05),
+        dict(base, fit="without axial_rotation", left_out="axial_rotation", converged=False,
+             largest_shifts="FL:scale +0.4 sd", facet_stiffness_n_per_m=1.1e4, facet_extension_7_5_n=6.0,
+             left_out_measured_deg=2.2, left_out_predicted_deg=5.4, left_out_rel_error=1.45)])
+    fmt = lambda v, d=3: f"{float(v):.{d}g}"            # noqa: E731
+    s = influence_sentence(t, fmt)
+    # the refit that stopped at its budget is still the row that frees the MAP, and is named as stopped
+    assert s.startswith("Without the axial rotation row (a diagnostic refit that stopped") and "1.1e+04" in s
+    # control: a table whose left-out rows all shift as far as the MAP names no row (not one identical to the MAP)
+    assert influence_sentence(t.iloc[:2], fmt) == ""

@@ -15,7 +15,7 @@ Cases (``REAL_CASES``):
   axis and the trunk muscles are quiet, so the model state chosen for lying is the calibrated passive L4-L5 unit at
   rest (no external load): its disc force is what the ligaments' pre-tension alone makes
   (role ``load_sharing.compression``, set calibrated, row ``force_n`` = 0), turned into IDP with the in-vivo
-  problem's own IDP per newton (the muscle model's paper-2 formula). Lying on the side adds a small lateral moment
+  muscle model's paper-2 formula at moment 0 (its IDP per newton, disc area ``l2s1.disc_area_m2``). Lying on the side adds a small lateral moment
   the state leaves out. Spread: ``discovery.in_vivo_sd_mpa`` (assumed; one volunteer).
 * ``facet_share``     Adams and Hutton (1980): facets carry about 16 % of a compressive load in the erect posture;
   the model's share of a 1000 N follower load from the compression table. One row (the flexed-posture row, 0 %, is
@@ -44,6 +44,7 @@ from ..experiments.fsu import build_fsu
 from ..experiments.validation import MULTILEVEL_DIRECTIONS
 from ..geometry.configured import load_configured
 from ..inputs.io import write_json_atomic, write_table_atomic
+from ..mechanics.idp import DISC_AREA_M2, MPA, idp_per_newton
 from ..inputs.tables import read_kind
 from .detect import DiscoveryInputError, discovery_settings
 from .fit import discover
@@ -221,18 +222,14 @@ def rest_disc_force(compression_table) -> float:
 
 
 def lying_tables(lying_path, validation: pd.DataFrame, segment_loads: pd.DataFrame, rest_force_n: float,
-                 level="L4-L5"):
-    """(in-vivo table, segment loads) extended by the lying rows: the passive unit at rest, IDP = the muscle rows'
-    IDP per newton x its disc force, moment 0 (see the module doc)."""
+                 level="L4-L5", area_m2=DISC_AREA_M2):
+    """(in-vivo table, segment loads) extended by the lying rows: the passive unit at rest, IDP = the muscle model's
+    paper-2 formula at its disc force and moment 0, i.e. its IDP per newton (:func:`lumbar.mechanics.idp.idp_per_newton`,
+    disc area ``area_m2``) x the force (see the module doc). The lying rows need no converged muscle posture: an
+    in-vivo table whose activities all failed still poses them."""
     ly = read_kind(lying_path, "in_vivo_idp")
     conv = validation["converged"].astype(str).str.lower().isin(["true", "1"])
-    sl = segment_loads[segment_loads["level"] == level].drop_duplicates("activity")
-    m = validation[conv].merge(sl[["activity", "compressive_n"]], on="activity")
-    ok = m["compressive_n"].to_numpy(float) > 0
-    if not ok.any():
-        raise DiscoveryInputError("in-vivo table: no converged activity with a compressive segment load; the lying "
-                                  "rows need the muscle model's IDP per newton")
-    per_n = float(np.median(m["idp_sim_mpa"].to_numpy(float)[ok] / m["compressive_n"].to_numpy(float)[ok]))
+    per_n = idp_per_newton("paper2", area_m2=area_m2) / MPA
     rows = pd.DataFrame({"activity": ly["activity"], "idp_sim_mpa": per_n * rest_force_n,
                          "idp_in_vivo_mpa": ly["idp_mpa"].astype(float), "converged": True,
                          "source": ly["source"], "kind": ly["kind"],
@@ -246,7 +243,8 @@ def lying_tables(lying_path, validation: pd.DataFrame, segment_loads: pd.DataFra
 def in_vivo_lying_problem(config, validation_path, segment_loads_path, lying_path, compression_path) -> Problem:
     s = discovery_settings(config)
     v, sl = lying_tables(lying_path, pd.read_csv(validation_path), pd.read_csv(segment_loads_path),
-                         rest_disc_force(compression_path), s["in_vivo_level"])
+                         rest_disc_force(compression_path), s["in_vivo_level"],
+                         (config.get("l2s1") or {}).get("disc_area_m2", DISC_AREA_M2))
     p = in_vivo_problem(v, config, segment_loads=sl)
     p.meta.update(sigma_assumed=p.sigma.copy(), model_sd=np.zeros(p.n),
                   spread=f"assumed {s['in_vivo_sd_mpa']:g} MPa per row (discovery.in_vivo_sd_mpa; one volunteer, none "

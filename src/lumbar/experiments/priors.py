@@ -196,12 +196,18 @@ def prior_sources(names, prior: str) -> dict:
 #: spreads of a parameter without a sourced one (fit units): a decade of force scale, 1 mm of pre-elongation
 DEFAULT_SCALE_LOG10_SD = 1.0
 DEFAULT_PRE_ELONGATION_SD_MM = 1.0
-#: log10 spread of a disc torque-law scale: the disc-only rows' own spread, assumed as that of a measured ROM row
-#: (25 %, the validation's acceptance band; the paper publishes the disc-only fit, not its specimens' spread)
-DISC_TORQUE_LOG10_SD = math.log10(1.25)
+#: log10 spread of a disc torque-law scale: one decade. Its centre is the disc-only fit (step 1, Eq. 3 on the disc-only
+#: rows), and the same disc-only rows enter the admissible fit's likelihood as data (together one observation per
+#: direction): a prior of their spread (25 %) would count that one published curve twice and make the posterior of
+#: the disc laws sqrt(2) times too narrow. The prior only keeps the scale finite where no row reaches it.
+DISC_TORQUE_LOG10_SD = 1.0
+#: ... and where a direction has no disc-only row in the likelihood, the prior is the curve's only appearance: the
+#: spread of a measured row (25 %, the validation's acceptance band; the paper publishes the disc-only fit, not its
+#: specimens' spread)
+DISC_CURVE_LOG10_SD = math.log10(1.25)
 
 
-def default_spreads(names, lo, hi) -> np.ndarray:
+def default_spreads(names, lo, hi, disc_data_directions=None) -> np.ndarray:
     """Prior spreads (fit units) of the fit parameters ``names`` when none is given: :data:`DEFAULT_SCALE_LOG10_SD`
     per force scale, :data:`DEFAULT_PRE_ELONGATION_SD_MM` per pre-elongation, :data:`FACET_LOG10_SD` for the facet
     stiffness, and a quarter of the sourced log10 range (``hi - lo``) for the disc shear stiffness (the range as
@@ -217,7 +223,10 @@ def default_spreads(names, lo, hi) -> np.ndarray:
         elif n == "disc_shear":
             out.append(0.25 * float(hi[j] - lo[j]))
         elif n.startswith("disc_torque:"):
-            out.append(DISC_TORQUE_LOG10_SD)
+            # the disc-only curve counts once: as data where the direction has disc-only rows in the likelihood
+            # (``disc_data_directions``; None: every direction), else as this prior
+            as_data = disc_data_directions is None or n.split(":", 1)[1] in disc_data_directions
+            out.append(DISC_TORQUE_LOG10_SD if as_data else DISC_CURVE_LOG10_SD)
         else:
             raise ValueError(f"no default prior spread for fit parameter {n!r}")
     return np.array(out, float)

@@ -27,7 +27,7 @@ from lumbar.inputs import manifests
 
 from lumbar.experiments import validation as V
 
-from .influence_text import influence_sentence, profile_sentence
+from .influence_text import influence_sentence, profile_sentence, spread_sentence
 from .document import Contents, Doc, Figure, Heading, Para, Table
 
 log = logging.getLogger(__name__)
@@ -467,7 +467,7 @@ class ReportBuilder:
             return ""
         t = read_csv(self.path(rel))
         text = influence_sentence(t, fmt).rstrip(".")
-        prof = profile_sentence(t, fmt)
+        prof = (profile_sentence(t, fmt) + " " + spread_sentence(t, fmt)).strip()
         return (f"Where those loads come from: {text} (Table P2). {prof}".strip()) if text else prof
 
     def _facet_edge_sentence(self) -> str:

@@ -18,7 +18,7 @@ from ...inputs.characteristics import load_characteristic_set
 from .. import admissibility as ADM
 from ..fsu import MIN_SLACK_FRACTION, build_fsu, set_ligament_law
 from ..posterior import Posterior, covariance_table, laplace_posterior, posterior_table
-from ..priors import default_spreads, prior_sources
+from ..priors import DISC_CURVE_LOG10_SD, default_spreads, prior_sources
 from .common import AT_BOUND_FRACTION, PENALTY
 from .disc import eq3
 from .penalties import FIT_MARGIN, fit_penalties, scale_penalties
@@ -178,11 +178,13 @@ class _Objective:
     penalties ``pen``, residuals ``r``) and counts residual and linearised evaluations in :attr:`n_eval`."""
 
     def __init__(self, probe, base, names, hi, prior_q, prior_sd, limit, nz, directions, measured, dr, torque,
-                 data_sd_rel):
+                 data_sd_rel, disc_sd_rel=None):
         self.probe, self.base, self.names, self.hi = probe, base, names, hi
         self.prior_q, self.prior_sd, self.limit, self.nz = prior_q, prior_sd, limit, nz
         self.directions, self.measured, self.dr, self.torque = directions, measured, dr, torque
         self.data_sd_rel = data_sd_rel
+        # spread of the disc-only curve as data for this unit (default: that of a measured row)
+        self.disc_sd_rel = data_sd_rel if disc_sd_rel is None else disc_sd_rel
         # the disc-only rows of one direction are points of one published curve (derived from the paper's Eq. 3
         # fit), not independent measurements: together they count as one observation of spread data_sd_rel (each
         # row's residual divided by sqrt(rows of its direction)); counted as independent rows they would pin the
@@ -218,7 +220,7 @@ class _Objective:
         for d, M, phi in self.dr:
             p1, p2, p3 = self.torque[d]
             sc = 10.0 ** q[self.torque_idx[d]] if d in self.torque_idx else 1.0
-            out.append((float(eq3(phi, (p1 * sc, p2, p3 * sc))) - M) / (self.data_sd_rel * M))
+            out.append((float(eq3(phi, (p1 * sc, p2, p3 * sc))) - M) / (self.disc_sd_rel * M))
         return np.array(out) * self.dr_weight
 
     def reach_directions(self):
@@ -340,8 +342,13 @@ def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", publ
                    k_shear=None, max_iter=50, tol=1e-8, max_nfev=MAX_NFEV,
                    nz_reference=None, start: dict | None = None, prior_spread: dict | None = None,
                    data_sd_rel: float = DATA_SD_REL, fit_disc_torque: bool = True,
-                   disc_rows: pd.DataFrame | None = None, diagnostic: bool = False) -> AdmissibleFit:
+                   disc_rows: pd.DataFrame | None = None, diagnostic: bool = False,
+                   disc_data_sd_rel: float | None = None) -> AdmissibleFit:
     """Fit a characteristic set to real ROM rows AND the admissibility criteria (constrained least squares).
+
+    ``disc_data_sd_rel``: the relative spread of the disc-only rows as data for this unit (default ``data_sd_rel``):
+    how far the disc of the specimens behind the disc-only curve (Heuer et al. 2007) may differ from this unit's; a
+    sensitivity refit (:func:`.influence.disc_spread_profile`) widens it.
 
     ``diagnostic``: a refit that only feeds a diagnostic table (leave one row out, a held parameter), whose table
     records whether it converged: its non-convergence is logged at INFO, not as a WARNING for the user.
@@ -399,16 +406,19 @@ def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", publ
         from ...geometry.visible_human import read_uw_materials  # noqa: PLC0415
         probe.set_remus(read_uw_materials(geometry_path, level))
     directions = list(t["direction"])
-    prior_sd = np.array([(prior_spread or {}).get(n, d) for n, d in zip(names, default_spreads(names, lo, hi))], float)
-    if np.any(~np.isfinite(prior_sd)) or np.any(prior_sd <= 0):
-        raise ValueError(f"fit_admissible: every prior spread must be finite and > 0, got {dict(zip(names, prior_sd))}")
     # the disc-only rows (the stage the disc law was fitted on) as data too, in torque space at the measured angle
-    # (Eq. 3 as step 1 fits it): the disc torque scales are then informed by their own data, not only by a prior
+    # (Eq. 3 as step 1 fits it): the disc torque scales are then informed by their own data, and their prior, centred
+    # on the same curve, must not count it again (priors.DISC_TORQUE_LOG10_SD); a direction without rows keeps the
+    # curve as its prior (priors.DISC_CURVE_LOG10_SD)
     dr = [] if disc_rows is None or not fit_disc_torque else \
         [(str(r.direction), float(r.moment_nm), math.radians(float(r.rom_mean_deg)))
          for r in disc_rows.itertuples(index=False) if str(r.direction) in charset.disc.torque]
+    defaults = default_spreads(names, lo, hi, disc_data_directions={d for d, _, _ in dr})
+    prior_sd = np.array([(prior_spread or {}).get(n, d) for n, d in zip(names, defaults)], float)
+    if np.any(~np.isfinite(prior_sd)) or np.any(prior_sd <= 0):
+        raise ValueError(f"fit_admissible: every prior spread must be finite and > 0, got {dict(zip(names, prior_sd))}")
     obj = _Objective(probe, base, names, hi, prior_q, prior_sd, limit, nz, directions, measured, dr,
-                     charset.disc.torque, data_sd_rel)
+                     charset.disc.torque, data_sd_rel, disc_data_sd_rel)
     if not start:         # no start given: the best common force scale of every ligament
         q_start = _start_scan(obj, names, prior_q, lo, hi)
         probe.warm = None
@@ -466,10 +476,15 @@ def posterior_tables(fit: AdmissibleFit | None, prior_name: str = "") -> tuple[p
             pd.DataFrame(columns=["parameter_i", "parameter_j", "covariance"])
     post = fit.posterior
     src = prior_sources(post.names, prior_name or "table3")
-    for n in post.names:
+    for j, n in enumerate(post.names):
         if n.startswith("disc_torque:"):
-            src[n] = ("centre: the disc-only fit (step 1, Eq. 3 on the disc-only rows); spread: that of a measured "
-                      f"row, {DATA_SD_REL:.0%} (assumed: no specimen spread published)")
+            as_data = float(np.asarray(post.prior_sd)[j]) > 2.0 * DISC_CURVE_LOG10_SD
+            src[n] = ("centre: the disc-only fit (step 1, Eq. 3 on the disc-only rows); spread: " +
+                      ("one decade, because the same rows enter the likelihood as data (one observation per "
+                       f"direction, spread {DATA_SD_REL:.0%} assumed: no specimen spread published) and are counted "
+                       "once" if as_data else
+                       f"that of a measured row, {DATA_SD_REL:.0%} (assumed: no specimen spread published; the "
+                       "disc-only rows are not in this fit's likelihood)"))
     tab = posterior_table(post, src, BOUND_REASONS).assign(
         prior=prior_name, data_spread=f"{DATA_SD_REL:.0%} of each measured ROM row (assumed; none published)",
         map_converged=bool(fit.optimizer.get("converged", True)))

@@ -374,12 +374,18 @@ def _final_fit(geometry, cal, base, published, reference, real_targets, info, fa
                                   disc_rows=stage_rows(reference, DISC_STAGE), diagnostic=True,
                                   max_nfev=influence.DIAGNOSTIC_MAX_NFEV, **(real_fit_kw or {}))
 
+        def refit_spread(targets, start, spread):
+            # the disc-only rows as data at a wider relative spread (a sensitivity refit from the MAP)
+            return refit(targets, start, diagnostic=True, max_nfev=influence.DIAGNOSTIC_MAX_NFEV,
+                         disc_data_sd_rel=spread)
+
         rf = refit(real_targets, st)
         info["final_fit"] = rf
         if row_influence:
             info["row_influence"] = pd.concat(
                 [influence.row_influence(rf, real_targets, refit_left_out, geometry, level),
-                 influence.facet_profile(rf, real_targets, refit_held, geometry, level)], ignore_index=True)
+                 influence.facet_profile(rf, real_targets, refit_held, geometry, level),
+                 influence.disc_spread_profile(rf, real_targets, refit_spread, geometry, level)], ignore_index=True)
     else:
         rf = fit_real_targets(geometry, final_start, real_targets, level=level, k_shear=k_shear,
                               max_iter=max_iter, secondary=reference if final_surrogate_weight > 0 else None,
