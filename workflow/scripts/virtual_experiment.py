@@ -35,12 +35,14 @@ if sr.get("anchor_generator") and sr.get("real_targets"):
         fit = fit_admissible(geo, cs, targets, level=f["level"], published=published, geometry_path=vh_path,
                              k_shear=f.get("disc_shear_stiffness_n_per_m"), max_iter=s["max_iter"],
                              prior_spread=spreads,
-                             disc_rows=read_experiment_table(derived) if derived else None)
+                             disc_rows=read_experiment_table(derived) if derived else None,
+                             diagnostic=True)      # an anchor of the virtual specimens: its verdict is a column
     else:
         fit = fit_real_targets(geo, cs, targets, level=f["level"], k_shear=f.get("disc_shear_stiffness_n_per_m"),
                                max_iter=s["max_iter"])
     cs = fit.charset
-    out = fit.parameters.assign(role="generator anchoring (force scales of the generator set)")
+    out = fit.parameters.assign(role="generator anchoring (force scales of the generator set)",
+                                map_converged=bool(getattr(fit, "optimizer", {}).get("converged", True)))
     tg = fit.targets.rename(columns={"rom_mean_deg": "value_measured", "rom_sim_deg": "value_sim"})
     write_table_atomic(out, snakemake.output.generator_fit)
     write_table_atomic(tg, snakemake.output.generator_targets)

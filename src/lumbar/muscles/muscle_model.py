@@ -493,7 +493,7 @@ def make_solver(model, cfg=None):
     certifier = cfg.get("certifier", "ipopt")
     if certifier == "ipopt":
         solver.certifier = IpoptPostureSolver(solver, tol=cfg.get("ipopt_tol", 1e-5),
-                                              max_iter=cfg.get("ipopt_max_iter", 150))
+                                              max_iter=cfg.get("ipopt_max_iter", 100))
         solver.multistart = bool(cfg.get("multistart", True))
     elif certifier != "sqp":
         raise ValueError(f"muscle_model.solver.certifier must be 'ipopt' or 'sqp', got {certifier!r}")

@@ -350,8 +350,10 @@ def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", publ
     how far the disc of the specimens behind the disc-only curve (Heuer et al. 2007) may differ from this unit's; a
     sensitivity refit (:func:`.influence.disc_spread_profile`) widens it.
 
-    ``diagnostic``: a refit that only feeds a diagnostic table (leave one row out, a held parameter), whose table
-    records whether it converged: its non-convergence is logged at INFO, not as a WARNING for the user.
+    ``diagnostic``: a refit that only feeds a diagnostic table (leave one row out, a held parameter, a wider disc-only
+    spread) or anchors the virtual specimens of the surrogate generator, whose table records whether it converged
+    (``converged`` / ``map_converged``): its non-convergence is logged at INFO, not as a WARNING for the user. The
+    shipped calibration's own MAP is never diagnostic.
 
     Parameters (bounded; ``least_squares(method="trf")``): per ligament on elongation, log10 of its force scale in
     FIT_SCALE_BOUNDS (a and c scaled; a scale outside the admissible 0.1-10 x of
