@@ -41,8 +41,8 @@ def influence_sentence(t: pd.DataFrame, fmt) -> str:
                                                "optimum)")
     return (f"Without the {r['left_out'].replace('_', ' ')} row{stopped} the MAP stays within "
             f"{fmt(top_shift(r['largest_shifts']), 2)} prior spreads of every prior (with it: "
-            f"{f['largest_shifts'].split(';')[0]}): the facet stiffness is {fmt(r['facet_stiffness_n_per_m'], 3)} N/m "
-            f"instead of {fmt(f['facet_stiffness_n_per_m'], 3)}, the extension facet force at 7.5 N*m "
+            f"{f['largest_shifts'].split(';')[0]}): the facet stiffness is {r['facet_stiffness_n_per_m']:.2g} N/m "
+            f"instead of {f['facet_stiffness_n_per_m']:.2g}, the extension facet force at 7.5 N*m "
             f"{fmt(r['facet_extension_7_5_n'])} N instead of {fmt(f['facet_extension_7_5_n'])} N, and the largest "
             f"ligament moment in flexion is the {r['largest_flexion_ligament']}'s instead of the "
             f"{f['largest_flexion_ligament']}'s; but the unit then predicts {fmt(r['left_out_predicted_deg'])} deg "
@@ -109,7 +109,7 @@ def spread_sentence(t: pd.DataFrame, fmt, facet_ext_max_n=90.5, ssl_min_n=5.0) -
     if rows.empty:
         return ""
     parts = [f"{fmt(100 * r['disc_row_spread'], 2)} %: disc axial-rotation law {fmt(r['disc_axial_rotation_scale'], 2)} x, "
-             f"facet stiffness {fmt(r['facet_stiffness_n_per_m'], 2)} N/m, extension facet force "
+             f"facet stiffness {r['facet_stiffness_n_per_m']:.2g} N/m, extension facet force "
              f"{fmt(r['facet_extension_7_5_n'])} N, SSL {fmt(r['ssl_flexion_tension_n'])} N"
              for _, r in rows.iterrows()]
     ok = rows[(rows["facet_extension_7_5_n"] <= facet_ext_max_n) & (rows["ssl_flexion_tension_n"] >= ssl_min_n)

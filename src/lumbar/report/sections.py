@@ -516,7 +516,8 @@ class ReportBuilder:
                  "RMSE of the L4-L5 intradiscal pressure")
         else:
             s = (f"The muscle-driven model predicts the in-vivo L4-L5 intradiscal pressure with R2 = {fmt(m['r2'])} "
-                 f"and RMSE = {fmt(m['rmse_mpa'])} MPa over the {fmt(n)} of {fmt(total)} activities it reaches")
+                 f"and RMSE = {fmt(m['rmse_mpa'])} MPa over the {fmt(n)} of {fmt(total)} activities it reaches with "
+                 "a certified optimum")
         pub = self.published.get("idp_validation_r2")
         paper = pub["value"] if pub is not None else m.get("paper_r2")
         if paper is not None:
@@ -526,6 +527,12 @@ class ReportBuilder:
             t = read_csv(self.path(iv))
             if "reached" in t.columns:
                 miss = [human_value(a) for a, r in zip(t["activity"], t["reached"]) if not bool(r)]
+                if "certified" in t.columns:
+                    unc = [human_value(a) for a, r, c in zip(t["activity"], t["reached"], t["certified"])
+                           if bool(r) and not bool(c)]
+                    if unc:
+                        s += (f"; reached, but IPOPT could not certify the optimum (left out; Flags): "
+                              f"{', '.join(unc)}")
                 if miss:
                     s += f"; not reached (beyond its muscles' capacity; muscle capacity table): {', '.join(miss)}"
         return s + "."
