@@ -40,7 +40,7 @@ def test_partial_section_keeps_given_values_and_fills_the_rest():
     assert cfg["fsu"]["moments_nm"] == [2.5, 7.5]
     assert cfg["fsu"]["facet_stiffness_n_per_m"] is None      # null = the characteristic set's facet.csv value
     assert cfg["solver"]["tol_force_n"] == 1e-6 and cfg["solver"]["max_iter"] == 50
-    mcfg = cfg["muscle_model"]["solver"]                        # given: ipopt_max_iter 10 (default 100)
+    mcfg = cfg["muscle_model"]["solver"]                        # given: ipopt_max_iter 10 (default 50)
     assert mcfg["ipopt_max_iter"] == 10 and mcfg["multistart"] is False
     assert mcfg["max_iter"] == 150 and mcfg["batch_size"] == 64   # not given: the schema's defaults
 

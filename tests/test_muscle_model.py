@@ -399,12 +399,6 @@ def test_baseline_file_round_trips_the_baseline_postures(tmp_path):
         np.testing.assert_array_equal(back[post].a, s.a)
     # control: the other activity's solution is not what was stored for a posture
     assert not np.array_equal(back["standing"].x, sols[0].x)
-    # whether IPOPT certified each baseline comes back too (a solution without the flag counts as certified)
-    assert all(back[p].certified for p in POSTURES)
-    sols[names.index(POSTURES["standing"])].certified = False
-    write_baseline(sols, names, tmp_path / "baseline2.npz")
-    back2 = read_baseline(tmp_path / "baseline2.npz")
-    assert not back2["standing"].certified and back2["flexion"].certified
     np.savez(tmp_path / "partial.npz", standing_x=sols[1].x, standing_R=sols[1].R, standing_a=sols[1].a)
     with pytest.raises(KeyError):
         read_baseline(tmp_path / "partial.npz")
@@ -417,23 +411,3 @@ def test_uncertified_message_names_the_count_the_statuses_and_the_table():
     assert msg.startswith("muscle_validation: 2 reached posture(s)") and "Maximum_Iterations_Exceeded;" in msg
     assert "certified=False in t.csv" in msg
     assert "(see ipopt_status;" in uncertified_message("x", ["a"], "t.csv")
-
-
-def test_scenarios_of_an_uncertified_baseline_are_tested_but_not_polished():
-    """Warm-started from a baseline IPOPT could not certify, a sensitivity scenario gets IPOPT's convergence test at
-    its SQP point but no IPOPT iterations (max_iter 0 inside the block), and the certifier's budget is restored
-    afterwards, also when the block raises; without a certifier, or when inactive, nothing changes."""
-    from types import SimpleNamespace
-
-    from lumbar.muscles.muscle_sensitivity import _without_polish
-    solver = SimpleNamespace(certifier=SimpleNamespace(max_iter=100))
-    with _without_polish(solver):
-        assert solver.certifier.max_iter == 0
-    assert solver.certifier.max_iter == 100
-    with pytest.raises(RuntimeError), _without_polish(solver):
-        raise RuntimeError("solve failed")
-    assert solver.certifier.max_iter == 100
-    with _without_polish(solver, active=False):
-        assert solver.certifier.max_iter == 100
-    with _without_polish(SimpleNamespace(certifier=None)):
-        pass

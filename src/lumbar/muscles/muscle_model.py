@@ -493,7 +493,7 @@ def make_solver(model, cfg=None):
     certifier = cfg.get("certifier", "ipopt")
     if certifier == "ipopt":
         solver.certifier = IpoptPostureSolver(solver, tol=cfg.get("ipopt_tol", 1e-5),
-                                              max_iter=cfg.get("ipopt_max_iter", 100))
+                                              max_iter=cfg.get("ipopt_max_iter", 50))
         solver.multistart = bool(cfg.get("multistart", True))
     elif certifier != "sqp":
         raise ValueError(f"muscle_model.solver.certifier must be 'ipopt' or 'sqp', got {certifier!r}")
@@ -513,13 +513,11 @@ def model_from_config(cfg: dict, passive_dir) -> LumbarMuscleModel:
 
 def write_baseline(sols, names, path) -> Path:
     """The solved baseline postures (:data:`POSTURES`; ``sols`` in the order of ``names``) as one ``.npz``
-    (``<posture>_x``, ``_R``, ``_a`` and ``_certified``: whether IPOPT certified it), written atomically;
-    :func:`read_baseline` reads it back."""
+    (``<posture>_x``, ``_R``, ``_a``), written atomically; :func:`read_baseline` reads it back."""
     base = {}
     for post, name in POSTURES.items():
         s = sols[names.index(name)]
-        base.update({f"{post}_x": s.x, f"{post}_R": s.R, f"{post}_a": s.a,
-                     f"{post}_certified": np.array(bool(getattr(s, "certified", True)))})
+        base.update({f"{post}_x": s.x, f"{post}_R": s.R, f"{post}_a": s.a})
     path = Path(path)
     tmp = path.with_suffix(".tmp.npz")
     np.savez(tmp, **base)
@@ -532,14 +530,8 @@ def read_baseline(path) -> dict:
     reference of the sensitivity and Sobol scenarios)."""
     from .redundancy import PostureSolution
     z = np.load(path)
-    out = {}
-    for posture in POSTURES:
-        s = PostureSolution(z[f"{posture}_x"], z[f"{posture}_R"], z[f"{posture}_a"], True, True, 0.0, 0.0, 0.0, 0.0,
-                            0)
-        key = f"{posture}_certified"
-        s.certified = bool(z[key]) if key in z.files else True      # a file without the flag: as before
-        out[posture] = s
-    return out
+    return {posture: PostureSolution(z[f"{posture}_x"], z[f"{posture}_R"], z[f"{posture}_a"], True, True, 0.0, 0.0,
+                                     0.0, 0.0, 0) for posture in POSTURES}
 
 
 def uncertified_message(what, which, table, statuses=()) -> str | None:

@@ -5,8 +5,6 @@ statements (:data:`PAPER_CHANGES`, :func:`sensitivity_rows`, :func:`run_sensitiv
 by :func:`lumbar.muscles.muscle_model.apply_parameter`."""
 from __future__ import annotations
 
-from contextlib import contextmanager
-
 import logging
 from math import comb
 
@@ -112,47 +110,17 @@ def sensitivity_rows(parameter, ssl_um, values, scopes, postures) -> pd.DataFram
     return pd.DataFrame(rows)
 
 
-@contextmanager
-def _without_polish(solver, active=True):
-    """Within the block, the solver's certifier (if any) only tests the SQP point (IPOPT ``max_iter`` 0) instead of
-    iterating from it; restored afterwards."""
-    cert = getattr(solver, "certifier", None)
-    if not active or cert is None:
-        yield
-        return
-    keep = cert.max_iter
-    cert.max_iter = 0
-    try:
-        yield
-    finally:
-        cert.max_iter = keep
-
-
 def run_sensitivity(model, solver, rows: pd.DataFrame, baseline: dict, area_m2=18e-4, batch_size=None,
                     label="sensitivity") -> pd.DataFrame:
     """Solve every row (batches of ``batch_size``, progress logged), warm-started from the baseline solution
-    of its posture. Rows whose baseline IPOPT could not certify get IPOPT's convergence test at their SQP point but
-    no IPOPT iterations from it (:func:`_without_polish`): warm-started from a point IPOPT could not certify, their
-    polish failed in every case measured (84 of 84 standing scenarios of one default run, each running to
-    ``ipopt_max_iter``), so they are reported as not certified without that cost."""
+    of its posture."""
     props, start, names = [], [], []
     for _, r in rows.iterrows():
         ssl = None if pd.isna(r["ssl_um"]) else float(r["ssl_um"])
         props.append(apply_parameter(model.props, model.ms, r["parameter"], r["value"], r["group_scope"], ssl))
         names.append(POSTURES[r["posture"]])
         start.append(baseline[r["posture"]])
-    weak = np.array([not bool(getattr(baseline[p], "certified", True)) for p in rows["posture"]], bool)
-    sols = [None] * len(rows)
-    for sel, polish in ((~weak, True), (weak, False)):
-        idx = np.flatnonzero(sel)
-        if not idx.size:
-            continue
-        with _without_polish(solver, not polish):
-            part = solve_with_progress(model, solver, [names[i] for i in idx], [props[i] for i in idx],
-                                       [start[i] for i in idx], batch_size,
-                                       label if polish else f"{label} (baseline not certified)")
-        for i, s in zip(idx, part):
-            sols[i] = s
+    sols = solve_with_progress(model, solver, names, props, start, batch_size, label)
     out = rows.copy()
     seg = [model.segment_loads(s.x[None], s.R[None]).query("level == 'L4-L5'").iloc[0] for s in sols]
     tot, fp, mp = idp_parts([s["compressive_n"] for s in seg], [s["moment_nm"] for s in seg], area_m2)
