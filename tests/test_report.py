@@ -482,3 +482,24 @@ def test_real_data_paragraph_keeps_unexplained_apart_from_nothing_named(fake_res
     assert re.search(r"Tested, unexplained \([^)]*\): intact_rom \(gap 7\.07\)", text), text[:2000]
     assert re.search(r"Tested, nothing named \([^)]*\): in_vivo \(gap 1\.55\)", text)
     assert not re.search(r"nothing named[^.]*intact_rom", text)
+
+
+def test_muscle_sentence_names_reached_but_uncertified_apart_from_not_reached(fake_muscle_discrepancy):
+    """The first page counts the activities with a certified optimum and names a posture that was reached but whose
+    optimum IPOPT could not certify apart from one the muscles cannot reach (beyond their capacity)."""
+    tmp, config, inputs = fake_muscle_discrepancy
+    t = Path("results/tables")
+    (t / "in_vivo_validation.csv").write_text(
+        "activity,idp_sim_mpa,idp_in_vivo_mpa,converged,reached,certified\n"
+        "upright_standing,0.43,0.5,False,True,False\n"
+        "crate_far,0.64,1.8,False,False,False\n"
+        "flexion_36deg,0.93,1.08,True,True,True\n")
+    extra = [str(t / "in_vivo_validation.csv")]
+    html_path, _, _ = _build(tmp, config, inputs + [e for e in extra if e not in inputs])
+    text = parse_report(html_path).text
+    assert "activities it reaches with a certified optimum" in text
+    assert "reached, but IPOPT could not certify the optimum (left out; Flags): upright standing" in text
+    assert "not reached (beyond its muscles' capacity; muscle capacity table): crate far" in text
+    # control: the uncertified posture is not called "not reached", nor the unreached one "reached"
+    assert "muscle capacity table): upright standing" not in text
+    assert "(left out; Flags): crate far" not in text
