@@ -44,6 +44,8 @@ rule muscle_validation:
         log_file("muscle_validation"),
     benchmark:
         benchmark_file("muscle_validation")
+    # on the longest chain (see stepwise_reduction_surrogate): its baseline starts the Sobol and sensitivity chunks
+    priority: 5
     conda:
         "../envs/lumbar.yaml"
     params:
@@ -65,10 +67,10 @@ rule muscle_sensitivity:
         log_file(f"muscle_sensitivity/{MUSCLE_CHUNKS.wildcard_pattern}"),
     benchmark:
         benchmark_file(f"muscle_sensitivity/{MUSCLE_CHUNKS.wildcard_pattern}")
-    # leaves of the DAG (only muscle_sensitivity_table and the report wait for them): below the default priority 0,
-    # so that the jobs heading longer chains (calibration -> forward sets -> tables; the discovery's specimen banks ->
-    # benchmark jobs) start first and these short jobs fill both cores at the end (lowest: the shortest jobs)
-    priority: -10
+    # leaves of the DAG (only muscle_sensitivity_table and the report wait for them), but the longest jobs of the
+    # DAG after the Sobol chunks (20-30 s each on the default config): as soon as the baseline exists, so that the
+    # short jobs (the discovery's, 2-14 s) fill both cores at the end (longest processing time first)
+    priority: 1
     conda:
         "../envs/lumbar.yaml"
     params:
@@ -109,8 +111,8 @@ rule muscle_sobol_chunk:
     wildcard_constraints:
         posture="standing|flexion",
         chunk=r"\d+",
-    # leaves like muscle_sensitivity (see there), longer ones: after the other rules, before the sensitivity chunks
-    priority: -5
+    # leaves like muscle_sensitivity (see there), the longest jobs of the DAG (flexion: 35-40 s): first of all
+    priority: 2
     conda:
         "../envs/lumbar.yaml"
     params:

@@ -15,6 +15,9 @@ rule stepwise_reduction_surrogate:
         log_file("stepwise_reduction_surrogate"),
     benchmark:
         benchmark_file("stepwise_reduction_surrogate")
+    # heads the longest chain of the DAG (surrogate -> calibrate -> the muscle model's baseline -> its Sobol and
+    # sensitivity chunks): first, so that the calibration does not wait for it behind short jobs
+    priority: 10
     conda:
         "../envs/lumbar.yaml"
     params:

@@ -1,5 +1,6 @@
 """Calibration stage, rule calibrate: the backward stepwise reduction (Tables 1-3), the admissibility-constrained
-final fit and its posterior, and the calibrated characteristic set (lumbar.experiments.calibration).
+final fit and its posterior, and the calibrated characteristic set (lumbar.experiments.calibration). Its diagnostic
+refits from the MAP are rule calibration_influence (calibration_influence.py, which calls :func:`run`).
 
 By hand: python workflow/scripts/calibrate.py calibrate --configfile config/test/config.yaml
 """
@@ -45,9 +46,6 @@ def _write_fit_tables(snakemake, log, res, targets):
     ff = res.info.get("final_fit")
     (ff.penalties if ff is not None else pd.DataFrame(columns=["penalty", "value"])).pipe(
         write_table_atomic, snakemake.output.penalties)
-    infl = res.info.get("row_influence")
-    write_table_atomic(infl if infl is not None else pd.DataFrame(columns=list(cal.INFLUENCE_COLUMNS)),
-                       snakemake.output.row_influence)
     post_tab, cov_tab = cal.posterior_tables(ff, res.info.get("prior_name", ""))
     write_table_atomic(post_tab, snakemake.output.posterior)
     write_table_atomic(cov_tab, snakemake.output.covariance)
@@ -74,7 +72,10 @@ def _log_bounds(snakemake, log, res, rf):
                         "(%s)", ", ".join(unexplained["parameter"]), snakemake.output.real_fit)
 
 
-def main(snakemake, log):
+def run(snakemake, log, row_influence=False):
+    """The calibration of the config (:func:`lumbar.experiments.calibration.calibrate`); ``row_influence``: with
+    the diagnostic refits from its MAP (rule calibration_influence). Returns (result, start set, targets, data
+    kind)."""
     g, f, s, sr = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solver, snakemake.params.sr
     ref, real, data_kind = _reference(snakemake, log)
     geo = load_configured(g, levels=[f["level"]])
@@ -95,8 +96,13 @@ def main(snakemake, log):
                         transfer=sr["ligament_transfer"],
                         geometry_path=g["path"] if g["kind"] == "visible_human" else None,
                         anchor_start_values=anchor, prior=sr["ligament_prior"],
-                        row_influence=bool(sr.get("row_influence", True)))
+                        row_influence=row_influence)
     log.info("calibration wall time %.1f s", res.wall_time_s)
+    return res, paper, targets, data_kind
+
+
+def main(snakemake, log):
+    res, paper, targets, data_kind = run(snakemake, log)
     out_dir = Path(snakemake.output.characteristics[0]).parent
     cal.write_characteristics(res, snakemake.input.characteristics, out_dir,
                               reference_source=f"{snakemake.input.experiment} ({data_kind})")

@@ -495,6 +495,7 @@ def make_solver(model, cfg=None):
         solver.certifier = IpoptPostureSolver(solver, tol=cfg.get("ipopt_tol", 1e-5),
                                               max_iter=cfg.get("ipopt_max_iter", 50))
         solver.multistart = bool(cfg.get("multistart", True))
+        solver.handover_window = int(cfg.get("handover_window", 10))
     elif certifier != "sqp":
         raise ValueError(f"muscle_model.solver.certifier must be 'ipopt' or 'sqp', got {certifier!r}")
     return solver

@@ -140,6 +140,7 @@ class _Batch:
     iters: np.ndarray
     warm: list
     msg: list
+    costs: list = None       # phase 1: each scenario's cost after each iteration (the hand-over test)
 
 
 @dataclass
@@ -200,6 +201,13 @@ class RedundancySolver:
         self.certifier = None        # an IpoptPostureSolver (lumbar.muscles.nlp): certifies every reached optimum
         self.multistart = False      # cold solves: also IPOPT alone from the cold start; the lower certified cost wins
         self.multistart_max_iter = 150
+        # hand-over to IPOPT (phase 1, only with a certifier): a scenario that is reached (equilibrium, thorax on
+        # target) and whose cost fell by less than ``handover_rel`` (relative) over its last ``handover_window``
+        # iterations stops; IPOPT polishes it from there (as every reached point that fails its test). The SQP
+        # stalls at such points (line search or KKT residual ~1 for up to its whole budget) where IPOPT
+        # certifies in a few iterations; unreached scenarios keep their whole budget. 0: off.
+        self.handover_window = 0
+        self.handover_rel = 1e-4
 
     # ------------------------------------------------------------------ pieces
     def _params(self, params, a, idx):
@@ -532,8 +540,25 @@ class RedundancySolver:
             if act.size == 0:
                 break
             self._iterate(b, False, act)
+            if self.handover_window and self.certifier is not None:
+                self._handover(b, act)
         self._polish(b)
         return self._solutions(b)
+
+    def _handover(self, b: _Batch, act):
+        """Stop the reached scenarios of ``act`` whose cost stalled (see ``handover_window``); IPOPT takes over."""
+        st, w = b.st, self.handover_window
+        terr = np.linalg.norm(st["e"][act], axis=-1)
+        resid = np.abs(st["Q"][act]).max(-1)
+        for k, i in enumerate(act):
+            h = b.costs[i]
+            h.append(float(st["c"][i]))
+            if b.done[i] or len(h) <= w or resid[k] >= self.tol or terr[k] > self.max_tracking_deg:
+                continue
+            if h[-1 - w] - h[-1] < self.handover_rel * (1.0 + abs(h[-1])):
+                b.done[i] = True
+                b.msg[i] = (f"handed to IPOPT: reached, cost down by < {self.handover_rel:g} (relative) over "
+                            f"{w} SQP iterations")
 
     def _start(self, targets_deg, params, x0, R0, a0) -> _Batch:
         """The batch's start: poses, activations and state; for a cold start with targets beyond
@@ -560,7 +585,7 @@ class RedundancySolver:
         st = self._state(x, R, a, params, allidx, targets)
         return _Batch(x, R, a, st, params, targets, D=np.full(B, self.trust0), mu=np.full(B, self.mu0),
                       done=np.zeros(B, bool), optimal=np.zeros(B, bool), stop=np.zeros(B, bool),
-                      iters=np.zeros(B, int), warm=[None] * B, msg=[""] * B)
+                      iters=np.zeros(B, int), warm=[None] * B, msg=[""] * B, costs=[[] for _ in range(B)])
 
     def _iterate(self, b: _Batch, held, act):
         """One SQP iteration of the scenarios ``act``: QP steps, capped, then the line search and its acceptance

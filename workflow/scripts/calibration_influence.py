@@ -1,0 +1,62 @@
+"""Calibration stage, rule calibration_influence: the calibration's diagnostic refits from its MAP (leave one real
+row out, the facet stiffness held, the disc-only rows at a wider spread; lumbar.experiments.calibration.influence).
+
+The calibration is run again (calibrate.py's :func:`run`, deterministic) with the refits, in a job of its own so
+that every stage reading the calibrated set starts while they run. The MAP it refits from must be the one rule
+calibrate shipped (``posterior.csv``): a difference is an error, never a table about another fit.
+With ``stepwise_reduction.row_influence: false`` the table is its header alone.
+
+By hand: python workflow/scripts/calibration_influence.py calibration_influence --configfile config/test/config.yaml
+"""
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _common.py
+import _common  # noqa: E402
+
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+
+import calibrate  # noqa: E402
+from lumbar.experiments import calibration as cal  # noqa: E402
+from lumbar.inputs.io import write_table_atomic  # noqa: E402
+
+#: MAP agreement of the rerun with the shipped posterior, relative (fit units: log10 scales, mm, %; |difference| <=
+#: MAP_TOLERANCE * (1 + |value|)): the CSV keeps six significant digits (measured: differences up to 5e-6 on values
+#: of about 1); a larger difference means the two jobs fitted different problems
+MAP_TOLERANCE = 1e-5
+
+
+def check_same_map(shipped: pd.DataFrame, rerun: pd.DataFrame, path) -> None:
+    """Raise if the rerun's MAP (``map_fit`` per parameter) is not the one in the shipped posterior ``path``."""
+    a = shipped.set_index("parameter")["map_fit"]
+    b = rerun.set_index("parameter")["map_fit"]
+    if set(a.index) != set(b.index):
+        raise RuntimeError(f"{path}: parameters {sorted(a.index)}; the influence rerun fitted {sorted(b.index)}: "
+                           "rerun rule calibrate")
+    d = (a - b.reindex(a.index)).abs()
+    bad = d[~(d <= MAP_TOLERANCE * (1.0 + a.abs()))]
+    if len(bad):
+        raise RuntimeError(f"{path}: the influence rerun's MAP differs from the shipped one in "
+                           + ", ".join(f"{k} by {v:.3g}" for k, v in bad.items())
+                           + f" (fit units; tolerance {MAP_TOLERANCE} x (1 + |value|)): rerun rule calibrate")
+
+
+def main(snakemake, log):
+    if not bool(snakemake.params.sr.get("row_influence", True)):
+        log.info("stepwise_reduction.row_influence is false: %s holds the header alone", snakemake.output.row_influence)
+        write_table_atomic(pd.DataFrame(columns=list(cal.INFLUENCE_COLUMNS)), snakemake.output.row_influence)
+        return
+    res, _, _, _ = calibrate.run(snakemake, log, row_influence=True)
+    post, _ = cal.posterior_tables(res.info.get("final_fit"), res.info.get("prior_name", ""))
+    check_same_map(pd.read_csv(snakemake.input.posterior), post, snakemake.input.posterior)
+    infl = res.info.get("row_influence")
+    infl = infl if infl is not None else pd.DataFrame(columns=list(cal.INFLUENCE_COLUMNS))
+    write_table_atomic(infl, snakemake.output.row_influence)
+    log.info("wrote %s (%d refits from the MAP; %d converged)", snakemake.output.row_influence, len(infl),
+             int(np.sum(infl["converged"].astype(bool))) if "converged" in infl else len(infl))
+
+
+if __name__ == "__main__":
+    snakemake, log = _common.start(globals())
+    main(snakemake, log)
