@@ -78,7 +78,7 @@ def test_mock_snakemake_gives_the_rules_outputs(common, in_root):
     cal = common.mock_snakemake("calibrate", TEST_CONFIG)
     assert sur.output.table == "results/experiments/stepwise_reduction_surrogate.csv"
     assert cal.input.experiment == sur.output.table
-    assert len(cal.output) == 20 and len(cal.output.characteristics) == 6
+    assert len(cal.output) == 19 and len(cal.output.characteristics) == 6
 
 
 def test_mock_snakemake_rejects_wrong_wildcards(common, in_root):
