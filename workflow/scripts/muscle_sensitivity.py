@@ -30,11 +30,7 @@ def main(snakemake, log):
     log.info("chunk %s (ssl %s): %d scenarios in %.1f s, %d not reached, %d reached but not certified "
              "(max KKT residual %.1e)", param, ssl, len(out), time.perf_counter() - t0, int((~out["reached"]).sum()),
              int((out["reached"] & ~out["certified"]).sum()), out["kkt_residual"].max())
-    unc = out["reached"] & ~out["certified"]
-    warning = mm.uncertified_message(f"sensitivity chunk {param} (ssl {ssl})", list(out.index[unc]),
-                                     snakemake.output[0], out.loc[unc, "ipopt_status"])
-    if warning:
-        log.warning("%s", warning)
+    # the study's one WARNING for uncertified scenarios comes from rule muscle_sensitivity_table (all chunks)
     write_table_atomic(out, snakemake.output[0])
 
 if __name__ == "__main__":

@@ -546,8 +546,9 @@ def uncertified_message(what, which, table, statuses=()) -> str | None:
     why = ", ".join(sorted({str(s) for s in statuses})) or "see ipopt_status"
     return (f"{what}: {len(which)} reached posture(s) whose optimum IPOPT could not certify ({why}; certified=False "
             f"in {table}): read them as equilibria that may not be the optimum. A larger muscle_model.solver."
-            "ipopt_max_iter helps where IPOPT was still converging; near the edge of the muscles' capacity it may "
-            "stall at any limit")
+            "ipopt_max_iter helps where IPOPT was still converging; near the edge of the muscles' capacity, or where "
+            "the cost leaves the posture's distribution over the levels almost free (upright standing on the "
+            "calibrated passive set: docs/findings.md), it stalls at any limit")
 
 
 def solve_postures(model, solver, activities, props_list=None, start=None):
