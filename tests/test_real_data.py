@@ -213,6 +213,7 @@ def test_facet_share_row_reads_the_share_column(tmp_path):
     assert r["z"].iat[0] == pytest.approx((0.72 - 16) / RD.FACET_SHARE_ASSUMED_SD)
     rec = RD.facet_share_case(LITERATURE, c, tmp_path / "fs", config())
     assert "too few rows" in rec["decision"] and rec["why_not_named"].startswith("power")
+    assert rec["candidates_tried"].startswith("none: no library candidate acts on the facet share")
     assert abs(rec["z_half_spread"]) == pytest.approx(2 * abs(rec["largest_z"]))
     # control: a model share at the measured value has z 0
     _compression().assign(facet_share=0.16).to_csv(c, index=False)

@@ -478,6 +478,8 @@ def facet_share_case(literature_path, compression_path, out_dir, config) -> dict
     rec = case_record("facet_share", r, f"assumed {FACET_SHARE_ASSUMED_SD:g} percentage points (none published)",
                       f"posture {rows['posture'].iloc[0]}, load {FACET_SHARE_FORCE_N:g} N", z[1.0],
                       {f: dec for f in SPREAD_FACTORS}, config)
+    # the library has no candidate that acts on the facets' share of a compressive load: say so, not an empty cell
+    rec["candidates_tried"] = "none: no library candidate acts on the facet share of a compressive load"
     rec |= {"n_rows": n, "gap_before": abs(z[1.0]), "z_half_spread": z[0.5], "z_double_spread": z[2.0],
             "note": (f"model {rows['model_pct'].iloc[0]:.3g} % of a {FACET_SHARE_FORCE_N:g} N follower load vs "
                      f"about {rows['measured_pct'].iloc[0]:g} % measured; |z| {abs(z[0.5]):.2f} / {abs(z[1.0]):.2f} / "
