@@ -376,6 +376,16 @@ def test_validation_metrics_with_and_without_flagged_postures(model, baseline):
     assert m["r2"] == pytest.approx(np.corrcoef(ok["idp_sim_mpa"], ok["idp_in_vivo_mpa"])[0, 1] ** 2)
     assert m["r2_all"] == pytest.approx(np.corrcoef(val["idp_sim_mpa"], val["idp_in_vivo_mpa"])[0, 1] ** 2)
     assert m["rmse_all_mpa"] > m["rmse_mpa"]      # the flagged row (in vivo 0.2 MPa) is far off
+    # r2_reached: the reached activities, certified or not; an unreached one (thorax off target) stays out
+    sols5 = [st, fl, st, replace(fl, converged=False, certified=False),
+             replace(st, converged=False, reached=False, certified=False)]
+    iv5 = pd.concat([iv, pd.DataFrame({"activity": ["extension_20deg"], "idp_mpa": [3.0], "source": "x",
+                                       "kind": "x"})], ignore_index=True)
+    _, val5, m5 = validation(model, sols5, names + ["extension_19deg"], iv5)
+    rr = val5[val5["reached"]]
+    assert (m5["n"], m5["n_reached"], m5["n_total"]) == (3, 4, 5)
+    assert m5["r2_reached"] == pytest.approx(np.corrcoef(rr["idp_sim_mpa"], rr["idp_in_vivo_mpa"])[0, 1] ** 2)
+    assert m5["r2_reached"] != pytest.approx(m5["r2_all"]) and m5["r2_reached"] != pytest.approx(m5["r2"])
 
 
 def test_baseline_file_round_trips_the_baseline_postures(tmp_path):

@@ -503,3 +503,25 @@ def test_muscle_sentence_names_reached_but_uncertified_apart_from_not_reached(fa
     # control: the uncertified posture is not called "not reached", nor the unreached one "reached"
     assert "muscle capacity table): upright standing" not in text
     assert "(left out; Flags): crate far" not in text
+    # without the metrics of the reached activities, no such clause
+    assert "activities reached: R2" not in text
+
+
+def test_muscle_sentence_gives_the_fit_with_the_reached_but_uncertified_posture(fake_muscle_discrepancy):
+    """Where a reached posture is left out for its certificate, the first page also gives R2 and RMSE over every
+    reached activity (the metrics' r2_reached), so that a reader sees what the left-out posture would change."""
+    tmp, config, inputs = fake_muscle_discrepancy
+    t = Path("results/tables")
+    (t / "in_vivo_validation.csv").write_text(
+        "activity,idp_sim_mpa,idp_in_vivo_mpa,converged,reached,certified\n"
+        "upright_standing,0.43,0.5,False,True,False\n"
+        "flexion_36deg,0.93,1.08,True,True,True\n")
+    mm = Path("results/muscle_model")
+    (mm / "in_vivo_metrics.json").write_text(json.dumps(
+        {"r2": 0.5037, "rmse_mpa": 0.2052, "n": 3, "n_total": 5, "r2_reached": 0.7223, "rmse_reached_mpa": 0.1811,
+         "n_reached": 4}))
+    extra = [str(t / "in_vivo_validation.csv")]
+    html_path, _, _ = _build(tmp, config, inputs + [e for e in extra if e not in inputs])
+    text = parse_report(html_path).text
+    assert re.search(r"upright standing \(with it, over the 4 activities reached: R2 = 0\.72\d*, RMSE = 0\.18\d* MPa\)",
+                     text), text[:3000]

@@ -194,7 +194,9 @@ def validation(model, sols, names, in_vivo: pd.DataFrame, area_m2=18e-4):
     metrics = {"n": int(len(ok)), "n_total": int(len(val)), "r2": None, "rmse_mpa": None,
                "r2_definition": "squared Pearson correlation (linear fit of simulated vs in-vivo IDP, as the paper)",
                "paper_r2": 0.98}
-    for suffix, d in (("", ok), ("_all", val)):
+    reached = val[val["reached"].astype(bool)]
+    metrics["n_reached"] = int(len(reached))
+    for suffix, d in (("", ok), ("_reached", reached), ("_all", val)):
         if len(d) >= 3:
             r = np.corrcoef(d["idp_sim_mpa"], d["idp_in_vivo_mpa"])[0, 1]
             metrics["r2" + suffix] = float(r ** 2)
@@ -203,4 +205,7 @@ def validation(model, sols, names, in_vivo: pd.DataFrame, area_m2=18e-4):
             metrics["r2" + suffix] = metrics["rmse" + suffix + "_mpa"] = None
     metrics["all_definition"] = ("r2_all, rmse_all_mpa: every activity, including the IDP of postures flagged as "
                                  "not converged (their thorax misses the target; not a model prediction)")
+    metrics["reached_definition"] = ("r2_reached, rmse_reached_mpa: the activities reached (equilibrium, thorax on "
+                                     "target), including those whose optimum IPOPT could not certify (an equilibrium "
+                                     "that may not be the optimum)")
     return seg, val, metrics

@@ -533,6 +533,9 @@ class ReportBuilder:
                     if unc:
                         s += (f"; reached, but IPOPT could not certify the optimum (left out; Flags): "
                               f"{', '.join(unc)}")
+                        if m.get("r2_reached") is not None and m.get("rmse_reached_mpa") is not None:
+                            s += (f" (with it, over the {fmt(m.get('n_reached'))} activities reached: R2 = "
+                                  f"{fmt(m['r2_reached'])}, RMSE = {fmt(m['rmse_reached_mpa'])} MPa)")
                 if miss:
                     s += f"; not reached (beyond its muscles' capacity; muscle capacity table): {', '.join(miss)}"
         return s + "."
