@@ -1,6 +1,6 @@
 """Calibration stage, rule calibrate: the backward stepwise reduction (Tables 1-3), the admissibility-constrained
-final fit and its posterior, and the calibrated characteristic set (lumbar.experiments.calibration). Its diagnostic
-refits from the MAP are rule calibration_influence (calibration_influence.py, which calls :func:`run`).
+final fit and its posterior, and the calibrated characteristic set (lumbar.experiments.calibration; the configured
+run: lumbar.experiments.calibration.configured, shared with rule calibration_influence).
 
 By hand: python workflow/scripts/calibrate.py calibrate --configfile config/test/config.yaml
 """
@@ -13,24 +13,8 @@ import _common  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from lumbar.experiments import calibration as cal  # noqa: E402
-from lumbar.experiments.stepwise_reduction import read_experiment_table, reference_table  # noqa: E402
-from lumbar.geometry.configured import load_configured  # noqa: E402
 from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
-
-
-def _reference(snakemake, log):
-    """The reference table (experiment, derived disc-only rows, real targets) and its data kind."""
-    exp = read_experiment_table(snakemake.input.experiment)
-    derived = read_experiment_table(_common.first(snakemake.input.derived)) \
-        if _common.first(snakemake.input.derived) else None
-    real = [read_experiment_table(p) for p in _common.as_list(snakemake.input.real_targets)]
-    real = pd.concat(real, ignore_index=True) if real else None
-    ref = reference_table(exp, derived, real)
-    data_kind = "surrogate" if (ref["kind"] == "surrogate").any() else "measured"
-    log.info("calibrating on %s (%d rows; kinds %s)", snakemake.input.experiment, len(ref),
-             dict(ref["kind"].value_counts()))
-    return ref, real, data_kind
 
 
 def _write_fit_tables(snakemake, log, res, targets):
@@ -72,37 +56,11 @@ def _log_bounds(snakemake, log, res, rf):
                         "(%s)", ", ".join(unexplained["parameter"]), snakemake.output.real_fit)
 
 
-def run(snakemake, log, row_influence=False):
-    """The calibration of the config (:func:`lumbar.experiments.calibration.calibrate`); ``row_influence``: with
-    the diagnostic refits from its MAP (rule calibration_influence). Returns (result, start set, targets, data
-    kind)."""
-    g, f, s, sr = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solver, snakemake.params.sr
-    ref, real, data_kind = _reference(snakemake, log)
-    geo = load_configured(g, levels=[f["level"]])
-    paper = load_characteristic_set("calibrated", data_dir=snakemake.input.characteristics)
-    anchor = cal.read_fit_start(_common.first(snakemake.input.generator_fit))
-    targets, origin = cal.admissible_fit_targets(ref, real)
-    if targets is None:
-        log.warning("no intact ROM rows at 10 N*m in %s nor in stepwise_reduction.real_targets: the calibration ends "
-                    "at the stepwise fits, WITHOUT the admissibility constraints (results/calibration/"
-                    "admissibility.csv says which criteria the set fails)", snakemake.input.experiment)
-    else:
-        log.info("final fit (admissibility-constrained) pinned to %s (%d rows)", origin, len(targets))
-    res = cal.calibrate(geo, ref, initial=paper, level=f["level"], k_shear=f.get("disc_shear_stiffness_n_per_m"),
-                        tolerance_deg=sr["outlier_tolerance_deg"], data_kind=data_kind, max_iter=s["max_iter"],
-                        surrogate_weight=sr["surrogate_weight"], family=sr["calibration_family"],
-                        final_surrogate_weight=sr["final_surrogate_weight"],
-                        real_targets=targets,
-                        transfer=sr["ligament_transfer"],
-                        geometry_path=g["path"] if g["kind"] == "visible_human" else None,
-                        anchor_start_values=anchor, prior=sr["ligament_prior"],
-                        row_influence=row_influence)
-    log.info("calibration wall time %.1f s", res.wall_time_s)
-    return res, paper, targets, data_kind
-
-
 def main(snakemake, log):
-    res, paper, targets, data_kind = run(snakemake, log)
+    p, i = snakemake.params, snakemake.input
+    c = cal.calibrate_configured(p.geometry, p.fsu, p.solver, p.sr, i.experiment, _common.first(i.derived),
+                                 _common.as_list(i.real_targets), i.characteristics, _common.first(i.generator_fit))
+    res, paper, targets, data_kind = c.result, c.start_set, c.targets, c.data_kind
     out_dir = Path(snakemake.output.characteristics[0]).parent
     cal.write_characteristics(res, snakemake.input.characteristics, out_dir,
                               reference_source=f"{snakemake.input.experiment} ({data_kind})")

@@ -1,7 +1,8 @@
 """Calibration stage, rule calibration_influence: the calibration's diagnostic refits from its MAP (leave one real
 row out, the facet stiffness held, the disc-only rows at a wider spread; lumbar.experiments.calibration.influence).
 
-The calibration is run again (calibrate.py's :func:`run`, deterministic) with the refits, in a job of its own so
+The calibration is run again (lumbar.experiments.calibration.calibrate_configured, as rule calibrate runs it;
+deterministic) with the refits, in a job of its own so
 that every stage reading the calibrated set starts while they run. The MAP it refits from must be the one rule
 calibrate shipped (``posterior.csv``): a difference is an error, never a table about another fit.
 With ``stepwise_reduction.row_influence: false`` the table is its header alone.
@@ -17,7 +18,6 @@ import _common  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-import calibrate  # noqa: E402
 from lumbar.experiments import calibration as cal  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 
@@ -47,7 +47,10 @@ def main(snakemake, log):
         log.info("stepwise_reduction.row_influence is false: %s holds the header alone", snakemake.output.row_influence)
         write_table_atomic(pd.DataFrame(columns=list(cal.INFLUENCE_COLUMNS)), snakemake.output.row_influence)
         return
-    res, _, _, _ = calibrate.run(snakemake, log, row_influence=True)
+    p, i = snakemake.params, snakemake.input
+    res = cal.calibrate_configured(p.geometry, p.fsu, p.solver, p.sr, i.experiment, _common.first(i.derived),
+                                   _common.as_list(i.real_targets), i.characteristics, _common.first(i.generator_fit),
+                                   row_influence=True).result
     post, _ = cal.posterior_tables(res.info.get("final_fit"), res.info.get("prior_name", ""))
     check_same_map(pd.read_csv(snakemake.input.posterior), post, snakemake.input.posterior)
     infl = res.info.get("row_influence")

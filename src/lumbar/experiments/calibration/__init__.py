@@ -12,6 +12,8 @@ the admissible (MAP) fit that ends it. Modules by job:
 - :mod:`.influence`: the MAP refitted without each real row in turn, and what that does to the judged internal
   loads (:func:`row_influence`);
 - :mod:`.tables`: the calibrated characteristic directory and the Table 1-3 analogs;
+- :mod:`.configured`: :func:`calibrate_configured`, the calibration as the workflow's config and inputs set it up
+  (rules calibrate and calibration_influence);
 - :mod:`.common`: what the fits share.
 
 The figures (Figs. 4-5 analogs) are drawn by :mod:`lumbar.plots.calibration`. This package never imports snakemake.
@@ -21,6 +23,7 @@ from .admissible import (BOUND_REASONS, DATA_SD_REL, DISC_TORQUE_SCALE_BOUNDS, F
                          AdmissibleFit, admissible_fit_targets, fit_admissible, posterior_tables, read_fit_start,
                          shift_parameter)
 from .common import AT_BOUND_FRACTION, IDENTIFIABLE_MIN_DEG, PENALTY
+from .configured import ConfiguredCalibration, calibrate_configured, reference_inputs
 from .disc import (DISC_STAGE, P1_MIN_NM, c_zero, derived_disc_only_rows, eq3, fit_disc_direction, invert_eq3,
                    softplus_zero_law)
 from .influence import COLUMNS as INFLUENCE_COLUMNS
@@ -41,6 +44,8 @@ __all__ = [
     # stepwise driver
     "A_BOUNDS", "B_BOUNDS", "CALIBRATED_LIGAMENTS", "CONCAVE_CANDIDATES", "D_BOUNDS", "F0_BOUNDS", "FACET_STAGE",
     "K_FACET_BOUNDS", "LIGAMENT_STAGE", "ORDER", "CalibrationResult", "calibrate",
+    # the calibration as the workflow configures it
+    "ConfiguredCalibration", "calibrate_configured", "reference_inputs",
     # shared by the fits
     "AT_BOUND_FRACTION", "IDENTIFIABLE_MIN_DEG", "PENALTY",
     # real-target fit
