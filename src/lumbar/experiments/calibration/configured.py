@@ -56,8 +56,8 @@ def calibrate_configured(geometry: dict, fsu: dict, solver: dict, sr: dict, expe
     targets, origin = admissible_fit_targets(ref, real)
     if targets is None:
         log.warning("no intact ROM rows at 10 N*m in %s nor in stepwise_reduction.real_targets: the calibration ends "
-                    "at the stepwise fits, WITHOUT the admissibility constraints (results/calibration/"
-                    "admissibility.csv says which criteria the set fails)", experiment)
+                    "at the stepwise fits, WITHOUT the admissibility constraints (the admissibility table of the "
+                    "calibration stage says which criteria the set fails)", experiment)
     else:
         log.info("final fit (admissibility-constrained) pinned to %s (%d rows)", origin, len(targets))
     res = calibrate(geo, ref, initial=paper, level=fsu["level"], k_shear=fsu.get("disc_shear_stiffness_n_per_m"),
