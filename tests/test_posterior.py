@@ -322,3 +322,99 @@ def test_disc_torque_prior_does_not_count_the_disc_only_curve_a_second_time():
     assert (1.0 / math.log10(1.0 + DATA_SD_REL) ** 2) / rows > 0.5          # the double count it replaces
     # a direction without disc-only rows in the likelihood keeps the curve as its prior, at a measured row's spread
     assert sd[1] == pytest.approx(math.log10(1.0 + DATA_SD_REL))
+
+
+# ------------------------------------------------------------------ checked bands: draws where the linearisation fails
+def _shift1(q, name, d):
+    q = np.array(q, float)
+    q[int(name[1:])] += d
+    return q
+
+
+def _gauss(cov, n, seed=0):
+    return np.random.default_rng(seed).multivariate_normal(np.zeros(len(cov)), cov, size=n)
+
+
+def test_checked_band_keeps_a_linear_band_that_passes_its_check_and_runs_no_draw():
+    cov = np.array([[0.04]])
+    calls = []
+
+    def predict(q):
+        calls.append(1)
+        return np.array([2.0 * q[0] + 5.0])
+
+    b = P.checked_band(predict, np.zeros(1), ["p0"], cov, _shift1, lower=0.0, offsets=_gauss(cov, 64))
+    assert b.n_draws == 0 and list(b.method) == [P.METHOD_LINEAR] and len(calls) == 2   # MAP + one step, no draw
+    assert b.low90[0] == pytest.approx(5.0 - P.Z90 * 0.4) and b.high90[0] == pytest.approx(5.0 + P.Z90 * 0.4)
+
+
+def test_checked_band_samples_a_positive_quantity_whose_linear_band_goes_negative():
+    # y = exp(q), q ~ N(0, 0.8^2): the linear band 1 +- 1.645 * 0.8 reaches below 0, the true 90 % band is
+    # exp(+-1.645 * 0.8) = [0.27, 3.73]
+    s = 0.8
+    cov = np.array([[s * s]])
+    D = _gauss(cov, 4000, seed=1)
+    b = P.checked_band(lambda q: np.exp(q), np.zeros(1), ["p0"], cov, _shift1, lower=0.0, offsets=D)
+    assert b.method[0] == P.METHOD_BOUND and b.n_draws == 4000
+    assert b.low90[0] == pytest.approx(np.exp(-P.Z90 * s), rel=0.1)
+    assert b.high90[0] == pytest.approx(np.exp(P.Z90 * s), rel=0.1)
+    # control: without the physical bound nothing flags the row and the impossible linear band stays
+    c = P.checked_band(lambda q: np.exp(q), np.zeros(1), ["p0"], cov, _shift1, offsets=D)
+    assert c.n_draws == 0 and c.low90[0] < 0.0
+    # without draws the failing row is clipped at the bound, and says so
+    d = P.checked_band(lambda q: np.exp(q), np.zeros(1), ["p0"], cov, _shift1, lower=0.0)
+    assert d.method[0] == P.METHOD_CLIPPED and d.low90[0] == 0.0 and d.high90[0] == pytest.approx(1 + P.Z90 * s, rel=1e-2)
+
+
+def test_checked_band_compares_every_row_with_the_draws_once_they_run():
+    cov = np.array([[0.64]])
+
+    def predict(q):
+        x = np.asarray(q, float)[0]
+        return np.array([np.exp(x), x * x + 5.0, 2.0 * x + 1.0])   # bounded; curved, no bound; linear, no bound
+
+    b = P.checked_band(predict, np.zeros(1), ["p0"], cov, _shift1, lower=[0.0, np.nan, np.nan],
+                       offsets=_gauss(cov, 400))
+    assert list(b.method) == [P.METHOD_BOUND, P.METHOD_NONLINEAR, P.METHOD_LINEAR]
+    # the curved row's linear band has no width at q = 0 (zero gradient); the draws' band is chi-square shaped
+    assert b.low90[1] >= 5.0 and b.high90[1] == pytest.approx(5.0 + 0.64 * P.Z90**2, rel=0.2)
+    assert b.high90[2] == pytest.approx(1.0 + 2.0 * P.Z90 * 0.8)
+
+
+def test_checked_band_says_when_too_few_draws_converge():
+    cov = np.array([[0.64]])
+
+    def draw(q):
+        return np.array([np.nan]) if np.asarray(q)[0] > -1.0 else np.exp(q)   # most draws "do not converge"
+
+    b = P.checked_band(np.exp, np.zeros(1), ["p0"], cov, _shift1, lower=0.0, predict_draw=draw,
+                       offsets=_gauss(cov, 64))
+    assert b.method[0] == P.METHOD_CLIPPED and b.low90[0] == 0.0 and "64 posterior draws" in b.summary()
+
+
+def test_sample_posterior_reproduces_a_gaussian_posterior_and_respects_a_one_sided_constraint():
+    """The MCMC on r(q) = A q - b recovers the analytic Gaussian posterior (mean, covariance), is seeded; with a steep
+    one-sided penalty inactive at the MAP (zero curvature there, so the Laplace spread ignores it), the draws respect
+    it and their spread is below the Laplace one: the case the bands need the draws for."""
+    A = np.array([[2.0, 0.5], [0.0, 1.0], [1.0, 1.0]])
+    b = np.array([1.0, 0.5, 0.2])
+    q_map = np.linalg.lstsq(A, b, rcond=None)[0]
+    cov = np.linalg.inv(A.T @ A)
+    post = P.laplace_posterior(["p0", "p1"], q_map, q_map, np.ones(2), -10 * np.ones(2), 10 * np.ones(2), A,
+                               A @ q_map - b, ["r0", "r1", "r2"], 3)
+    s = P.sample_posterior(lambda q: A @ q - b, post, walkers=16, steps=1500, burn_in=300, keep=200, seed=3)
+    np.testing.assert_allclose(s.chain_sd, np.sqrt(np.diag(cov)), rtol=0.15)
+    assert np.all(np.abs(s.draws.mean(axis=0) - q_map) < 0.25 * np.sqrt(np.diag(cov)))
+    s2 = P.sample_posterior(lambda q: A @ q - b, post, walkers=16, steps=1500, burn_in=300, keep=200, seed=3)
+    np.testing.assert_array_equal(s.draws, s2.draws)
+    t = P.sampling_table(post, s)
+    assert list(t.columns) == list(P.SAMPLING_COLUMNS) and t["sd_ratio_sampled_over_laplace"].between(0.85, 1.15).all()
+
+    def walled(q):   # p0 may not exceed its MAP by more than 0.05: a steep one-sided penalty, zero at the MAP
+        return np.concatenate([A @ q - b, [1e3 * max(0.0, q[0] - q_map[0] - 0.05)]])
+
+    w = P.sample_posterior(walled, post, walkers=16, steps=1500, burn_in=300, keep=200, seed=3)
+    assert w.draws[:, 0].max() <= q_map[0] + 0.06
+    assert w.chain_sd[0] < 0.8 * np.sqrt(cov[0, 0])
+    # control: offsets are the draws minus the MAP
+    np.testing.assert_allclose(w.offsets, w.draws - q_map)

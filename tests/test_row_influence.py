@@ -212,20 +212,14 @@ def test_influence_sentence_keeps_a_stopped_refit_and_is_silent_when_no_row_move
 
 
 def test_influence_job_refuses_a_map_other_than_the_shipped_one():
-    """The influence rule reruns the calibration; its table must describe the shipped MAP. Rounding of the CSV (six
-    significant digits) passes; a different fit fails, naming the parameter (control: the same table passes)."""
-    import importlib.util
-    import sys
-    from pathlib import Path
-
+    """The influence and draws rules rerun the calibration; their tables must describe the shipped MAP. Rounding of
+    the CSV (six significant digits) passes; a different fit fails, naming the parameter (control: the same table
+    passes)."""
     import pandas as pd
     import pytest
 
-    scripts = Path(__file__).resolve().parents[1] / "workflow" / "scripts"
-    sys.path.insert(0, str(scripts))
-    spec = importlib.util.spec_from_file_location("calibration_influence", scripts / "calibration_influence.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    from lumbar.experiments import calibration as mod
+
     shipped = pd.DataFrame({"parameter": ["ISL:scale", "facet_stiffness"], "map_fit": [0.571398, 6.13522]})
     rounded = shipped.assign(map_fit=[0.5713984, 6.135224])
     mod.check_same_map(shipped, shipped, "posterior.csv")

@@ -61,6 +61,40 @@ rule calibration_influence:
         "../scripts/calibration_influence.py"
 
 
+# Draws from the calibration's posterior: a short MCMC (emcee) on the objective the MAP fit minimises, in a job of
+# its own (the calibration rerun deterministically, its MAP checked against the shipped one). The band rules run
+# these draws forward where a linearised band fails its check (lumbar.experiments.posterior.checked_band).
+rule calibration_draws:
+    input:
+        geometry_inputs,
+        experiment=stepwise_reduction_experiment,
+        derived=stepwise_reduction_derived,
+        real_targets=config["stepwise_reduction"]["real_targets"],
+        characteristics=characteristics_dir(),
+        characteristic_tables=characteristic_tables(
+            config["characteristics"]["data_dir"]
+        ),
+        generator_fit=out("virtual_experiment", "generator_fit"),
+        posterior=out("calibration", "posterior"),
+    output:
+        **stage_outputs("calibration", "calibration_draws"),
+    log:
+        log_file("calibration_draws"),
+    benchmark:
+        benchmark_file("calibration_draws")
+    # the band rules wait for it
+    priority: 8
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        geometry=config["geometry"],
+        fsu=config["fsu"],
+        solver=config["solver"],
+        sr=config["stepwise_reduction"],
+    script:
+        "../scripts/calibration_draws.py"
+
+
 rule fig4_disc_torque_angle:
     input:
         points=out("calibration", "disc_points"),

@@ -35,6 +35,7 @@ rule l2s1_bands:
         characteristics=outs("calibration", "characteristics"),
         posterior=out("calibration", "posterior"),
         covariance=out("calibration", "covariance"),
+        draws=out("calibration", "draws"),
         cables=config["l2s1"]["cables"],
     output:
         **stage_outputs("l2s1", "l2s1_bands"),

@@ -34,6 +34,7 @@ rule load_sharing_bands:
         characteristics=outs("calibration", "characteristics"),
         posterior=out("calibration", "posterior"),
         covariance=out("calibration", "covariance"),
+        draws=out("calibration", "draws"),
     output:
         **stage_outputs("load_sharing", "load_sharing_bands"),
     log:

@@ -30,6 +30,7 @@ rule stepwise_reduction_bands:
         characteristics=outs("calibration", "characteristics"),
         posterior=out("calibration", "posterior"),
         covariance=out("calibration", "covariance"),
+        draws=out("calibration", "draws"),
     output:
         **stage_outputs("stepwise_reduction", "stepwise_reduction_bands"),
     log:

@@ -37,6 +37,7 @@ rule multilevel_validation:
         prior=out("calibration", "prior"),
         posterior=out("calibration", "posterior"),
         covariance=out("calibration", "covariance"),
+        draws=out("calibration", "draws"),
         characteristics=outs("calibration", "characteristics"),
         published=characteristic_tables(
             config["characteristics"]["data_dir"], ["calibrated"]

@@ -21,26 +21,6 @@ import pandas as pd  # noqa: E402
 from lumbar.experiments import calibration as cal  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 
-#: MAP agreement of the rerun with the shipped posterior, relative (fit units: log10 scales, mm, %; |difference| <=
-#: MAP_TOLERANCE * (1 + |value|)): the CSV keeps six significant digits (measured: differences up to 5e-6 on values
-#: of about 1); a larger difference means the two jobs fitted different problems
-MAP_TOLERANCE = 1e-5
-
-
-def check_same_map(shipped: pd.DataFrame, rerun: pd.DataFrame, path) -> None:
-    """Raise if the rerun's MAP (``map_fit`` per parameter) is not the one in the shipped posterior ``path``."""
-    a = shipped.set_index("parameter")["map_fit"]
-    b = rerun.set_index("parameter")["map_fit"]
-    if set(a.index) != set(b.index):
-        raise RuntimeError(f"{path}: parameters {sorted(a.index)}; the influence rerun fitted {sorted(b.index)}: "
-                           "rerun rule calibrate")
-    d = (a - b.reindex(a.index)).abs()
-    bad = d[~(d <= MAP_TOLERANCE * (1.0 + a.abs()))]
-    if len(bad):
-        raise RuntimeError(f"{path}: the influence rerun's MAP differs from the shipped one in "
-                           + ", ".join(f"{k} by {v:.3g}" for k, v in bad.items())
-                           + f" (fit units; tolerance {MAP_TOLERANCE} x (1 + |value|)): rerun rule calibrate")
-
 
 def main(snakemake, log):
     if not bool(snakemake.params.sr.get("row_influence", True)):
@@ -52,7 +32,7 @@ def main(snakemake, log):
                                    _common.as_list(i.real_targets), i.characteristics, _common.first(i.generator_fit),
                                    row_influence=True).result
     post, _ = cal.posterior_tables(res.info.get("final_fit"), res.info.get("prior_name", ""))
-    check_same_map(pd.read_csv(snakemake.input.posterior), post, snakemake.input.posterior)
+    cal.check_same_map(pd.read_csv(snakemake.input.posterior), post, snakemake.input.posterior)
     infl = res.info.get("row_influence")
     infl = infl if infl is not None else pd.DataFrame(columns=list(cal.INFLUENCE_COLUMNS))
     write_table_atomic(infl, snakemake.output.row_influence)

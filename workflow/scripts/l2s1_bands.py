@@ -33,14 +33,15 @@ def main(snakemake, log):
                              tol=min(s["tol_force_n"], s["tol_moment_nm"]), moment_nm=p["moment_nm"])
         return df
 
-    bands = table_bands_from_files(snakemake.input.posterior, snakemake.input.covariance, table_of, "idp_mpa", KEYS, cs,
-                                   shift_parameter)
+    bands, band = table_bands_from_files(snakemake.input.posterior, snakemake.input.covariance, snakemake.input.draws,
+                                         table_of, "idp_mpa", KEYS, cs, shift_parameter)
     write_table_atomic(bands, snakemake.output[0])
     if not len(bands):
         log.info("the calibration has no posterior (no admissible fit): no bands")
     else:
         log.info("posterior bands of %d L2-S1 IDP scenarios; median 90 %% half-width %.3g MPa", len(bands),
                  float((bands["high90"] - bands["map"]).median()))
+        log.info("how the bands were made: %s", band.summary())
 
 
 if __name__ == "__main__":

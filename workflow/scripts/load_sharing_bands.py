@@ -1,6 +1,7 @@
 """Load-sharing stage, rule load_sharing_bands: the 90 % posterior bands of the calibrated unit's intact
-moment-rotation curves and internal loads, by linearisation (the calibration's Laplace posterior,
-role calibration.covariance of the stage manifests; lumbar.experiments.posterior.curve_bands).
+moment-rotation curves and internal loads, by linearisation, checked, and from posterior draws where the check
+fails (the calibration's Laplace posterior, role calibration.covariance of the stage manifests;
+lumbar.experiments.posterior.curve_bands).
 
 By hand: python workflow/scripts/load_sharing_bands.py load_sharing_bands --configfile config/test/config.yaml
 """
@@ -14,7 +15,7 @@ import pandas as pd  # noqa: E402
 from lumbar.experiments import load_sharing as LS  # noqa: E402
 from lumbar.experiments.calibration import shift_parameter  # noqa: E402
 from lumbar.experiments.fsu import build_fsu  # noqa: E402
-from lumbar.experiments.posterior import BAND_COLUMNS, curve_bands, read_posterior  # noqa: E402
+from lumbar.experiments.posterior import BAND_COLUMNS, curve_bands, read_draw_offsets, read_posterior  # noqa: E402
 from lumbar.geometry.configured import load_configured  # noqa: E402
 from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
@@ -39,12 +40,15 @@ def main(snakemake, log):
     def curves_of(fsu):
         return LS.moment_rotation_curves(fsu, moments_nm=moments, stages=("intact",), max_iter=s["max_iter"])
 
-    bands = curve_bands(build, cs, names, cov, shift_parameter, curves_of, list(LS.CURVE_DIRECTIONS), moments)
+    offsets = read_draw_offsets(snakemake.input.posterior, snakemake.input.draws, names)
+    bands, band = curve_bands(build, cs, names, cov, shift_parameter, curves_of, list(LS.CURVE_DIRECTIONS), moments,
+                              offsets=offsets)
     write_table_atomic(bands, snakemake.output.bands)
     top = bands[np.isclose(bands["moment_nm"], moments[-1]) & (bands["quantity"] == "rotation_deg")]
     log.info("posterior bands of the intact curves (%d parameters, %d values); rotation at %g N*m: %s", len(names),
              len(bands), moments[-1], "; ".join(f"{r.direction} {r.map:.2f} +- {1.645 * r.sd:.2f} deg"
                                                for r in top.itertuples()))
+    log.info("how the bands were made: %s", band.summary())
 
 
 if __name__ == "__main__":

@@ -20,7 +20,7 @@ from lumbar.experiments.calibration import read_prior_set, shift_parameter  # no
 from lumbar.experiments import validation as V  # noqa: E402
 from lumbar.experiments.fsu import build_fsu  # noqa: E402
 from lumbar.experiments.load_sharing import moment_rotation_curves  # noqa: E402
-from lumbar.experiments.posterior import read_posterior  # noqa: E402
+from lumbar.experiments.posterior import read_draw_offsets, read_posterior  # noqa: E402
 from lumbar.geometry.configured import load_configured  # noqa: E402
 from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
@@ -62,6 +62,7 @@ def main(snakemake, log):
     post = read_posterior(snakemake.input.posterior, snakemake.input.covariance)
     if post is not None and len(rom):
         bands = V.level_rom_bands(geo, cal, levels, post[0], post[1], shift_parameter,
+                                  offsets=read_draw_offsets(snakemake.input.posterior, snakemake.input.draws, post[0]),
                                   facet_stiffness=f.get("facet_stiffness_n_per_m"),
                                   k_shear=f.get("disc_shear_stiffness_n_per_m"))
         rom = rom.merge(bands[["level", "direction", "band_low", "band_high"]].rename(

@@ -32,14 +32,15 @@ def main(snakemake, log):
                                                   tol=min(s["tol_force_n"], s["tol_moment_nm"]),
                                                   load_steps=s["load_steps"])
 
-    bands = table_bands_from_files(snakemake.input.posterior, snakemake.input.covariance, table_of, "rom_deg", KEYS, cs,
-                                   shift_parameter)
+    bands, band = table_bands_from_files(snakemake.input.posterior, snakemake.input.covariance, snakemake.input.draws,
+                                         table_of, "rom_deg", KEYS, cs, shift_parameter)
     write_table_atomic(bands, snakemake.output[0])
     if not len(bands):
         log.info("the calibration has no posterior (no admissible fit): no bands")
     else:
         log.info("posterior bands of %d stepwise-reduction scenarios; median 90 %% half-width %.3g deg", len(bands),
                  float((bands["high90"] - bands["map"]).median()))
+        log.info("how the bands were made: %s", band.summary())
 
 
 if __name__ == "__main__":

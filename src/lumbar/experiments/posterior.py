@@ -104,7 +104,7 @@ def laplace_posterior(names, q, prior_centre, prior_sd, lower, upper, jacobian, 
                      np.asarray(lower, float), np.asarray(upper, float), cov, J, r, list(residual_names), int(n_data))
 
 
-def _natural(name, v):
+def natural_units(name, v):
     """Fit units -> natural units and unit of a parameter."""
     v = np.asarray(v, float)
     if name.endswith(":pre_elongation"):
@@ -126,7 +126,7 @@ def posterior_table(post: Posterior, sources=None, bound_reasons=None) -> pd.Dat
         c, s, m = post.prior_centre[j], post.prior_sd[j], post.map_q[j]
         lo_p, hi_p = max(c - Z90 * s, post.lower[j]), min(c + Z90 * s, post.upper[j])
         lo_q, hi_q = max(m - Z90 * sd[j], post.lower[j]), min(m + Z90 * sd[j], post.upper[j])
-        val, unit = _natural(n, [c, lo_p, hi_p, m, lo_q, hi_q])
+        val, unit = natural_units(n, [c, lo_p, hi_p, m, lo_q, hi_q])
         rows.append({
             "parameter": n, "unit": unit, "fit_unit": "mm" if n.endswith(":pre_elongation") else "log10",
             "prior_centre": val[0], "prior_90_low": val[1], "prior_90_high": val[2],
@@ -189,12 +189,225 @@ def linearised_band(predict, charset, names, cov, shift, step: float = BAND_STEP
     return y0, np.where(np.isfinite(sd), sd, np.nan), G
 
 
+#: where draws run forward, a linearised band whose ends lie further than this fraction of its width from the draws'
+#: 5th and 95th percentiles fails the comparison and takes the draws' band
+BAND_AGREEMENT = 0.25
+#: a row takes the draws' band only if at least this fraction of the draws gave it a (converged) value
+BAND_MIN_VALID = 0.5
+#: band_method values: how a row's 90 % band was made
+METHOD_LINEAR = "linearised"
+METHOD_BOUND = "draws: linear band crosses the physical bound"
+METHOD_NONLINEAR = "draws: linear band off the draws' band"
+METHOD_CLIPPED = "linearised, clipped at the physical bound (no usable draws)"
+
+
+@dataclass
+class Band:
+    """Checked 90 % bands of m predictions (:func:`checked_band`)."""
+
+    y: np.ndarray           # (m,) prediction at the MAP
+    sd: np.ndarray          # (m,) linearised standard deviation
+    low90: np.ndarray       # (m,) lower end of the 90 % band used
+    high90: np.ndarray      # (m,) upper end
+    method: np.ndarray      # (m,) how the band was made (METHOD_*)
+    n_draws: int            # posterior draws run forward (0: the linearisation passed its check everywhere)
+    n_draws_failed: int     # draws whose forward run raised (their rows count as not converged)
+
+    def summary(self) -> str:
+        """One log line: rows per method and the draws run."""
+        vals, counts = np.unique(self.method.astype(str), return_counts=True)
+        rows = "; ".join(f"{c} {v}" for v, c in zip(vals, counts))
+        draws = (f"{self.n_draws} posterior draws run forward ({self.n_draws_failed} failed)" if self.n_draws
+                 else "no draws run")
+        return f"{rows}; {draws}"
+
+
+def checked_band(predict, charset, names, cov, shift, lower=None, predict_draw=None, offsets=None) -> Band:
+    """90 % bands of the predictions ``predict(charset) -> (m,)`` by linearisation (:func:`linearised_band`),
+    checked, and from posterior draws where the check shows that the linearisation fails.
+
+    The check: a prediction with a physical lower bound (``lower`` (m,) or scalar, NaN for none: a tension, a
+    contact force, a range of motion) whose linear band reaches below it is not a linear function of the parameters
+    there. If any row fails, the posterior draws ``offsets`` (n, p: draw minus MAP in fit units, the calibration's
+    MCMC sample, :func:`sample_posterior`) are run forward (``predict_draw``, default ``predict``: NaN for a row
+    whose equilibrium did not converge), and
+    - the rows that failed take the draws' 5th-95th percentile band;
+    - every other row is compared with the draws too: if an end of its linear band lies more than
+      :data:`BAND_AGREEMENT` of the band's width from the draws', it takes the draws' band as well.
+    A failing row without draws, or with fewer than :data:`BAND_MIN_VALID` valid ones, keeps its linear band clipped
+    at the bound and says so. Without a failing row no draw is run."""
+    y, sd, _ = linearised_band(predict, charset, names, cov, shift)
+    low, high = y - Z90 * sd, y + Z90 * sd
+    m = len(y)
+    lo_b = np.broadcast_to(np.asarray(np.nan if lower is None else lower, float), (m,))
+    tol = 1e-9 * (1.0 + np.abs(y))
+    below = np.isfinite(lo_b) & np.isfinite(low) & (low < lo_b - tol)
+    method = np.full(m, METHOD_LINEAR, dtype=object)
+    low, high = low.copy(), high.copy()
+    D = np.empty((0, len(names))) if offsets is None else np.atleast_2d(np.asarray(offsets, float))
+    if not below.any() or not len(D):
+        low[below] = lo_b[below]
+        method[below] = METHOD_CLIPPED
+        return Band(y, sd, low, high, method, 0, 0)
+    if D.shape[1] != len(names):
+        raise ValueError(f"checked_band: draws of {D.shape[1]} parameters for {len(names)} names")
+    run = predict_draw or predict
+    Y = np.full((len(D), m), np.nan)
+    failed = 0
+    for i, d in enumerate(D):
+        cs = charset
+        for n, dj in zip(names, d):
+            cs = shift(cs, n, float(dj))
+        try:
+            Y[i] = np.asarray(run(cs), float)
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+            failed += 1
+    valid = np.isfinite(Y).sum(axis=0) >= BAND_MIN_VALID * len(D)
+    q05 = np.full(m, np.nan)
+    q95 = np.full(m, np.nan)
+    if valid.any():
+        q05[valid], q95[valid] = np.nanpercentile(Y[:, valid], [5.0, 95.0], axis=0)
+    off = np.maximum(np.abs(q05 - low), np.abs(q95 - high))
+    nonlinear = valid & ~below & np.isfinite(off) & (off > BAND_AGREEMENT * (high - low) + tol)
+    take = valid & (below | nonlinear)
+    low[take], high[take] = q05[take], q95[take]
+    method[below & valid] = METHOD_BOUND
+    method[nonlinear] = METHOD_NONLINEAR
+    clip = below & ~valid
+    low[clip] = lo_b[clip]
+    method[clip] = METHOD_CLIPPED
+    return Band(y, sd, low, high, method, len(D), failed)
+
+
+# ------------------------------------------------------------------ posterior draws: a short MCMC on the objective
+#: the sampler's defaults (config stepwise_reduction.posterior_draws): walkers, steps, burn-in steps, draws kept, seed,
+#: and the start: walkers drawn from the Laplace posterior shrunk by this factor about the MAP (the Laplace spread
+#: ignores the one-sided constraints inactive at the MAP and is several times too wide in some directions)
+DRAW_DEFAULTS = {"walkers": 40, "steps": 250, "burn_in": 100, "keep": 64, "seed": 0, "start_scale": 0.4}
+#: columns of the sampling table (role calibration.sampling)
+SAMPLING_COLUMNS = ("parameter", "map_fit", "laplace_sd_fit", "sampled_sd_fit", "sd_ratio_sampled_over_laplace",
+                    "sampled_5_fit", "sampled_95_fit", "walkers", "steps", "burn_in", "kept", "acceptance",
+                    "autocorrelation_steps", "independent_samples")
+
+
+@dataclass
+class PosteriorSample:
+    """Draws from the calibration's posterior (:func:`sample_posterior`), fit units."""
+
+    names: list
+    map_q: np.ndarray
+    draws: np.ndarray           # (keep, p) parameter vectors
+    chain_sd: np.ndarray        # (p,) spread of the whole chain after burn-in
+    chain_q05: np.ndarray
+    chain_q95: np.ndarray
+    walkers: int
+    steps: int
+    burn_in: int
+    acceptance: float
+    autocorrelation_steps: float   # mean integrated autocorrelation time of the chain [steps]
+
+    @property
+    def independent_samples(self) -> float:
+        return self.walkers * (self.steps - self.burn_in) / max(self.autocorrelation_steps, 1.0)
+
+    @property
+    def offsets(self) -> np.ndarray:
+        return self.draws - self.map_q
+
+
+def sample_posterior(residual, post: Posterior, walkers: int = 40, steps: int = 250, burn_in: int = 100,
+                     keep: int = 64, seed: int = 0, start_scale: float = 0.4) -> PosteriorSample:
+    """Draws from the posterior the MAP fit uses, log p(q) = -r(q).r(q)/2 inside the fit's bounds (``residual``: q ->
+    the stacked residuals, :attr:`lumbar.experiments.calibration.AdmissibleFit.objective`), by emcee's affine-invariant
+    ensemble sampler (Foreman-Mackey et al. 2013): ``walkers`` started about the MAP (Laplace draws shrunk by
+    ``start_scale``, inside the bounds), ``steps`` steps, the first ``burn_in`` discarded; ``keep`` draws taken evenly
+    from the rest. Seeded. A residual that raises (a law outside its validity) or is not finite counts as outside the
+    posterior."""
+    import emcee  # noqa: PLC0415 - only this function needs it
+
+    if not (0 <= burn_in < steps) or keep < 1 or walkers < 2 * len(post.names):
+        raise ValueError(f"sample_posterior: need 0 <= burn_in ({burn_in}) < steps ({steps}), keep >= 1 ({keep}) and "
+                         f"walkers >= 2 x parameters ({walkers} for {len(post.names)})")
+
+    def log_prob(q):
+        if np.any(q < post.lower) or np.any(q > post.upper):
+            return -np.inf
+        try:
+            r = np.asarray(residual(q), float)
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+            return -np.inf
+        return -0.5 * float(r @ r) if np.all(np.isfinite(r)) else -np.inf
+
+    rng = np.random.default_rng(seed)
+    w, V = np.linalg.eigh(0.5 * (post.cov + post.cov.T))
+    root = V * np.sqrt(np.clip(w, 0.0, None))
+    start = []
+    for _ in range(200 * walkers):
+        q = post.map_q + start_scale * (rng.standard_normal(len(w)) @ root.T)
+        if np.isfinite(log_prob(q)):
+            start.append(q)
+            if len(start) == walkers:
+                break
+    if len(start) < walkers:
+        raise RuntimeError(f"sample_posterior: only {len(start)} of {walkers} start points inside the posterior's "
+                           f"support after {200 * walkers} tries (start_scale {start_scale})")
+    sampler = emcee.EnsembleSampler(walkers, len(w), log_prob)
+    sampler.random_state = np.random.RandomState(seed).get_state()
+    sampler.run_mcmc(np.array(start), steps, progress=False)
+    chain = sampler.get_chain(discard=burn_in)            # (steps - burn_in, walkers, p)
+    flat = chain.reshape(-1, len(w))
+    # tol=0: the length check of emcee is replaced by the independent-sample count this stage reports
+    tau = float(np.mean(emcee.autocorr.integrated_time(chain, tol=0, quiet=True)))
+    idx = np.linspace(0, len(flat) - 1, keep).round().astype(int)
+    q05, q95 = np.percentile(flat, [5.0, 95.0], axis=0)
+    return PosteriorSample(list(post.names), post.map_q.copy(), flat[idx], flat.std(axis=0), q05, q95, walkers, steps,
+                           burn_in, float(np.mean(sampler.acceptance_fraction)), tau)
+
+
+def sampling_table(post: Posterior, sample: PosteriorSample) -> pd.DataFrame:
+    """Per parameter: the MAP, the Laplace and the sampled spread (fit units) and their ratio, the sampled 90 %
+    interval, and the chain's settings and diagnostics (role calibration.sampling)."""
+    return pd.DataFrame({
+        "parameter": sample.names, "map_fit": sample.map_q, "laplace_sd_fit": post.sd, "sampled_sd_fit": sample.chain_sd,
+        "sd_ratio_sampled_over_laplace": sample.chain_sd / np.where(post.sd > 0, post.sd, np.nan),
+        "sampled_5_fit": sample.chain_q05, "sampled_95_fit": sample.chain_q95, "walkers": sample.walkers,
+        "steps": sample.steps, "burn_in": sample.burn_in, "kept": len(sample.draws), "acceptance": sample.acceptance,
+        "autocorrelation_steps": sample.autocorrelation_steps, "independent_samples": sample.independent_samples,
+    })[list(SAMPLING_COLUMNS)]
+
+
+def draws_table(sample: PosteriorSample) -> pd.DataFrame:
+    """The kept draws (role calibration.draws): one row per draw, one column per parameter (fit units)."""
+    t = pd.DataFrame(sample.draws, columns=sample.names)
+    t.insert(0, "draw", np.arange(len(t)))
+    return t
+
+
+def read_draw_offsets(posterior_csv, draws_csv, names) -> np.ndarray | None:
+    """Draws minus the MAP (n, p) in the order of ``names`` (fit units), from the calibration's posterior and draws
+    tables; None when there are no draws (no posterior, or an empty table)."""
+    post, d = pd.read_csv(posterior_csv), pd.read_csv(draws_csv)
+    if post.empty or d.empty:
+        return None
+    missing = [n for n in names if n not in d.columns]
+    if missing:
+        raise ValueError(f"{draws_csv}: no column for the parameters {missing} of {posterior_csv}; rerun rule "
+                         "calibration_draws")
+    m = post.set_index("parameter")["map_fit"]
+    return d[list(names)].to_numpy(float) - m.reindex(list(names)).to_numpy(float)
+
+
 #: quantities of the intact moment-rotation curves that get a posterior band (columns of the curve tables; plus the
 #: larger facet force and, for lateral bending and axial rotation, the mean of the two sides)
 BAND_QUANTITIES = ("rotation_deg", "facet_left_contact_n", "facet_right_contact_n", "disc_axial_force_n",
                    "ALL_tension_n", "PLL_tension_n", "FL_tension_n", "CL_tension_n", "ISL_tension_n",
                    "SSL_tension_n", "ITL_tension_n", "facet_left_beyond_surface_n", "facet_right_beyond_surface_n")
-BAND_COLUMNS = ("direction", "moment_nm", "quantity", "map", "sd", "low90", "high90", "converged")
+BAND_COLUMNS = ("direction", "moment_nm", "quantity", "map", "sd", "low90", "high90", "converged", "band_method")
+#: quantities that cannot be negative: the disc carries no traction, contact pushes, ligaments pull
+NON_NEGATIVE_QUANTITIES = frozenset(q for q in BAND_QUANTITIES if q != "rotation_deg") | {"facet_max_contact_n"}
+#: result-table values that cannot be negative: a range of motion in the direction of its moment, a pressure of a
+#: disc without traction (:func:`table_bands`)
+NON_NEGATIVE_TABLE_VALUES = frozenset({"rom_deg", "idp_mpa"})
 
 
 def _curve_vector(curves: pd.DataFrame, directions, moments):
@@ -223,51 +436,70 @@ def _curve_vector(curves: pd.DataFrame, directions, moments):
     return np.array(out), keys, np.array(conv)
 
 
-def curve_bands(build, charset, names, cov, shift, curves_of, directions, moments) -> pd.DataFrame:
-    """90 % posterior bands of the intact moment-rotation curves and their internal loads, by linearisation.
+def curve_bands(build, charset, names, cov, shift, curves_of, directions, moments,
+                offsets=None) -> tuple[pd.DataFrame, Band]:
+    """90 % posterior bands of the intact moment-rotation curves and their internal loads: linearised, checked, and
+    from posterior draws where the check fails (:func:`checked_band`; the forces of :data:`NON_NEGATIVE_QUANTITIES`
+    cannot be negative).
 
     ``build(charset)`` -> unit; ``curves_of(unit)`` -> its intact curve table (``moment_rotation_curves``);
-    ``shift(charset, name, delta)`` moves one fit parameter (:func:`lumbar.experiments.calibration.shift_parameter`).
-    One table row per (direction, moment, quantity): the MAP value, the linearised standard deviation and the 90 %
-    band (:data:`Z90`), and whether the MAP step converged."""
+    ``shift(charset, name, delta)`` moves one fit parameter (:func:`lumbar.experiments.calibration.shift_parameter`);
+    ``offsets``: the calibration's posterior draws minus its MAP (:func:`read_draw_offsets`).
+    One table row per (direction, moment, quantity): the MAP value, the linearised standard deviation, the 90 %
+    band (:data:`Z90`), whether the MAP step converged and how the band was made (``band_method``); and the
+    :class:`Band` (its log line)."""
     keys, conv = [], []
 
-    def predict(cs):
+    def predict(cs, draw=False):
         y, k, c = _curve_vector(curves_of(build(cs)), directions, moments)
         if not keys:
             keys.extend(k)
             conv.extend(c)
-        return y
+        return np.where(c, y, np.nan) if draw else y
 
-    y, sd, _ = linearised_band(predict, charset, names, cov, shift)
-    return pd.DataFrame({"direction": [k[0] for k in keys], "moment_nm": [k[1] for k in keys],
-                         "quantity": [k[2] for k in keys], "map": y, "sd": sd, "low90": y - Z90 * sd,
-                         "high90": y + Z90 * sd, "converged": conv})[list(BAND_COLUMNS)]
+    y0 = predict(charset)
+    lower = np.array([0.0 if k[2] in NON_NEGATIVE_QUANTITIES else np.nan for k in keys])
+    b = checked_band(lambda cs: y0 if cs is charset else predict(cs), charset, names, cov, shift, lower=lower,
+                     predict_draw=lambda cs: predict(cs, draw=True), offsets=offsets)
+    t = pd.DataFrame({"direction": [k[0] for k in keys], "moment_nm": [k[1] for k in keys],
+                      "quantity": [k[2] for k in keys], "map": b.y, "sd": b.sd, "low90": b.low90,
+                      "high90": b.high90, "converged": conv, "band_method": b.method})
+    return t[list(BAND_COLUMNS)], b
 
 
-def table_bands(table_of, value_col: str, key_cols, charset, names, cov, shift) -> pd.DataFrame:
+def table_bands(table_of, value_col: str, key_cols, charset, names, cov, shift,
+                offsets=None) -> tuple[pd.DataFrame, Band]:
     """90 % posterior band of every row of a result table ``table_of(charset) -> DataFrame`` (its rows in the same
-    order for every set; e.g. the 160 stepwise-reduction scenarios of Table 4 or the 49 IDP scenarios of Table 5),
-    by linearisation: ``key_cols`` of the table, then map, sd, low90, high90 of ``value_col``."""
+    order for every set; e.g. the 160 stepwise-reduction scenarios of Table 4 or the 49 IDP scenarios of Table 5):
+    linearised, checked, from posterior draws where the check fails (:func:`checked_band`; the values of
+    :data:`NON_NEGATIVE_TABLE_VALUES` cannot be negative; a draw's row whose ``converged`` column is false counts
+    as missing; ``offsets`` as in :func:`curve_bands`). ``key_cols`` of the table, then map, sd, low90, high90 of
+    ``value_col`` and band_method; and the :class:`Band`."""
     keys = []
 
-    def predict(cs):
+    def predict(cs, draw=False):
         t = table_of(cs)
         if not keys:
             keys.append(t[list(key_cols)].reset_index(drop=True))
-        return t[value_col].to_numpy(float)
+        v = t[value_col].to_numpy(float)
+        if draw and "converged" in t.columns:
+            v = np.where(t["converged"].to_numpy(bool), v, np.nan)
+        return v
 
-    y, sd, _ = linearised_band(predict, charset, names, cov, shift)
+    lower = 0.0 if value_col in NON_NEGATIVE_TABLE_VALUES else None
+    b = checked_band(predict, charset, names, cov, shift, lower=lower,
+                     predict_draw=lambda cs: predict(cs, draw=True), offsets=offsets)
     out = keys[0].copy()
-    out["map"], out["sd"], out["low90"], out["high90"] = y, sd, y - Z90 * sd, y + Z90 * sd
-    return out
+    out["map"], out["sd"], out["low90"], out["high90"], out["band_method"] = b.y, b.sd, b.low90, b.high90, b.method
+    return out, b
 
 
-def table_bands_from_files(posterior_csv, covariance_csv, table_of, value_col: str, key_cols, charset,
-                           shift) -> pd.DataFrame:
-    """:func:`table_bands` with the calibration's posterior read from its files; an empty table with the columns
-    when the calibration has no posterior (no admissible fit)."""
+def table_bands_from_files(posterior_csv, covariance_csv, draws_csv, table_of, value_col: str, key_cols, charset,
+                           shift) -> tuple[pd.DataFrame, Band | None]:
+    """:func:`table_bands` with the calibration's posterior and draws read from its files; an empty table with the
+    columns (and no :class:`Band`) when the calibration has no posterior (no admissible fit)."""
     post = read_posterior(posterior_csv, covariance_csv)
     if post is None:
-        return pd.DataFrame(columns=list(key_cols) + ["map", "sd", "low90", "high90"])
-    return table_bands(table_of, value_col, key_cols, charset, post[0], post[1], shift)
+        return pd.DataFrame(columns=list(key_cols) + ["map", "sd", "low90", "high90", "band_method"]), None
+    offsets = read_draw_offsets(posterior_csv, draws_csv, post[0])
+    return table_bands(table_of, value_col, key_cols, charset, post[0], post[1], shift, offsets=offsets)

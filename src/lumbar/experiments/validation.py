@@ -374,13 +374,15 @@ def multilevel_rom(curves: pd.DataFrame, yamamoto: pd.DataFrame, moment_nm=10.0,
     return pd.DataFrame(rows)
 
 
-def level_rom_bands(geometry, charset, levels, names, cov, shift, moment_nm=10.0, **build_kw) -> pd.DataFrame:
+def level_rom_bands(geometry, charset, levels, names, cov, shift, moment_nm=10.0, offsets=None,
+                    **build_kw) -> pd.DataFrame:
     """90 % posterior band of the ROM at ``moment_nm`` of every level in ``levels`` (the calibrated set applied
-    unchanged), by linearisation of the calibration's posterior (``names``, ``cov``; ``shift`` moves one fit
+    unchanged), by linearisation of the calibration's posterior, checked (a range of motion cannot be negative;
+    :func:`lumbar.experiments.posterior.checked_band`; ``offsets``: the calibration's posterior draws minus its MAP) (``names``, ``cov``; ``shift`` moves one fit
     parameter, :func:`lumbar.experiments.calibration.shift_parameter`): level, direction (Yamamoto's, the two-side
-    mean for lateral bending and axial rotation), map_deg, sd_deg, band_low, band_high."""
+    mean for lateral bending and axial rotation), map_deg, sd_deg, band_low, band_high, band_method."""
     from .fsu import range_of_motion  # noqa: PLC0415
-    from .posterior import Z90, linearised_band  # noqa: PLC0415
+    from .posterior import checked_band  # noqa: PLC0415
 
     dirs = [d for ds in MULTILEVEL_DIRECTIONS.values() for d in ds]
     keys = [(lv, yd) for lv in levels for yd in MULTILEVEL_DIRECTIONS]
@@ -393,9 +395,9 @@ def level_rom_bands(geometry, charset, levels, names, cov, shift, moment_nm=10.0
             out += [float(np.mean([by[d] for d in ds])) for ds in MULTILEVEL_DIRECTIONS.values()]
         return np.array(out)
 
-    y, sd, _ = linearised_band(predict, charset, names, cov, shift)
-    return pd.DataFrame({"level": [k[0] for k in keys], "direction": [k[1] for k in keys], "map_deg": y,
-                         "sd_deg": sd, "band_low": y - Z90 * sd, "band_high": y + Z90 * sd})
+    b = checked_band(predict, charset, names, cov, shift, lower=0.0, offsets=offsets)
+    return pd.DataFrame({"level": [k[0] for k in keys], "direction": [k[1] for k in keys], "map_deg": b.y,
+                         "sd_deg": b.sd, "band_low": b.low90, "band_high": b.high90, "band_method": b.method})
 
 
 def near_limit(rom: pd.DataFrame, rel=REL_TOLERANCE, band=0.05) -> pd.DataFrame:

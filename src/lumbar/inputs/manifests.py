@@ -225,6 +225,8 @@ MANIFESTS: dict[str, Manifest] = {m.stage: m for m in (
         "posterior": _o("calibration/posterior.csv", "calibrate", final=True),
         "covariance": _o("calibration/posterior_covariance.csv", "calibrate"),
         "row_influence": _o("calibration/row_influence.csv", "calibration_influence", final=True),
+        "draws": _o("calibration/posterior_draws.csv", "calibration_draws"),
+        "sampling": _o("calibration/posterior_sampling.csv", "calibration_draws", final=True),
         "rom_fit": _o("calibration/calibration_rom_fit.csv", "calibrate"),
         "disc_points": _o("calibration/fig4_points.csv", "calibrate"),
         "ligament_points": _o("calibration/fig5_points.csv", "calibrate"),

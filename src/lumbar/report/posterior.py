@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from ..experiments.posterior import METHOD_BOUND, METHOD_CLIPPED, METHOD_LINEAR, METHOD_NONLINEAR, natural_units
 from .influence_text import influence_sentence as _influence_sentence
 from .influence_text import profile_sentence as _profile_sentence
 from .influence_text import spread_sentence as _spread_sentence
@@ -30,6 +31,27 @@ BAND_ROWS = (("flexion", 10.0, "rotation_deg", "flexion ROM, 10 N*m [deg]"),
 
 def _value(unit: str, v: float) -> str:
     return fmt(v) if "mm" in unit else fmt(v, 3)
+
+
+def sampling_sentence(s: pd.DataFrame) -> str:
+    """What the MCMC draws say about the Laplace approximation (role calibration.sampling), for the section."""
+    if s is None or s.empty:
+        return ""
+    r = s["sd_ratio_sampled_over_laplace"].astype(float)
+    c = s.iloc[0]
+    return (f" A short MCMC on the same objective ({int(c['walkers'])} walkers x {int(c['steps'])} steps, the first "
+            f"{int(c['burn_in'])} discarded; about {fmt(c['independent_samples'], 2)} independent samples) gives "
+            f"posterior spreads of {fmt(r.min(), 2)} to {fmt(r.max(), 2)} times the Laplace spread (median "
+            f"{fmt(r.median(), 2)}): the one-sided constraints that are inactive at the MAP have no curvature there, "
+            "so the Laplace intervals of Table P are wider than the posterior where the ratio is below 1. A longer "
+            "chain spreads further along the slowest directions (benchmark: docs/load_sharing.md), so the sampled "
+            "intervals are, if anything, narrow.")
+
+
+#: how a band was made, in the report's words
+BAND_METHOD_WORDS = {METHOD_LINEAR: "linearised", METHOD_BOUND: "posterior draws (the linear band goes below zero)",
+                     METHOD_NONLINEAR: "posterior draws (the linear band disagrees with them)",
+                     METHOD_CLIPPED: "linearised, cut at zero (no usable draws)"}
 
 
 def posterior_sentence(t: pd.DataFrame) -> str:
@@ -56,6 +78,9 @@ def posterior_section(b: ReportBuilder):
         b.missing("Calibration posterior (posterior.csv)")
         return
     t = pd.read_csv(b.path(posterior))
+    sampling = b.out("calibration", "sampling")
+    smp = pd.read_csv(b.path(sampling)) if b.has(sampling) else None
+    smp = smp.set_index("parameter") if smp is not None and not smp.empty else None
     if t.empty:
         b.para("This calibration has no admissible (MAP) fit, hence no posterior (ligament_transfer: strain).")
         return
@@ -63,8 +88,8 @@ def posterior_section(b: ReportBuilder):
            "each parameter a sourced prior (centre and spread) and minimises the data misfit over the data's spread "
            "plus the prior misfit over the prior's spread, with the admissibility criteria as soft penalties (a MAP "
            "estimate). The posterior is the Laplace approximation of that same objective at its optimum. "
-           + posterior_sentence(t) + " Data spread: " + str(t["data_spread"].iloc[0]) + ". Design: "
-           "docs/load_sharing.md.")
+           + posterior_sentence(t) + " Data spread: " + str(t["data_spread"].iloc[0]) + "."
+           + sampling_sentence(None if smp is None else smp.reset_index()) + " Design: docs/load_sharing.md.")
     rows = []
     for r in t.itertuples(index=False):
         rows.append([r.parameter.replace("_", " "), r.unit,
@@ -72,15 +97,18 @@ def posterior_section(b: ReportBuilder):
                      f"{_value(r.unit, r.prior_90_high)})",
                      f"{_value(r.unit, r.map)} ({_value(r.unit, r.posterior_90_low)} to "
                      f"{_value(r.unit, r.posterior_90_high)})",
+                     _sampled(smp, r.parameter, r.unit),
                      fmt(r.spread_ratio, 2), fmt(r.shift_prior_sd, 2),
                      (r.moved_by if isinstance(r.moved_by, str) and r.moved_by else "stays at its prior"),
                      ("yes: " + str(r.bound_reason)) if bool(r.at_bound) else "no"])
     b.table_block("Prior and posterior of every calibrated parameter", [
-        "parameter", "unit", "prior centre (90 %)", "MAP (posterior 90 %)", "posterior / prior spread",
+        "parameter", "unit", "prior centre (90 %)", "MAP (Laplace 90 %)", "posterior draws 90 %",
+        "posterior / prior spread",
         "shift [prior spreads]", "moved by (share of the pull)", "at a bound"], rows, source=posterior,
         label="Table P",
         note="Prior sources per parameter: the CSV's prior_source column. A spread ratio near 1 with a shift near 0: "
-             "the data did not inform the parameter.")
+             "the data did not inform the parameter. Posterior draws: the MCMC of rule calibration_draws "
+             "(posterior_sampling.csv).")
     b.figure(b.out("calibration", "posterior_figure"), "Prior (grey) and posterior (blue) 90 % interval of every "
              "calibrated parameter, in prior spreads from the prior centre.", label="Fig. P")
     if b.has(bands):
@@ -90,14 +118,26 @@ def posterior_section(b: ReportBuilder):
             g = bd[(bd["direction"] == d) & np.isclose(bd["moment_nm"], M) & (bd["quantity"] == q)]
             if len(g):
                 r = g.iloc[0]
-                rows.append([label, fmt(r["map"]), f"{fmt(r['low90'])} to {fmt(r['high90'])}"])
+                how = str(r.get("band_method", METHOD_LINEAR))
+                rows.append([label, fmt(r["map"]), f"{fmt(r['low90'])} to {fmt(r['high90'])}",
+                             BAND_METHOD_WORDS.get(how, how)])
         b.table_block("The calibrated unit's predictions with their 90 % posterior band (intact)",
-                      ["prediction", "MAP", "90 % band"], rows, source=bands,
-                      note="Linearisation of the posterior (one finite-difference step per parameter); every "
-                           "direction and moment of the curves is in the CSV.")
+                      ["prediction", "MAP", "90 % band", "how the band was made"], rows, source=bands,
+                      note="Every band starts as the linearisation of the posterior (one finite-difference step per "
+                           "parameter) and is checked: where it reaches below zero (a force, a tension) or lies more "
+                           "than a quarter of its width from the band of the posterior draws run forward, it is the "
+                           "draws' 5th to 95th percentile. Every direction and moment of the curves is in the CSV.")
     else:
         b.missing("Posterior bands of the intact curves (bands_calibrated.csv)")
     influence_block(b)
+
+
+def _sampled(smp, name: str, unit: str) -> str:
+    """The posterior draws' 90 % interval of one parameter in its natural unit, or "-"."""
+    if smp is None or name not in smp.index:
+        return "-"
+    lo, hi = natural_units(name, [smp.loc[name, "sampled_5_fit"], smp.loc[name, "sampled_95_fit"]])[0]
+    return f"{_value(unit, lo)} to {_value(unit, hi)}"
 
 
 def influence_block(b: ReportBuilder):

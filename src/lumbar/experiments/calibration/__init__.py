@@ -23,7 +23,8 @@ from .admissible import (BOUND_REASONS, DATA_SD_REL, DISC_TORQUE_SCALE_BOUNDS, F
                          AdmissibleFit, admissible_fit_targets, fit_admissible, posterior_tables, read_fit_start,
                          shift_parameter)
 from .common import AT_BOUND_FRACTION, IDENTIFIABLE_MIN_DEG, PENALTY
-from .configured import ConfiguredCalibration, calibrate_configured, reference_inputs
+from .configured import (MAP_TOLERANCE, ConfiguredCalibration, calibrate_configured, check_same_map,
+                         reference_inputs)
 from .disc import (DISC_STAGE, P1_MIN_NM, c_zero, derived_disc_only_rows, eq3, fit_disc_direction, invert_eq3,
                    softplus_zero_law)
 from .influence import COLUMNS as INFLUENCE_COLUMNS
@@ -45,7 +46,7 @@ __all__ = [
     "A_BOUNDS", "B_BOUNDS", "CALIBRATED_LIGAMENTS", "CONCAVE_CANDIDATES", "D_BOUNDS", "F0_BOUNDS", "FACET_STAGE",
     "K_FACET_BOUNDS", "LIGAMENT_STAGE", "ORDER", "CalibrationResult", "calibrate",
     # the calibration as the workflow configures it
-    "ConfiguredCalibration", "calibrate_configured", "reference_inputs",
+    "MAP_TOLERANCE", "ConfiguredCalibration", "calibrate_configured", "check_same_map", "reference_inputs",
     # shared by the fits
     "AT_BOUND_FRACTION", "IDENTIFIABLE_MIN_DEG", "PENALTY",
     # real-target fit

@@ -69,3 +69,24 @@ def calibrate_configured(geometry: dict, fsu: dict, solver: dict, sr: dict, expe
                     anchor_start_values=anchor, prior=sr["ligament_prior"], row_influence=row_influence)
     log.info("calibration wall time %.1f s", res.wall_time_s)
     return ConfiguredCalibration(res, paper, targets, data_kind)
+
+
+#: MAP agreement of the rerun with the shipped posterior, relative (fit units: log10 scales, mm, %; |difference| <=
+#: MAP_TOLERANCE * (1 + |value|)): the CSV keeps six significant digits (measured: differences up to 5e-6 on values
+#: of about 1); a larger difference means the two jobs fitted different problems
+MAP_TOLERANCE = 1e-5
+
+
+def check_same_map(shipped: pd.DataFrame, rerun: pd.DataFrame, path) -> None:
+    """Raise if the rerun's MAP (``map_fit`` per parameter) is not the one in the shipped posterior ``path``."""
+    a = shipped.set_index("parameter")["map_fit"]
+    b = rerun.set_index("parameter")["map_fit"]
+    if set(a.index) != set(b.index):
+        raise RuntimeError(f"{path}: parameters {sorted(a.index)}; the rerun fitted {sorted(b.index)}: "
+                           "rerun rule calibrate")
+    d = (a - b.reindex(a.index)).abs()
+    bad = d[~(d <= MAP_TOLERANCE * (1.0 + a.abs()))]
+    if len(bad):
+        raise RuntimeError(f"{path}: the rerun's MAP differs from the shipped one in "
+                           + ", ".join(f"{k} by {v:.3g}" for k, v in bad.items())
+                           + f" (fit units; tolerance {MAP_TOLERANCE} x (1 + |value|)): rerun rule calibrate")
