@@ -418,3 +418,15 @@ def test_sample_posterior_reproduces_a_gaussian_posterior_and_respects_a_one_sid
     assert w.chain_sd[0] < 0.8 * np.sqrt(cov[0, 0])
     # control: offsets are the draws minus the MAP
     np.testing.assert_allclose(w.offsets, w.draws - q_map)
+
+
+def test_report_says_what_the_draws_say_of_the_laplace_spread_and_how_each_band_was_made():
+    from lumbar.report.posterior import BAND_METHOD_WORDS, sampling_sentence
+
+    s = pd.DataFrame({"parameter": ["a", "b"], "sd_ratio_sampled_over_laplace": [0.2, 0.9], "walkers": 40,
+                      "steps": 250, "burn_in": 100, "independent_samples": 390.0})
+    text = sampling_sentence(s)
+    assert "40 walkers x 250 steps" in text and "0.2 to 0.9 times the Laplace spread" in text
+    assert sampling_sentence(None) == "" and sampling_sentence(s.iloc[:0]) == ""
+    # every way a band can be made has words in the report (a new method without words would print its code)
+    assert set(BAND_METHOD_WORDS) == {P.METHOD_LINEAR, P.METHOD_BOUND, P.METHOD_NONLINEAR, P.METHOD_CLIPPED}

@@ -127,6 +127,7 @@ rule fig5_ligament_characteristics:
 rule posterior_figure:
     input:
         posterior=out("calibration", "posterior"),
+        sampling=out("calibration", "sampling"),
     output:
         **stage_outputs("calibration", "posterior_figure"),
     log:

@@ -1,5 +1,6 @@
-"""Calibration stage, rule posterior_figure: the prior and posterior 90 % interval of every calibrated parameter
-(input: role calibration.posterior of the stage manifests; lumbar.plots.posterior).
+"""Calibration stage, rule posterior_figure: the prior and posterior 90 % interval of every calibrated parameter, with
+the posterior draws' interval (inputs: roles calibration.posterior and calibration.sampling of the stage manifests;
+lumbar.plots.posterior).
 
 By hand: python workflow/scripts/posterior_figure.py posterior_figure --configfile config/test/config.yaml
 """
@@ -14,7 +15,7 @@ from lumbar.plots.posterior import plot_prior_posterior  # noqa: E402
 
 def main(snakemake, log):
     table = pd.read_csv(snakemake.input.posterior)
-    plot_prior_posterior(table, snakemake.output[0])
+    plot_prior_posterior(table, snakemake.output[0], pd.read_csv(snakemake.input.sampling))
     log.info("wrote %s (%d parameters)", snakemake.output[0], len(table))
 
 

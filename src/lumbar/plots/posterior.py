@@ -11,10 +11,12 @@ from ..inputs.io import save_figure_atomic, subplots
 Z90 = 1.6448536269514722
 
 
-def plot_prior_posterior(table: pd.DataFrame, path) -> None:
-    """One row per parameter of the calibration's posterior table (stage manifest role calibration.posterior): the prior's 90 % interval (grey, -1.645 to +1.645
-    prior spreads about its centre) and the posterior's (blue bar, MAP dot), both in prior spreads from the prior
-    centre, so that a shift and a narrowing read alike for every unit; a parameter at a bound is marked red."""
+def plot_prior_posterior(table: pd.DataFrame, path, sampling: pd.DataFrame | None = None) -> None:
+    """One row per parameter of the calibration's posterior table (stage manifest role calibration.posterior): the
+    prior's 90 % interval (grey, -1.645 to +1.645 prior spreads about its centre), the Laplace posterior's (blue bar,
+    MAP dot) and, with ``sampling`` (role calibration.sampling), the posterior draws' 5-95 % interval (dark line),
+    all in prior spreads from the prior centre, so that a shift and a narrowing read alike for every unit; a
+    parameter at a bound is marked red."""
     t = table.reset_index(drop=True)
     n = len(t)
     fig, ax = subplots(1, 1, figsize=(8.0, 0.32 * n + 2.0))
@@ -32,6 +34,12 @@ def plot_prior_posterior(table: pd.DataFrame, path) -> None:
     plo, phi = fit_units("prior_90_low"), fit_units("prior_90_high")
     ax.barh(y, phi - plo, left=plo, height=0.7, color="0.85", label="prior, 90 % (within the bounds)")
     ax.barh(y, hi - lo, left=lo, height=0.38, color="C0", alpha=0.75, label="posterior, 90 % (Laplace, within the bounds)")
+    if sampling is not None and not sampling.empty:
+        sm = sampling.set_index("parameter").reindex(t["parameter"])
+        slo = (sm["sampled_5_fit"].to_numpy(float) - c) / s
+        shi = (sm["sampled_95_fit"].to_numpy(float) - c) / s
+        ok = np.isfinite(slo) & np.isfinite(shi)
+        ax.hlines(y[ok], slo[ok], shi[ok], color="k", lw=2.2, label="posterior draws (MCMC), 5-95 %")
     at_b = t["at_bound"].astype(bool).to_numpy()
     ax.plot(shift[~at_b], y[~at_b], "o", color="C0", ms=4, label="MAP")
     if at_b.any():

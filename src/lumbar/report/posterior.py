@@ -109,8 +109,9 @@ def posterior_section(b: ReportBuilder):
         note="Prior sources per parameter: the CSV's prior_source column. A spread ratio near 1 with a shift near 0: "
              "the data did not inform the parameter. Posterior draws: the MCMC of rule calibration_draws "
              "(posterior_sampling.csv).")
-    b.figure(b.out("calibration", "posterior_figure"), "Prior (grey) and posterior (blue) 90 % interval of every "
-             "calibrated parameter, in prior spreads from the prior centre.", label="Fig. P")
+    b.figure(b.out("calibration", "posterior_figure"), "Prior (grey), Laplace posterior (blue) and posterior draws' "
+             "(black) 90 % interval of every calibrated parameter, in prior spreads from the prior centre.",
+             label="Fig. P")
     if b.has(bands):
         bd = pd.read_csv(b.path(bands))
         rows = []
