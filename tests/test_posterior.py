@@ -241,6 +241,24 @@ def test_scoreboard_band_columns_come_from_the_band_table_and_never_change_withi
     assert (df.loc[0, "sim_band_low"], df.loc[0, "sim_band_high"]) == (6.6, 7.4)
     assert np.isnan(df.loc[1, "sim_band_low"])              # another set has no posterior band
     assert list(df["within"]) == [True, False]
+    # the posterior draws: the share of them inside the row's acceptance interval (25 % of 8.9: 6.675-11.125)
+    draws = pd.DataFrame({"direction": "flexion", "moment_nm": 10.0, "quantity": "rotation_deg", "draw": range(4),
+                          "value": [6.0, 7.0, 7.2, np.nan]})
+    rows[0]["tolerance_rule"] = rows[1]["tolerance_rule"] = "measured +- 25 %"
+    df = V.scoreboard(rows, bands, draws)
+    assert df.loc[0, "p_within_posterior"] == pytest.approx(2 / 3)    # the draw that did not converge is left out
+    assert np.isnan(df.loc[1, "p_within_posterior"]) and list(df["within"]) == [True, False]
+
+
+def test_curve_draws_table_keeps_the_judged_moments_and_the_draws_of_each_row():
+    bands = pd.DataFrame({"direction": ["flexion"] * 3, "moment_nm": [5.0, 7.5, 10.0],
+                          "quantity": ["SSL_tension_n"] * 3})
+    Y = np.array([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]])                  # 2 draws x 3 rows
+    band = P.Band(np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), np.array(["x"] * 3, dtype=object), 2, 0, Y)
+    t = P.curve_draws_table(bands, band)
+    assert list(t.columns) == list(P.DRAW_VALUE_COLUMNS) and sorted(set(t["moment_nm"])) == [7.5, 10.0]
+    assert list(t[t["moment_nm"] == 10.0]["value"]) == [3.0, 6.0] and list(t["draw"][:2]) == [0, 1]
+    assert P.curve_draws_table(bands, P.Band(*(np.zeros(3),) * 4, np.array(["x"] * 3), 0, 0)).empty
 
 
 # ------------------------------------------------------------------ what the model adds over a trivial model

@@ -525,3 +525,24 @@ def test_muscle_sentence_gives_the_fit_with_the_reached_but_uncertified_posture(
     text = parse_report(html_path).text
     assert re.search(r"upright standing \(with it, over the 4 activities reached: R2 = 0\.72\d*, RMSE = 0\.18\d* MPa\)",
                      text), text[:3000]
+
+
+def test_posterior_judged_sentence_reads_the_draws_and_says_whether_the_data_decide():
+    """The share of posterior draws meeting the judged limits (extension facet force <= 90.5 N, SSL >= 5 N), from
+    the draws' values of the band rule; control: draws that meet both say the data do not decide them."""
+    import pandas as pd
+
+    from lumbar.report.influence_text import posterior_judged_sentence
+    from lumbar.report.sections import fmt
+
+    def table(fac, ssl):
+        rows = [("extension", 7.5, "facet_max_contact_n", i, v) for i, v in enumerate(fac)]
+        rows += [("flexion", 10.0, "SSL_tension_n", i, v) for i, v in enumerate(ssl)]
+        return pd.DataFrame(rows, columns=["direction", "moment_nm", "quantity", "draw", "value"])
+
+    s = posterior_judged_sentence(table([80, 120, 130, 140], [6, 2, 3, 7]), fmt)
+    assert "Across 4 draws" in s and "in 25 % of them" in s and "at 10 N*m flexion in 50 %" in s
+    assert "both in 25 %" in s and "do not decide" in s
+    s = posterior_judged_sentence(table([120] * 20, [6] * 20), fmt)
+    assert "both in 0 %" in s and "improbable" in s
+    assert posterior_judged_sentence(table([], []), fmt) == "" and posterior_judged_sentence(None, fmt) == ""

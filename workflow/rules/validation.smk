@@ -15,6 +15,7 @@ rule validation_real_data:
         compression=out("load_sharing", "compression", set="calibrated"),
         literature="data/load_sharing/load_sharing_literature.csv",
         bands=out("load_sharing", "bands"),
+        band_draws=out("load_sharing", "band_draws"),
         yamamoto="data/experiments/yamamoto1989_levels_original_text.csv",
     output:
         **stage_outputs("validation", "validation_real_data"),

@@ -15,7 +15,8 @@ import pandas as pd  # noqa: E402
 from lumbar.experiments import load_sharing as LS  # noqa: E402
 from lumbar.experiments.calibration import shift_parameter  # noqa: E402
 from lumbar.experiments.fsu import build_fsu  # noqa: E402
-from lumbar.experiments.posterior import BAND_COLUMNS, curve_bands, read_draw_offsets, read_posterior  # noqa: E402
+from lumbar.experiments.posterior import (BAND_COLUMNS, DRAW_VALUE_COLUMNS, curve_bands, curve_draws_table,  # noqa: E402
+                                         read_draw_offsets, read_posterior)
 from lumbar.geometry.configured import load_configured  # noqa: E402
 from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
@@ -27,6 +28,7 @@ def main(snakemake, log):
     if post is None:
         log.info("the calibration has no posterior (no admissible fit): no bands")
         write_table_atomic(pd.DataFrame(columns=list(BAND_COLUMNS)), snakemake.output.bands)
+        write_table_atomic(pd.DataFrame(columns=list(DRAW_VALUE_COLUMNS)), snakemake.output.band_draws)
         return
     names, cov = post
     geo = load_configured(g, levels=[f["level"]])
@@ -44,6 +46,7 @@ def main(snakemake, log):
     bands, band = curve_bands(build, cs, names, cov, shift_parameter, curves_of, list(LS.CURVE_DIRECTIONS), moments,
                               offsets=offsets)
     write_table_atomic(bands, snakemake.output.bands)
+    write_table_atomic(curve_draws_table(bands, band), snakemake.output.band_draws)
     top = bands[np.isclose(bands["moment_nm"], moments[-1]) & (bands["quantity"] == "rotation_deg")]
     log.info("posterior bands of the intact curves (%d parameters, %d values); rotation at %g N*m: %s", len(names),
              len(bands), moments[-1], "; ".join(f"{r.direction} {r.map:.2f} +- {1.645 * r.sd:.2f} deg"

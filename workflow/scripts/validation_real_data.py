@@ -50,7 +50,7 @@ def main(snakemake, log):
     # as penalties are marked as fit constraints)
     rows += V.internal_load_rows(pd.read_csv(snakemake.input.curves), pd.read_csv(snakemake.input.compression),
                                  pd.read_csv(snakemake.input.literature))
-    df = V.scoreboard(rows, pd.read_csv(snakemake.input.bands))
+    df = V.scoreboard(rows, pd.read_csv(snakemake.input.bands), pd.read_csv(snakemake.input.band_draws))
     write_table_atomic(df, snakemake.output.table)
     bands = pd.read_csv(snakemake.input.bands)
     own = bands[(bands["quantity"] == "rotation_deg") & np.isclose(bands["moment_nm"].astype(float), 10.0)]

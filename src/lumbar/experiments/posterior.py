@@ -212,6 +212,7 @@ class Band:
     method: np.ndarray      # (m,) how the band was made (METHOD_*)
     n_draws: int            # posterior draws run forward (0: the linearisation passed its check everywhere)
     n_draws_failed: int     # draws whose forward run raised (their rows count as not converged)
+    draw_values: np.ndarray | None = None   # (n_draws, m) the draws' predictions (NaN: not converged), if run
 
     def summary(self) -> str:
         """One log line: rows per method and the draws run."""
@@ -276,7 +277,7 @@ def checked_band(predict, charset, names, cov, shift, lower=None, predict_draw=N
     clip = below & ~valid
     low[clip] = lo_b[clip]
     method[clip] = METHOD_CLIPPED
-    return Band(y, sd, low, high, method, len(D), failed)
+    return Band(y, sd, low, high, method, len(D), failed, Y)
 
 
 # ------------------------------------------------------------------ posterior draws: a short MCMC on the objective
@@ -465,6 +466,28 @@ def curve_bands(build, charset, names, cov, shift, curves_of, directions, moment
                       "quantity": [k[2] for k in keys], "map": b.y, "sd": b.sd, "low90": b.low90,
                       "high90": b.high90, "converged": conv, "band_method": b.method})
     return t[list(BAND_COLUMNS)], b
+
+
+#: columns of the draws' values of the band rows (role load_sharing.band_draws)
+DRAW_VALUE_COLUMNS = ("direction", "moment_nm", "quantity", "draw", "value")
+#: moments [N*m] whose draws' values are kept: the internal loads judged at 7.5 N*m, the ROM at 10 N*m
+DRAW_VALUE_MOMENTS = (7.5, 10.0)
+
+
+def curve_draws_table(bands: pd.DataFrame, band: Band, moments=DRAW_VALUE_MOMENTS) -> pd.DataFrame:
+    """The posterior draws' values of the rows of a curve band table (:func:`curve_bands`) at ``moments``: one row
+    per (direction, moment, quantity, draw); empty where no draw was run. A judged quantity's posterior probability
+    of lying in its acceptance interval is read from these (:func:`lumbar.experiments.validation.scoreboard`)."""
+    if band is None or band.draw_values is None:
+        return pd.DataFrame(columns=list(DRAW_VALUE_COLUMNS))
+    keep = np.flatnonzero(np.isin(np.round(bands["moment_nm"].to_numpy(float), 6), np.round(moments, 6)))
+    n = band.draw_values.shape[0]
+    sub = bands.iloc[keep]
+    return pd.DataFrame({"direction": np.repeat(sub["direction"].to_numpy(), n),
+                         "moment_nm": np.repeat(sub["moment_nm"].to_numpy(float), n),
+                         "quantity": np.repeat(sub["quantity"].to_numpy(), n),
+                         "draw": np.tile(np.arange(n), len(keep)),
+                         "value": band.draw_values[:, keep].T.reshape(-1)})[list(DRAW_VALUE_COLUMNS)]
 
 
 def table_bands(table_of, value_col: str, key_cols, charset, names, cov, shift,

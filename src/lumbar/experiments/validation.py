@@ -23,7 +23,8 @@ from .fsu import build_fsu
 from ..mechanics.solve import solve
 
 COLUMNS = ("quantity", "condition", "unit", "sim", "measured", "measured_low", "measured_high", "kind",
-           "source", "within", "tolerance_rule", "set", "role", "note", "sim_band_low", "sim_band_high")
+           "source", "within", "tolerance_rule", "set", "role", "note", "sim_band_low", "sim_band_high",
+           "p_within_posterior")
 #: role of a row: "calibration target" = the calibration fitted this value (agreement is expected; the
 #: row shows how well the fit met it); "independent" = not used by any fit of this model
 TARGET, INDEPENDENT = "calibration target", "independent"
@@ -303,15 +304,19 @@ def internal_load_rows(curves: pd.DataFrame, compression: pd.DataFrame | None, l
     return rows
 
 
-def scoreboard(rows: list[dict], bands: pd.DataFrame | None = None) -> pd.DataFrame:
+def scoreboard(rows: list[dict], bands: pd.DataFrame | None = None, draws: pd.DataFrame | None = None) -> pd.DataFrame:
     """The real-data scoreboard; ``within`` is judged on the MAP point value, and where the calibration's posterior
     gives one (``bands``: role load_sharing.bands) the 90 % band of the simulated value stands
-    beside it (sim_band_low, sim_band_high; NaN where no band is computed)."""
+    beside it (sim_band_low, sim_band_high; NaN where no band is computed), with the share of the posterior draws
+    whose value lies in the row's acceptance interval (``draws``: role load_sharing.band_draws;
+    p_within_posterior, NaN without draws)."""
     df = pd.DataFrame(rows, columns=list(COLUMNS))
     if bands is not None and len(bands) and len(df):
         lo, hi = (np.array(v, float) for v in zip(*[band_of(r, bands) for r in df.itertuples(index=False)]))
         have = np.isfinite(lo)
         df.loc[have, "sim_band_low"], df.loc[have, "sim_band_high"] = lo[have], hi[have]
+    if draws is not None and len(draws) and len(df):
+        df["p_within_posterior"] = [p_within_posterior(r, draws) for _, r in df.iterrows()]
     return df
 
 
@@ -319,26 +324,50 @@ def scoreboard(rows: list[dict], bands: pd.DataFrame | None = None) -> pd.DataFr
 BAND_OF_QUANTITY = {"L4-L5 ROM": "rotation_deg", "facet contact force per joint": "facet_max_contact_n"}
 
 
-def band_of(row, bands: pd.DataFrame) -> tuple[float, float]:
-    """(low, high) 90 % posterior band of one scoreboard row of the calibrated set, NaN where the band table has
-    none: the intact L4-L5 ROM rows (two-side means for lateral bending and axial rotation) and the facet force rows
-    (the band of the larger facet, at 7.5 N*m)."""
-    q = BAND_OF_QUANTITY.get(row.quantity)
-    if q is None or row.set != "calibrated":
-        return np.nan, np.nan
+def band_key(row) -> tuple[str, float, str] | None:
+    """(direction, moment, quantity) of the band-table row of one scoreboard row of the calibrated set, None where
+    the band table has none: the intact L4-L5 ROM rows (two-side means for lateral bending and axial rotation) and
+    the facet force rows (the larger facet, at 7.5 N*m)."""
+    quantity, condition, set_name = (row["quantity"], row["condition"], row["set"]) if isinstance(row, pd.Series) \
+        else (row.quantity, row.condition, row.set)
+    q = BAND_OF_QUANTITY.get(quantity)
+    if q is None or set_name != "calibrated":
+        return None
     if q == "rotation_deg":
-        parts = str(row.condition).split()
+        parts = str(condition).split()
         if len(parts) < 3 or parts[0] != "intact":
-            return np.nan, np.nan
-        d, M = parts[1], float(parts[2])
-    else:
-        label = str(row.condition).rsplit(",", 1)[0]
-        d = next((c for c, _, lab in FACET_FORCE_ROWS if lab == label), None)
-        M = 7.5
-        if d is None:
-            return np.nan, np.nan
+            return None
+        return parts[1], float(parts[2]), q
+    label = str(condition).rsplit(",", 1)[0]
+    d = next((c for c, _, lab in FACET_FORCE_ROWS if lab == label), None)
+    return None if d is None else (d, 7.5, q)
+
+
+def band_of(row, bands: pd.DataFrame) -> tuple[float, float]:
+    """(low, high) 90 % posterior band of one scoreboard row of the calibrated set (:func:`band_key`), NaN where
+    the band table has none."""
+    k = band_key(row)
+    if k is None:
+        return np.nan, np.nan
+    d, M, q = k
     g = bands[(bands["direction"] == d) & np.isclose(bands["moment_nm"].astype(float), M) & (bands["quantity"] == q)]
     return (float(g["low90"].iloc[0]), float(g["high90"].iloc[0])) if len(g) else (np.nan, np.nan)
+
+
+def p_within_posterior(row: pd.Series, draws: pd.DataFrame) -> float:
+    """Share of the posterior draws (role load_sharing.band_draws) whose value of the row's quantity lies in the
+    row's acceptance interval (:func:`acceptance_band`); NaN without a band row, an interval or a valid draw."""
+    k = band_key(row)
+    lo, hi = acceptance_band(row)
+    if k is None or not (np.isfinite(lo) or np.isfinite(hi)):
+        return np.nan
+    d, M, q = k
+    v = draws[(draws["direction"] == d) & np.isclose(draws["moment_nm"].astype(float), M)
+              & (draws["quantity"] == q)]["value"].to_numpy(float)
+    v = v[np.isfinite(v)]
+    if not len(v):
+        return np.nan
+    return float(np.mean((v >= (lo if np.isfinite(lo) else -np.inf)) & (v <= (hi if np.isfinite(hi) else np.inf))))
 
 
 # ------------------------------------------------------------------ other levels (independent of the calibration)
@@ -554,7 +583,8 @@ def distinct_comparisons(df: pd.DataFrame) -> pd.DataFrame:
                     "tolerance_rule": r["tolerance_rule"], "role": r["role"], "sets": "; ".join(sets),
                     "n_rows": len(g), "kind": r["kind"], "source": r["source"], "note": r["note"],
                     "sim_band_low": float(r.get("sim_band_low", np.nan)),
-                    "sim_band_high": float(r.get("sim_band_high", np.nan))})
+                    "sim_band_high": float(r.get("sim_band_high", np.nan)),
+                    "p_within_posterior": float(r.get("p_within_posterior", np.nan))})
     res = pd.DataFrame(out)
     if res.empty:
         return res

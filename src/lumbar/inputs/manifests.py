@@ -252,6 +252,7 @@ MANIFESTS: dict[str, Manifest] = {m.stage: m for m in (
         "curves": _o("load_sharing/curves_{set}.csv", "load_sharing_curves"),
         "compression": _o("load_sharing/compression_{set}.csv", "load_sharing_curves"),
         "bands": _o("load_sharing/bands_calibrated.csv", "load_sharing_bands", final=True),
+        "band_draws": _o("load_sharing/band_draws_calibrated.csv", "load_sharing_bands", final=True),
         "summary": _o("load_sharing/load_sharing_summary.csv", "load_sharing_summary", "load_sharing_summary", _LS,
                       final=True),
         "reduction": _o("load_sharing/reduction_flexion.csv", "load_sharing_summary", "load_sharing_reduction", _LS,

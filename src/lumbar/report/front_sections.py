@@ -36,7 +36,10 @@ def scoreboard_section(b):
     b.doc.add(Para("One row per distinct comparison: rows that several characteristic sets share (the "
                    "disc-only stage, for which every set uses the paper's disc) are shown once, with the "
                    "number of sets. Acceptance interval: the published range, else the tolerance named in "
-                   f"the CSV's tolerance_rule. Every row, with its source: {rel}. Agreement with the "
+                   "the CSV's tolerance_rule. The 90 % band of the calibrated unit's value and, in brackets, the "
+                   "share of the calibration's posterior draws whose value lies in the acceptance interval: how "
+                   "firmly the data behind the calibration place the row on its side. "
+                   f"Every row, with its source: {rel}. Agreement with the "
                    "SURROGATE tables further below is a method check, not a validation."))
     titles = {V.INDEPENDENT: ("R1", "Independent checks (validation)"),
               V.TARGET: ("R2", "Calibration targets (fit quality, not validation)"),
@@ -52,6 +55,8 @@ def scoreboard_section(b):
             sim = fmt(r.sim) if np.isfinite(r.sim) else "no value"
             blo = getattr(r, "sim_band_low", np.nan)
             post = f"{fmt(blo)}-{fmt(r.sim_band_high)}" if np.isfinite(blo) else ""
+            pw = float(getattr(r, "p_within_posterior", np.nan))
+            post += f" ({pw:.0%} of draws within)" if post and np.isfinite(pw) else ""
             rows.append([q if q != last else "", V.condition_label(r.condition), sim, post, fmt(r.measured), band,
                          CHECK if r.within else CROSS, V.sets_label(r.sets)])
             last = q

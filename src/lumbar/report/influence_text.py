@@ -120,3 +120,36 @@ def spread_sentence(t: pd.DataFrame, fmt, facet_ext_max_n=90.5, ssl_min_n=5.0) -
     return ("How much the disc of the specimens behind the disc-only curve (Heuer et al. 2007) may differ from the disc "
             "behind the intact rows (Yamamoto et al. 1989) is not published; the fit assumes the spread of a measured "
             "row. Refitted with the disc-only rows at a wider spread: " + "; ".join(parts) + f"; {verdict} (Table P2).")
+
+
+#: the judged internal loads' limits that the sentences test: the in-vitro mean + 1 SD of the extension facet force
+#: (data/load_sharing: Jaumard et al. 2011, 51.5 + 39.0 N) and the SSL's share of the flexion load (Hindle et al. 1990)
+FACET_EXT_MAX_N, SSL_MIN_N = 90.5, 5.0
+
+
+def posterior_judged_sentence(draws: pd.DataFrame, fmt, facet_ext_max_n=FACET_EXT_MAX_N,
+                              ssl_min_n=SSL_MIN_N) -> str:
+    """How probable the judged limits of the extension facet force (at 7.5 N*m, the larger joint) and the SSL tension
+    (flexion, 10 N*m) are under the calibration's posterior: the share of the posterior draws (role
+    load_sharing.band_draws) that meet each and both. Empty without draws."""
+    if draws is None or draws.empty:
+        return ""
+
+    def values(direction, moment, quantity):
+        g = draws[(draws["direction"] == direction) & np.isclose(draws["moment_nm"].astype(float), moment)
+                  & (draws["quantity"] == quantity)]
+        return g.set_index("draw")["value"].astype(float)
+
+    fac, ssl = values("extension", 7.5, "facet_max_contact_n"), values("flexion", 10.0, "SSL_tension_n")
+    both = pd.concat([fac.rename("f"), ssl.rename("s")], axis=1).dropna()
+    if both.empty:
+        return ""
+    pf, ps = float((both["f"] <= facet_ext_max_n).mean()), float((both["s"] >= ssl_min_n).mean())
+    pb = float(((both["f"] <= facet_ext_max_n) & (both["s"] >= ssl_min_n)).mean())
+    return (f"Across {len(both)} draws from the calibration's posterior, the extension facet force at 7.5 N*m is at "
+            f"most {fmt(facet_ext_max_n)} N (the in-vitro mean + 1 SD) in {fmt(100 * pf, 2)} % of them, the SSL "
+            f"carries at least {fmt(ssl_min_n)} N at 10 N*m flexion in {fmt(100 * ps, 2)} %, both in "
+            f"{fmt(100 * pb, 2)} %: "
+            + ("meeting both is improbable under the data behind the calibration, so the MAP's misses are not a "
+               "matter of where in its posterior the fit stopped." if pb < 0.1 else
+               "a good part of the posterior meets them; the data behind the calibration do not decide them."))

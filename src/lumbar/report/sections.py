@@ -27,7 +27,7 @@ from lumbar.inputs import manifests
 
 from lumbar.experiments import validation as V
 
-from .influence_text import influence_sentence, profile_sentence, spread_sentence
+from .influence_text import influence_sentence, posterior_judged_sentence, profile_sentence, spread_sentence
 from .document import Contents, Doc, Figure, Heading, Para, Table
 
 log = logging.getLogger(__name__)
@@ -441,6 +441,9 @@ class ReportBuilder:
                 edge = self._facet_edge_sentence()
                 if edge:
                     out.append(edge)
+                post = self._posterior_judged_sentence()
+                if post:
+                    out.append(post)
             if out:
                 paras.append(" ".join(out))
                 out = []
@@ -469,6 +472,12 @@ class ReportBuilder:
         text = influence_sentence(t, fmt).rstrip(".")
         prof = (profile_sentence(t, fmt) + " " + spread_sentence(t, fmt)).strip()
         return (f"Where those loads come from: {text} (Table P2). {prof}".strip()) if text else prof
+
+    def _posterior_judged_sentence(self) -> str:
+        """How probable the judged limits are under the calibration's posterior draws, in words; empty without
+        the draws' values (role load_sharing.band_draws)."""
+        rel = self.out("load_sharing", "band_draws")
+        return posterior_judged_sentence(read_csv(self.path(rel)), fmt) if self.has(rel) else ""
 
     def _facet_edge_sentence(self) -> str:
         """Where the calibrated unit's extension facet force sits (inside the fitted articular surface or beyond it,
