@@ -311,10 +311,14 @@ def test_discovery_model_band_joins_the_row_spread_in_quadrature(tmp_path):
     from lumbar.discovery.problems import model_band_sd
     keys = pd.DataFrame({"stage": ["intact", "intact"], "direction": ["flexion", "extension"], "moment_nm": [10, 10]})
     p = tmp_path / "bands.csv"
+    # the band the report shows (here the posterior draws', narrower than the linearised sd of 0.3) sets the spread
     pd.DataFrame({"stage": ["intact"], "direction": ["flexion"], "moment_nm": [10.0], "map": [7.0], "sd": [0.3],
-                  "low90": [6.5], "high90": [7.5]}).to_csv(p, index=False)
-    np.testing.assert_allclose(model_band_sd(keys, p), [0.3, 0.0])     # a scenario without a band adds nothing
+                  "low90": [6.8], "high90": [7.129]}).to_csv(p, index=False)
+    np.testing.assert_allclose(model_band_sd(keys, p), [0.329 / (2 * P.Z90), 0.0])   # no band: adds nothing
     np.testing.assert_allclose(model_band_sd(keys, None), [0.0, 0.0])
+    # a table without band ends: the linearised sd
+    pd.DataFrame({"stage": ["intact"], "direction": ["flexion"], "moment_nm": [10.0], "sd": [0.3]}).to_csv(p, index=False)
+    np.testing.assert_allclose(model_band_sd(keys, p), [0.3, 0.0])
 
 
 def test_null_model_with_the_models_own_calibrated_level():

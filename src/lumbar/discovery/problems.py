@@ -150,15 +150,21 @@ def rom_problem(df, config, solver_kw=None, bank=None) -> Problem:
 
 def model_band_sd(keys: pd.DataFrame, path) -> np.ndarray:
     """The nominal model's own posterior spread [deg] at each scenario of ``keys`` (stage, direction, moment_nm), from
-    the calibration's band table (role stepwise_reduction.bands of the stage manifests, column ``sd``; setting
-    ``discovery.model_bands``, set by the workflow for the calibrated set): part of a row's spread, added in quadrature
-    to the measurement's. Zeros without a table (a set without a posterior); NaN-free."""
+    the calibration's band table (role stepwise_reduction.bands of the stage manifests; setting
+    ``discovery.model_bands``, set by the workflow for the calibrated set): the width of the row's 90 % band over
+    2 x 1.645, i.e. the band the report shows (the posterior draws' where the linearisation failed its check), the
+    linearised ``sd`` for a table without band ends. Part of a row's spread, added in quadrature to the
+    measurement's. Zeros without a table (a set without a posterior); NaN-free."""
+    from ..experiments.posterior import Z90  # noqa: PLC0415 - one definition of the 90 % quantile
+
     if not path:
         return np.zeros(len(keys))
     b = pd.read_csv(path)
     if b.empty:
         return np.zeros(len(keys))
     k = keys.assign(moment_nm=keys["moment_nm"].astype(float))
+    if {"low90", "high90"} <= set(b.columns):
+        b = b.assign(sd=(b["high90"].astype(float) - b["low90"].astype(float)) / (2.0 * Z90))
     b = b.assign(moment_nm=b["moment_nm"].astype(float))[["stage", "direction", "moment_nm", "sd"]]
     sd = k.merge(b, on=["stage", "direction", "moment_nm"], how="left")["sd"].to_numpy(float)
     return np.nan_to_num(sd)
