@@ -541,8 +541,8 @@ def test_posterior_judged_sentence_reads_the_draws_and_says_whether_the_data_dec
         return pd.DataFrame(rows, columns=["direction", "moment_nm", "quantity", "draw", "value"])
 
     s = posterior_judged_sentence(table([80, 120, 130, 140], [6, 2, 3, 7]), fmt)
-    assert "Across 4 draws" in s and "in 25 % of them" in s and "at 10 N*m flexion in 50 %" in s
-    assert "both in 25 %" in s and "do not decide" in s
+    assert "Of 4 posterior draws, 25 % keep" in s and "at 10 N*m flexion, 25 % both" in s
+    assert "50 % give the SSL at least 5 N at 10 N*m flexion" in s and "do not decide" in s
     s = posterior_judged_sentence(table([120] * 20, [6] * 20), fmt)
-    assert "both in 0 %" in s and "improbable" in s
+    assert "0 % both" in s and "improbable" in s
     assert posterior_judged_sentence(table([], []), fmt) == "" and posterior_judged_sentence(None, fmt) == ""

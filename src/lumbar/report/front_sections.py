@@ -56,7 +56,7 @@ def scoreboard_section(b):
             blo = getattr(r, "sim_band_low", np.nan)
             post = f"{fmt(blo)}-{fmt(r.sim_band_high)}" if np.isfinite(blo) else ""
             pw = float(getattr(r, "p_within_posterior", np.nan))
-            post += f" ({pw:.0%} of draws within)" if post and np.isfinite(pw) else ""
+            post += f" ({pw:.0%})" if post and np.isfinite(pw) else ""
             rows.append([q if q != last else "", V.condition_label(r.condition), sim, post, fmt(r.measured), band,
                          CHECK if r.within else CROSS, V.sets_label(r.sets)])
             last = q

@@ -146,10 +146,7 @@ def posterior_judged_sentence(draws: pd.DataFrame, fmt, facet_ext_max_n=FACET_EX
         return ""
     pf, ps = float((both["f"] <= facet_ext_max_n).mean()), float((both["s"] >= ssl_min_n).mean())
     pb = float(((both["f"] <= facet_ext_max_n) & (both["s"] >= ssl_min_n)).mean())
-    return (f"Across {len(both)} draws from the calibration's posterior, the extension facet force at 7.5 N*m is at "
-            f"most {fmt(facet_ext_max_n)} N (the in-vitro mean + 1 SD) in {fmt(100 * pf, 2)} % of them, the SSL "
-            f"carries at least {fmt(ssl_min_n)} N at 10 N*m flexion in {fmt(100 * ps, 2)} %, both in "
-            f"{fmt(100 * pb, 2)} %: "
-            + ("meeting both is improbable under the data behind the calibration, so the MAP's misses are not a "
-               "matter of where in its posterior the fit stopped." if pb < 0.1 else
-               "a good part of the posterior meets them; the data behind the calibration do not decide them."))
+    return (f"Of {len(both)} posterior draws, {fmt(100 * pf, 2)} % keep the extension facet force at 7.5 N*m at or "
+            f"below {fmt(facet_ext_max_n)} N (the in-vitro mean + 1 SD), {fmt(100 * ps, 2)} % give the SSL at least "
+            f"{fmt(ssl_min_n)} N at 10 N*m flexion, {fmt(100 * pb, 2)} % both: the data behind the calibration "
+            + ("make meeting both improbable." if pb < 0.1 else "do not decide them."))

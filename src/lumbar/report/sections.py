@@ -493,10 +493,9 @@ class ReportBuilder:
         total, off = float(b[f"facet_{side}_contact_n"]), float(b[f"facet_{side}_beyond_surface_n"])
         if not total > 0:
             return ""
-        return (f"In extension at 7.5 N*m, {fmt(off)} N of the larger facet force of {fmt(total)} N "
-                f"({fmt(100 * off / total, 2)} %) comes from contact beyond the fitted articular surface (the "
-                "cartilage grid of the geometry), where Eq. 4 is extrapolated: the extension facet force and ROM depend "
-                "on a part of the joint that no landmark describes (docs/validity.md).")
+        return (f"In extension at 7.5 N*m, {fmt(off)} of the larger joint's {fmt(total)} N "
+                f"({fmt(100 * off / total, 2)} %) come from contact beyond the fitted articular surface (the geometry's "
+                "cartilage grid), where Eq. 4 is extrapolated (docs/validity.md).")
 
     def _null_sentence(self) -> str:
         """What the model adds over a trivial model on the same rows (the validation's null-model table), in words
