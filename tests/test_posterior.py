@@ -452,3 +452,11 @@ def test_report_says_what_the_draws_say_of_the_laplace_spread_and_how_each_band_
     assert sampling_sentence(None) == "" and sampling_sentence(s.iloc[:0]) == ""
     # every way a band can be made has words in the report (a new method without words would print its code)
     assert set(BAND_METHOD_WORDS) == {P.METHOD_LINEAR, P.METHOD_BOUND, P.METHOD_NONLINEAR, P.METHOD_CLIPPED}
+
+
+def test_draw_settings_are_checked_before_any_computation_and_name_the_config_key():
+    assert P.check_draw_settings({}, 20) == P.DRAW_DEFAULTS
+    for bad, field in (({"burn_in": 300}, "burn_in"), ({"walkers": 30}, "walkers"), ({"keep": 0}, "keep"),
+                       ({"walker": 40}, "unknown")):
+        with pytest.raises(ValueError, match=f"stepwise_reduction.posterior_draws.*{field}|{field}.*posterior_draws"):
+            P.check_draw_settings(bad, 20)

@@ -24,8 +24,9 @@ from lumbar.inputs.io import write_table_atomic  # noqa: E402
 
 def main(snakemake, log):
     p, i, o = snakemake.params, snakemake.input, snakemake.output
-    settings = {**P.DRAW_DEFAULTS, **(p.sr.get("posterior_draws") or {})}
     shipped = pd.read_csv(i.posterior)
+    # the settings checked against the shipped posterior's parameters before the calibration is rerun
+    settings = P.check_draw_settings(p.sr.get("posterior_draws") or {}, len(shipped))
     if shipped.empty:
         log.info("the calibration has no posterior (no admissible fit): %s and %s hold their headers", o.draws,
                  o.sampling)

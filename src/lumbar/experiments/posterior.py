@@ -316,6 +316,24 @@ class PosteriorSample:
         return self.draws - self.map_q
 
 
+def check_draw_settings(settings: dict, n_parameters: int, where: str = "stepwise_reduction.posterior_draws") -> dict:
+    """The sampler's settings (:data:`DRAW_DEFAULTS` completed by ``settings``), checked before any computation: a
+    ValueError naming the config key and the expected form for a burn-in not below the steps, fewer walkers than
+    twice the ``n_parameters`` (emcee's ensemble needs them), or no draw kept."""
+    unknown = sorted(set(settings) - set(DRAW_DEFAULTS))
+    if unknown:
+        raise ValueError(f"{where}: unknown key(s) {unknown}; expected some of {sorted(DRAW_DEFAULTS)}")
+    s = {**DRAW_DEFAULTS, **settings}
+    if not 0 <= int(s["burn_in"]) < int(s["steps"]):
+        raise ValueError(f"{where}.burn_in: {s['burn_in']} with steps {s['steps']}; expected 0 <= burn_in < steps")
+    if int(s["walkers"]) < 2 * n_parameters:
+        raise ValueError(f"{where}.walkers: {s['walkers']}; expected at least twice the {n_parameters} calibrated "
+                         f"parameters ({2 * n_parameters})")
+    if int(s["keep"]) < 1:
+        raise ValueError(f"{where}.keep: {s['keep']}; expected at least 1 draw (50 or more for a 90 % band)")
+    return s
+
+
 def sample_posterior(residual, post: Posterior, walkers: int = 40, steps: int = 250, burn_in: int = 100,
                      keep: int = 64, seed: int = 0, start_scale: float = 0.4) -> PosteriorSample:
     """Draws from the posterior the MAP fit uses, log p(q) = -r(q).r(q)/2 inside the fit's bounds (``residual``: q ->
