@@ -5,6 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+#: the judged internal loads' limits that the sentences test: the in-vitro mean + 1 SD of the extension facet force
+#: (data/load_sharing: Jaumard et al. 2011, 51.5 + 39.0 N) and the SSL's share of the flexion load (Hindle et al. 1990)
+FACET_EXT_MAX_N, SSL_MIN_N = 90.5, 5.0
+
 
 def _sensitivity(t: pd.DataFrame) -> pd.Series:
     """Rows of a sensitivity refit (facet stiffness held, disc-only rows at another spread): neither the MAP nor a
@@ -51,7 +55,7 @@ def influence_sentence(t: pd.DataFrame, fmt) -> str:
             "internal loads outside their sourced ranges; it stays in the fit.")
 
 
-def profile_sentence(t: pd.DataFrame, fmt, facet_ext_max_n=90.5, ssl_min_n=5.0, rom_band=0.25,
+def profile_sentence(t: pd.DataFrame, fmt, facet_ext_max_n=FACET_EXT_MAX_N, ssl_min_n=SSL_MIN_N, rom_band=0.25,
                      measured_ar_deg=None) -> str:
     """The facet-stiffness profile in words (the rows of the calibration's row_influence table with
     ``facet_stiffness_held``): the stiffest held value at which the judged internal loads are in their ranges (extension
@@ -98,7 +102,7 @@ def profile_sentence(t: pd.DataFrame, fmt, facet_ext_max_n=90.5, ssl_min_n=5.0, 
                and np.isfinite(f.get("disc_axial_rotation_scale", np.nan)) else " (Table P2)."))
 
 
-def spread_sentence(t: pd.DataFrame, fmt, facet_ext_max_n=90.5, ssl_min_n=5.0) -> str:
+def spread_sentence(t: pd.DataFrame, fmt, facet_ext_max_n=FACET_EXT_MAX_N, ssl_min_n=SSL_MIN_N) -> str:
     """The disc-spread sensitivity in words (rows with ``disc_row_spread``): what the judged internal loads become when
     the disc-only rows, from another study's specimens than the intact rows, are given a wider spread as data. Empty
     without such rows."""
@@ -121,10 +125,6 @@ def spread_sentence(t: pd.DataFrame, fmt, facet_ext_max_n=90.5, ssl_min_n=5.0) -
             "behind the intact rows (Yamamoto et al. 1989) is not published; the fit assumes the spread of a measured "
             "row. Refitted with the disc-only rows at a wider spread: " + "; ".join(parts) + f"; {verdict} (Table P2).")
 
-
-#: the judged internal loads' limits that the sentences test: the in-vitro mean + 1 SD of the extension facet force
-#: (data/load_sharing: Jaumard et al. 2011, 51.5 + 39.0 N) and the SSL's share of the flexion load (Hindle et al. 1990)
-FACET_EXT_MAX_N, SSL_MIN_N = 90.5, 5.0
 
 
 def posterior_judged_sentence(draws: pd.DataFrame, fmt, facet_ext_max_n=FACET_EXT_MAX_N,
