@@ -546,3 +546,22 @@ def test_posterior_judged_sentence_reads_the_draws_and_says_whether_the_data_dec
     s = posterior_judged_sentence(table([120] * 20, [6] * 20), fmt)
     assert "0 % both" in s and "improbable" in s
     assert posterior_judged_sentence(table([], []), fmt) == "" and posterior_judged_sentence(None, fmt) == ""
+
+
+def test_first_page_says_in_words_which_trivial_model_the_model_does_not_beat():
+    """The null-model table in words: the model's count once per quantity beside every trivial model's, and which
+    one it does not beat (control: a quantity where the model beats its null says nothing of the kind)."""
+    import pandas as pd
+
+    from lumbar.report.sections import null_models_sentence
+
+    t = pd.DataFrame({"quantity": ["ROM, other levels", "ROM, other levels", "L4-L5 IDP in vivo"],
+                      "null_model": ["a", "b", "c"], "description": ["copy A", "copy B", "the mean"],
+                      "n_rows": [16, 16, 5], "model_within": [12, 12, 3], "null_within": [9, 13, 2],
+                      "model_beats_null": [True, False, True]})
+    s = null_models_sentence(t)
+    assert s.count("12 of 16 within") == 1 and "against 9 (copy A) and 13 (copy B)" in s
+    assert "does not beat the trivial model at 13" in s
+    assert "3 of 5 within against 2 (the mean)" in s and s.count("does not beat") == 1      # control
+    assert "which it does not beat" in null_models_sentence(t.iloc[2:].assign(model_beats_null=False))
+    assert null_models_sentence(t.iloc[:0]) == ""

@@ -176,6 +176,27 @@ def _render_caption(text: str, config: Mapping) -> str:
 
 
 # ----------------------------------------------------------------------------------------------- the builder
+def null_models_sentence(t: pd.DataFrame) -> str:
+    """The null-model table (role validation.null_models) in words, one clause per scoreboard quantity: the model's
+    count beside every trivial model's on the same rows, and which of them it does not beat (said in words, as the
+    first page must)."""
+    parts = []
+    for q, g in t.groupby("quantity", sort=False):
+        r0 = g.iloc[0]
+        nulls = [f"{int(r.null_within)} ({r.description})" for r in g.itertuples(index=False)]
+        s = (f"{V.condition_label(q)}, the model {int(r0.model_within)} of {int(r0.n_rows)} within against "
+             + " and ".join(nulls))
+        lost = ~g["model_beats_null"].astype(bool).to_numpy()
+        if lost.all():
+            s += ", which it does not beat" if len(g) == 1 else ", none of which it beats"
+        elif lost.any():
+            at = [str(int(v)) for v in g["null_within"][lost]]
+            s += (", and does not beat the trivial model at " + at[0] if len(at) == 1 else
+                  ", and does not beat the trivial models at " + " and ".join(at))
+        parts.append(s)
+    return ("Beside trivial models on the same rows: " + "; ".join(parts) + ".") if parts else ""
+
+
 class ReportBuilder:
     """Reads the result files and writes the report's sections into a :class:`~lumbar.report.document.Doc`
     (prose from the configuration and the files, figure and table numbering, what was not built)."""
@@ -501,17 +522,7 @@ class ReportBuilder:
         """What the model adds over a trivial model on the same rows (the validation's null-model table), in words
         where it does not beat it."""
         rel = self.out("validation", "null_models")
-        if not self.has(rel):
-            return ""
-        t = read_csv(self.path(rel))
-        parts = []
-        for r in t.itertuples(index=False):
-            s = (f"{V.condition_label(r.quantity)}: the model {r.model_within} of {r.n_rows} within, a trivial model "
-                 f"({r.description}) {r.null_within}")
-            if not bool(r.model_beats_null):
-                s += " - the model does not beat it"
-            parts.append(s)
-        return ("Beside a trivial model on the same rows: " + "; ".join(parts) + ".") if parts else ""
+        return null_models_sentence(read_csv(self.path(rel))) if self.has(rel) else ""
 
     def _muscle_abstract(self) -> str:
         rel = self.out("muscle_model", "metrics")
