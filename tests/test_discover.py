@@ -317,6 +317,18 @@ def test_benchmark_summary_false_positive_rate_interval_and_power():
     assert s["pass"]["false_positive_rate_max"] is False and s["pass"]["library_named_at_benchmark_magnitudes_min"]
     assert s["pass"]["out_of_library_unnamed_min"] is False and s["all_pass"] is False
     assert power_study._interval(0, 50)[0] == 0 and 0.05 < power_study._interval(0, 50)[1] < 0.08
+    text = D.benchmark_paragraph(s)       # the candidates without fixtures are named in the report, with the reason
+    assert "Not benchmarked: " in text and "lumbosacral_disc_height (acts only on multilevel_rom" in text
+
+
+def test_benchmark_names_the_candidates_it_cannot_test_and_why():
+    """A candidate acting only on an experiment without fixtures (the lumbosacral disc: multilevel ROM) is listed as
+    not benchmarked, with its experiment; a candidate on a benchmarked experiment is not (control)."""
+    nb = power_study.not_benchmarked({"stepwise_rom", "idp_invitro"})
+    assert "multilevel_rom" in nb["lumbosacral_disc_height"] and "disc_tension" in nb
+    assert "itl" not in nb and "axial_preload" not in nb
+    assert "lumbosacral_disc_height" not in power_study.not_benchmarked({"stepwise_rom", "multilevel_rom"})
+    assert set(power_study.not_benchmarked(set())) == {n for n, e in fx.EFFECTS.items()}
 
 
 def test_virtual_specimens_without_equilibrium_are_redrawn_not_dropped():

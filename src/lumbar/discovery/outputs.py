@@ -212,4 +212,6 @@ def benchmark_paragraph(summary: dict) -> str:
             f"named in {ool['k']} of {ool['n']} ({pct(ool['rate'])}, {ci(ool['rate_95ci'])}; target at least "
             f"{pct(s['targets']['out_of_library_unnamed_min'])}). Probability of naming the planted effect by "
             f"magnitude: {curve}. "
+            + (f"Not benchmarked: {'; '.join(f'{k} ({v})' for k, v in sorted(s['not_benchmarked'].items()))}. "
+               if s.get("not_benchmarked") else "")
             + ("Every target is met." if s["all_pass"] else f"Targets not met: {', '.join(fails)}."))
