@@ -56,6 +56,7 @@ class SpecimenInputs:
     axes: str                       # the mesh files' axes ("RAS" for a label volume's meshes)
     pattern: str | None = None
     label_table: Path | None = None
+    turn_inside_out: bool = False   # an inside-out mesh turned instead of refused (specimen_io.close_surface)
 
     @property
     def vertebrae(self) -> list[str]:
@@ -91,9 +92,13 @@ def specimen_inputs(g: dict) -> SpecimenInputs:
             specimen_io.check_units_axes(units, axes)
         except specimen_io.SpecimenError as exc:
             raise specimen_io.SpecimenError(f"geometry (kind meshes, path {path}): {exc}") from None
+        turn = g.get("turn_inside_out", False)
+        if not isinstance(turn, bool):
+            raise specimen_io.SpecimenError(f"geometry.turn_inside_out {turn!r} (kind meshes, path {path}): expected "
+                                            "true or false")
         files = specimen_io.find_level_files(path, pattern)
         specimen_io.check_levels(files, None, path)
-        return SpecimenInputs(kind, path, files, units, axes, pattern)
+        return SpecimenInputs(kind, path, files, units, axes, pattern, turn_inside_out=turn)
     for key in ("units", "axes"):
         if g.get(key) not in (None, {"units": "mm", "axes": "RAS"}[key]):
             raise specimen_io.SpecimenError(f"geometry.{key} {g[key]!r} with kind label_volume: the meshes of a label "
@@ -222,6 +227,8 @@ def cache_content(si: SpecimenInputs) -> bytes:
     rec = dict(kind=si.kind, units=si.units, axes=si.axes, name=si.path.name,
                files={v: _file_digest(f) for v, f in si.files.items()},
                label_table=_file_digest(si.label_table) if si.label_table else None)
+    if si.turn_inside_out:
+        rec["turn_inside_out"] = True
     return json.dumps(rec, sort_keys=True).encode()
 
 
@@ -252,7 +259,8 @@ def _build(si: SpecimenInputs, mesh_dir: Path | None) -> SpecimenBuild:
         read = specimen_io.read_specimen(mesh_dir, units="mm", axes="RAS")
         sources = {v: str(si.files[v]) for v in read.files}
     else:
-        read = specimen_io.read_specimen(si.path, units=si.units, axes=si.axes, pattern=si.pattern)
+        read = specimen_io.read_specimen(si.path, units=si.units, axes=si.axes, pattern=si.pattern,
+                                         turn_inside_out=si.turn_inside_out)
         sources = {v: str(f) for v, f in read.files.items()}
     sp = specimen_build.build_specimen(read.meshes, axes=si.axes, sources=sources, units=si.units,
                                        name=si.path.name)

@@ -204,12 +204,19 @@ def _boundary_loops(faces: np.ndarray) -> list[list[int]] | None:
     return loops
 
 
-def close_surface(mesh, level: str, file: Path, max_hole_m: float = MAX_HOLE_PERIMETER_M):
+def close_surface(mesh, level: str, file: Path, max_hole_m: float = MAX_HOLE_PERIMETER_M,
+                  turn_inside_out: bool = False):
     """The mesh closed and oriented: repeated and degenerate triangles removed, holes whose boundary is at most
-    ``max_hole_m`` long filled (a fan from the hole's centre), inconsistently oriented triangles turned (trimesh),
-    an inside-out surface turned; returns (mesh, list[Repair]) naming each change. A larger hole, an edge shared
-    by three faces, or a surface still open or inconsistent afterwards is a :class:`SpecimenError` naming
-    ``file``."""
+    ``max_hole_m`` long filled (a fan from the hole's centre), inconsistently oriented triangles turned (trimesh);
+    returns (mesh, list[Repair]) naming each change. A larger hole, an edge shared by three faces, or a surface
+    still open or inconsistent afterwards is a :class:`SpecimenError` naming ``file``.
+
+    A surface whose triangles all wind one way and enclose a negative volume (inside-out) is the signature of a
+    mirrored export (one axis flipped without re-ordering the faces; left and right exchanged, which the nearly
+    symmetric anatomy cannot show): a :class:`SpecimenError` unless ``turn_inside_out`` (the user states that the
+    coordinates are not mirrored and the writing tool winds its faces inwards); then the faces are turned and the
+    repair says so. A surface that needed its orientation made consistent and then enclosed a negative volume
+    is turned either way (mixed orientation is not a mirror's signature)."""
     import trimesh  # noqa: PLC0415 - mesh library where meshes are built (docs/design.md)
     repairs: list[Repair] = []
     keep = mesh.unique_faces() & mesh.nondegenerate_faces()
@@ -241,7 +248,8 @@ def close_surface(mesh, level: str, file: Path, max_hole_m: float = MAX_HOLE_PER
         if not mesh.is_watertight:
             raise SpecimenError(f"{file}: {level} surface is not closed after filling its holes; expected one "
                                 "closed surface per vertebra")
-    if not mesh.is_winding_consistent:
+    mixed = not mesh.is_winding_consistent
+    if mixed:
         trimesh.repair.fix_winding(mesh)
         if mesh.is_winding_consistent:
             repairs.append(Repair(level, file, "triangles turned to one consistent orientation"))
@@ -249,8 +257,17 @@ def close_surface(mesh, level: str, file: Path, max_hole_m: float = MAX_HOLE_PER
         raise SpecimenError(f"{file}: {level} surface has inconsistent triangle orientation (some faces inside-out); "
                             "expected a consistently oriented closed surface")
     if mesh.volume < 0:
+        if not (mixed or turn_inside_out):
+            raise SpecimenError(
+                f"{file}: {level} surface is inside-out (every triangle winds inwards, enclosed volume "
+                f"{mesh.volume * 1e6:.3g} cm^3): the signature of a mirrored export (one axis flipped without "
+                "re-ordering the faces), which would exchange left and right; expected outward-wound faces. Export "
+                "without mirroring, or, if the coordinates are not mirrored and the tool writes inward faces, pass "
+                "--turn-inside-out (geometry.turn_inside_out: true)")
         mesh.invert()
-        repairs.append(Repair(level, file, "surface was inside-out (negative volume): normals turned"))
+        why = ("after its orientation was made consistent" if mixed
+               else "the user stated the coordinates are not mirrored (turn_inside_out)")
+        repairs.append(Repair(level, file, f"surface was inside-out (negative volume): normals turned ({why})"))
     return mesh, repairs
 
 
@@ -290,10 +307,11 @@ def check_size(mesh, level: str, file, units: str) -> None:
 
 
 def read_specimen(path, units: str = "mm", axes: str = "LPS", pattern: str | None = None,
-                  require=None, max_hole_m: float = MAX_HOLE_PERIMETER_M) -> SpecimenMeshes:
+                  require=None, max_hole_m: float = MAX_HOLE_PERIMETER_M,
+                  turn_inside_out: bool = False) -> SpecimenMeshes:
     """Read and check a folder of vertebra surfaces (see the module doc); ``require``: vertebrae (``"L4"``) or
-    units (``"L4-L5"``) that must be present. Returns the meshes in metres, in the input's axes, with the repair
-    log."""
+    units (``"L4-L5"``) that must be present; ``turn_inside_out``: see :func:`close_surface` (an inside-out
+    surface is an error otherwise). Returns the meshes in metres, in the input's axes, with the repair log."""
     import trimesh  # noqa: PLC0415 - mesh library where meshes are built (docs/design.md)
     check_units_axes(units, axes)
     files = find_level_files(path, pattern)
@@ -309,17 +327,18 @@ def read_specimen(path, units: str = "mm", axes: str = "LPS", pattern: str | Non
         if len(mesh.faces) < 4:
             raise SpecimenError(f"{f}: {lv} mesh has {len(mesh.faces)} triangle(s); expected a closed vertebra surface")
         check_size(mesh, lv, f, units)
-        mesh, rep = close_surface(mesh, lv, f, max_hole_m)
+        mesh, rep = close_surface(mesh, lv, f, max_hole_m, turn_inside_out=turn_inside_out)
         repairs += rep
         meshes[lv] = mesh
     check_neighbours(meshes, files)
     return SpecimenMeshes(meshes=meshes, files=files, units=units, axes=axes, repairs=repairs, ignored=ignored)
 
 
-def read_specimen_meshes(path, units: str = "mm", axes: str = "LPS", pattern: str | None = None) -> dict:
+def read_specimen_meshes(path, units: str = "mm", axes: str = "LPS", pattern: str | None = None,
+                         turn_inside_out: bool = False) -> dict:
     """Level -> ``trimesh.Trimesh`` in metres, in the input's own axes (no axis change; the caller aligns),
     validated (:func:`read_specimen`; its ``repairs`` say what was closed)."""
-    return read_specimen(path, units=units, axes=axes, pattern=pattern).meshes
+    return read_specimen(path, units=units, axes=axes, pattern=pattern, turn_inside_out=turn_inside_out).meshes
 
 
 def _dense_points(mesh) -> np.ndarray:

@@ -121,13 +121,17 @@ def main(argv=None, prog: str = "lumbar landmarks") -> int:
                    "world), project (x anterior, y left, z superior)")
     p.add_argument("--pattern", default=None, help="file pattern with {level}, e.g. '{level}_vertebra.obj', where "
                    "a folder holds several surfaces per level")
+    p.add_argument("--turn-inside-out", action="store_true",
+                   help="turn a surface whose faces all wind inwards instead of refusing it (refused by default: "
+                        "the signature of a mirrored export); only when the coordinates are not mirrored")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--backend", default="auto", choices=("auto", "pyvista", "matplotlib", "none"),
                    help="QA figure engine ('none': no figures)")
     a = p.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     try:
-        read = read_specimen(a.mesh_dir, units=a.units, axes=a.axes, pattern=a.pattern)
+        read = read_specimen(a.mesh_dir, units=a.units, axes=a.axes, pattern=a.pattern,
+                             turn_inside_out=a.turn_inside_out)
         sources = {v: str(f) for v, f in read.files.items()}
         sp = build_specimen(read.meshes, axes=a.axes, sources=sources, units=a.units, name=Path(a.mesh_dir).name)
         paths = write_tables(sp, a.out)
