@@ -212,8 +212,14 @@ def test_neighbour_checks(tmp_path, shift_mm, what):
 
 def test_stacked_upside_down_refused(tmp_path):
     write_folder(tmp_path, ("S1", "L5", "L4"))                     # S1 on top: +z not superior
-    with pytest.raises(GeometryError, match="not above"):
+    with pytest.raises(GeometryError, match="not above.*axes 'any'"):
         S.read_specimen(tmp_path)
+    # a specimen at any angle in the scanner, declared as such: read (the anatomy orients it, specimen.py);
+    # the other checks stay: a vertebra moved 100 mm away is still refused
+    assert S.read_specimen(tmp_path, axes="any").levels == list(LEVELS3)
+    ellipsoid(-PITCH_MM - 100.0).export(tmp_path / "spec_L5.stl")
+    with pytest.raises(GeometryError, match="apart"):
+        S.read_specimen(tmp_path, axes="any")
 
 
 def test_visible_human_meshes_read_with_pattern():

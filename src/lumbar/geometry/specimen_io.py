@@ -34,7 +34,7 @@ from .meshio import read_mesh_arrays
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".vtk", ".vtp")
 UNITS = {"mm": 1e-3, "m": 1.0}
-AXES = ("LPS", "RAS", "project")
+AXES = ("LPS", "RAS", "project", "any")
 # a hole whose boundary loop is at most this long (about 5 mm across) is filled; a longer one is refused: a surface
 # with such a hole is not a segmented bone surface, and no fill can say what was there
 MAX_HOLE_PERIMETER_M = 0.015
@@ -104,7 +104,8 @@ def check_units_axes(units: str, axes: str) -> None:
     if axes not in AXES:
         raise SpecimenError(f"axes {axes!r}: expected one of {list(AXES)} (LPS: x left, y posterior, z superior, "
                             "DICOM/ITK; RAS: x right, y anterior, z superior, NIfTI; project: x anterior, y left, "
-                            "z superior)")
+                            "z superior; any: right-handed coordinates at any angle, the orientation from the "
+                            "anatomy alone)")
 
 
 def _is_volume(p: Path) -> bool:
@@ -330,7 +331,7 @@ def read_specimen(path, units: str = "mm", axes: str = "LPS", pattern: str | Non
         mesh, rep = close_surface(mesh, lv, f, max_hole_m, turn_inside_out=turn_inside_out)
         repairs += rep
         meshes[lv] = mesh
-    check_neighbours(meshes, files)
+    check_neighbours(meshes, files, axes)
     return SpecimenMeshes(meshes=meshes, files=files, units=units, axes=axes, repairs=repairs, ignored=ignored)
 
 
@@ -345,10 +346,10 @@ def _dense_points(mesh) -> np.ndarray:
     return np.concatenate([np.asarray(mesh.vertices), np.asarray(mesh.triangles_center)])
 
 
-def check_neighbours(meshes: dict, files: dict) -> None:
-    """Neighbouring vertebrae (L4 and L5, ...) stacked along +z, not overlapping (:func:`overlap_radius` above
-    ``MAX_OVERLAP_M``) and not apart (nearest points more than ``MAX_NEIGHBOUR_GAP_M``); ``files``: level -> what
-    the message names (a file)."""
+def check_neighbours(meshes: dict, files: dict, axes: str = "LPS") -> None:
+    """Neighbouring vertebrae (L4 and L5, ...) not overlapping (:func:`overlap_radius` above ``MAX_OVERLAP_M``),
+    not apart (nearest points more than ``MAX_NEIGHBOUR_GAP_M``) and, with declared axes (not ``"any"``), stacked
+    along their +z; ``files``: level -> what the message names (a file)."""
     from scipy.spatial import cKDTree  # noqa: PLC0415 - scipy.spatial where geometry is computed (docs/design.md)
     order = [v for v in VERTEBRA_NAMES if v in meshes]
     for up, lo in zip(order, order[1:]):
@@ -366,9 +367,11 @@ def check_neighbours(meshes: dict, files: dict) -> None:
                                 f"{r * 1e3:.1f} mm (allowed {MAX_OVERLAP_M * 1e3:.0f} mm); expected separate bones "
                                 "(a shifted, doubled or mislabelled file?)")
         ca, cb = A.center_mass, B.center_mass
-        if not ca[2] > cb[2]:
+        if axes != "any" and not ca[2] > cb[2]:
             raise SpecimenError(f"{where}: {up} is not above {lo} along +z (volume centroids z = {ca[2]:.4f} m and "
-                                f"{cb[2]:.4f} m); expected +z superior (LPS, RAS and the project frame all have it)")
+                                f"{cb[2]:.4f} m); expected +z superior (LPS, RAS and the project frame all have it). "
+                                "A specimen scanned at another angle (an in-vitro specimen lying in the scanner): "
+                                "axes 'any' takes the orientation from the anatomy alone")
 
 
 def _inside_distance(mesh, pts):

@@ -118,7 +118,8 @@ def main(argv=None, prog: str = "lumbar landmarks") -> int:
     p.add_argument("mesh_dir", help="folder with one surface per vertebra (L1..L5, S1 in the file names)")
     p.add_argument("--units", default="mm", choices=("mm", "m"), help="units of the mesh coordinates")
     p.add_argument("--axes", default="LPS", help="axes of the mesh coordinates: LPS (3D Slicer, DICOM), RAS (NIfTI "
-                   "world), project (x anterior, y left, z superior)")
+                   "world), project (x anterior, y left, z superior), any (right-handed, at any angle: the "
+                   "orientation from the anatomy alone)")
     p.add_argument("--pattern", default=None, help="file pattern with {level}, e.g. '{level}_vertebra.obj', where "
                    "a folder holds several surfaces per level")
     p.add_argument("--turn-inside-out", action="store_true",
