@@ -20,7 +20,8 @@ def test_schema_found_via_package():
 def test_defaults_filled_from_empty():
     cfg = load_config({})
     assert cfg["geometry"] == {"kind": "visible_human", "path": "data/geometry/visible_human_lss", "units": None,
-                               "axes": None, "pattern": None, "label_table": None}   # the last four: a specimen's
+                               "axes": None, "pattern": None, "turn_inside_out": False,
+                               "label_table": None}   # the last five: a specimen's
     assert cfg["characteristics"]["sets"] == [
         "calibrated", "chazal1985", "shirazi_adl1986", "white_panjabi1990", "nolte1990", "rupp2015"]
     assert cfg["fsu"] == {"level": "L4-L5", "moments_nm": [1, 2.5, 5, 7.5, 10], "beyond_experiment": False,
