@@ -9,6 +9,15 @@ second and per CPU second of this process (the one-core figure when other jobs s
 is recorded before and after). Target: < 3 s per vertebra. Usage::
 
     python benchmarks/bench_landmarks.py [--repeat 1] [--vertebrae L1,L2,L3,L4,L5,S1]
+
+``--dense K`` times what a CT surface exported at fine resolution costs instead: the same posed meshes, each
+triangle split into four K times (trimesh.remesh.subdivide; K = 2 gives 16x the triangles, 129,000-425,000 per
+vertebra, as a 0.3-0.5 mm export has), written as STL in millimetres, then read (``read_specimen``: the checks and
+the decimation to ``MAX_WORKING_FACES``) and built; beside it, in the same run, the same files with the decimation
+switched off (the baseline), and the landmarks' distance between the two. Its committed result is
+``benchmarks/results/landmarks_dense.json``::
+
+    python benchmarks/bench_landmarks.py --dense 2 > benchmarks/results/landmarks_dense.json
 """
 from __future__ import annotations
 
@@ -33,8 +42,12 @@ def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--repeat", type=int, default=1)
     p.add_argument("--vertebrae", default="L1,L2,L3,L4,L5,S1")
+    p.add_argument("--dense", type=int, default=0, help="subdivide K times and time reading + building (module doc)")
     a = p.parse_args(argv)
     verts = a.vertebrae.split(",")
+    if a.dense:
+        print(json.dumps(dense(verts, a.dense), indent=2))
+        return 0
     load0 = os.getloadavg()[0]
     geo = load_geometry("visible_human")
     t0, c0 = time.perf_counter(), time.process_time()
@@ -58,6 +71,52 @@ def main(argv=None):
                threads="OMP/OPENBLAS/MKL_NUM_THREADS=1")
     print(json.dumps(out, indent=2))
     return 0
+
+
+def dense(verts, k):
+    """Reading + building a finely exported specimen, with and without the decimation (module doc)."""
+    import tempfile  # noqa: PLC0415
+    from pathlib import Path  # noqa: PLC0415
+
+    import numpy as np  # noqa: PLC0415
+    import trimesh  # noqa: PLC0415
+
+    from lumbar.geometry.specimen_io import MAX_WORKING_FACES, read_specimen  # noqa: PLC0415
+    load0 = os.getloadavg()[0]
+    geo = load_geometry("visible_human")
+    default_atlas()
+    pose = ct_pose(0)
+    faces = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for v in verts:
+            m = geo.vertebrae[v].mesh.copy().apply_transform(pose)
+            vv, ff = m.vertices * 1e3, m.faces
+            for _ in range(k):
+                vv, ff = trimesh.remesh.subdivide(vv, ff)
+            trimesh.Trimesh(vv, ff).export(Path(tmp) / f"{v}.stl")
+            faces[v] = int(len(ff))
+        runs = {}
+        for name, cap in (("decimated", MAX_WORKING_FACES), ("baseline_full_surface", 10**9)):
+            t0, c0 = time.perf_counter(), time.process_time()
+            read = read_specimen(tmp, units="mm", axes="LPS", max_faces=cap)
+            sp = build_specimen(read.meshes, axes="LPS")
+            runs[name] = dict(wall_s=time.perf_counter() - t0, cpu_s=time.process_time() - c0,
+                              cpu_seconds_per_vertebra=(time.process_time() - c0) / len(verts),
+                              repairs=[str(r) for r in read.repairs],
+                              points=np.vstack([np.asarray(lm["ligaments"][n][e]).reshape(-1, 3)
+                                                for lv, lm in sorted(sp.landmarks.items())
+                                                for n in sorted(lm["ligaments"]) for e in (0, 1)]))
+    d = np.linalg.norm(runs["decimated"].pop("points") - runs["baseline_full_surface"].pop("points"), axis=1) * 1e3
+    dec = runs["decimated"]
+    return dict(benchmark="landmarks_dense", subdivisions=k, vertebrae=verts, triangles_per_vertebra=faces,
+                max_working_faces=MAX_WORKING_FACES, runs=runs,
+                cpu_ratio_decimated_over_baseline=dec["cpu_s"] / runs["baseline_full_surface"]["cpu_s"],
+                ligament_points_moved_by_decimation_mm=dict(median=float(np.median(d)), p95=float(np.quantile(d, 0.95)),
+                                                            max=float(d.max())),
+                target_seconds_per_vertebra=TARGET_S_PER_VERTEBRA,
+                within_target=bool(dec["cpu_seconds_per_vertebra"] < TARGET_S_PER_VERTEBRA),
+                load_average_before=load0, load_average_after=os.getloadavg()[0],
+                threads="OMP/OPENBLAS/MKL_NUM_THREADS=1")
 
 
 if __name__ == "__main__":

@@ -540,3 +540,19 @@ def test_corruptions_give_a_named_error_or_a_correct_result(ops):
         assert {x.level for x in r.repairs} == holed
     finally:
         shutil.rmtree(folder, ignore_errors=True)
+
+
+def test_dense_surface_decimated_for_the_landmarks_and_logged(tmp_path):
+    """A CT surface exported at fine resolution (here 20x the triangles of the shipped ones) is decimated before the
+    landmarks, stays closed and within a fraction of a millimetre of the input, and the log says so; a surface below
+    the limit is read unchanged (control). In metres, as read (the simplifier's absolute merge tolerance opened
+    such surfaces when they were decimated in metres)."""
+    dense = trimesh.creation.icosphere(subdivisions=7, radius=0.02)          # 327,680 triangles, metres
+    out, rep = S.working_density(dense, "L4", tmp_path / "L4.stl", max_faces=20_000)
+    assert len(out.faces) <= 20_000 and out.is_watertight and out.is_winding_consistent and out.volume > 0
+    assert len(rep) == 1 and "decimated 327680 -> " in rep[0].what and "mm of the decimated surface" in rep[0].what
+    d = out.nearest.on_surface(dense.vertices[::97])[1]
+    assert d.max() < 5e-4 and np.median(d) < 1e-4                           # a fraction of a CT voxel
+    np.testing.assert_allclose(out.volume, dense.volume, rtol=0.01)
+    same, none = S.working_density(out, "L4", tmp_path / "L4.stl", max_faces=20_000)
+    assert same is out and none == []                                       # control: below the limit, untouched

@@ -47,6 +47,11 @@ MAX_NEIGHBOUR_GAP_M = 0.030
 # (L*_vertebra.obj) and 0.9-1.5 mm for TotalSegmentator's 3 mm example meshed here (overlap_radius on a 1 mm grid);
 # a shifted, doubled or mislabelled vertebra shares far more (a doubled one: the whole bone)
 MAX_OVERLAP_M = 0.004
+# a surface denser than this is decimated (quadric, kept only where it stays closed) before the landmarks: a CT
+# surface exported at 0.3-0.5 mm has 100,000-500,000 triangles per vertebra and every step that follows (neighbour
+# checks, registration, closest points) grows with the count; the shipped surfaces have 8,000-34,000 (Visible Human
+# lumbar 8,052-9,262, its sacrum 26,550; the morphable mean 31,780-33,822), so they are read unchanged
+MAX_WORKING_FACES = 40_000
 
 _TOKEN = {f"l{i}": f"L{i}" for i in range(1, 6)} | {"s1": "S1", "sacrum": "S1"}
 
@@ -307,12 +312,38 @@ def check_size(mesh, level: str, file, units: str) -> None:
                             f"(lumbar.geometry.checks): {_units_hint(ext, units)}")
 
 
+def working_density(mesh, level: str, file: Path, max_faces: int = MAX_WORKING_FACES):
+    """``mesh`` with at most ``max_faces`` triangles (quadric decimation, trimesh / fast-simplification), kept only
+    where it stays a closed, consistently oriented surface of positive volume; (mesh, list[Repair]): the repair
+    names the counts and how far the decimated surface lies from the input's vertices (largest and 99th
+    percentile, by the decimated surface's closest points of a strided sample). A denser surface whose
+    decimation opens it is kept as it is (slower, never wrong), and the log says so."""
+    if len(mesh.faces) <= max_faces:
+        return mesh, []
+    n0 = len(mesh.faces)
+    # decimated in millimetres: in metres the simplifier's merge of coincident vertices (an absolute tolerance)
+    # joins distinct vertices of a bone surface and opens it
+    dec = mesh.copy()
+    dec.apply_scale(1e3)
+    dec = dec.simplify_quadric_decimation(face_count=max_faces)
+    dec.apply_scale(1e-3)
+    if not (dec.is_watertight and dec.is_winding_consistent and dec.volume > 0):
+        return mesh, [Repair(level, file, f"not decimated: decimating {n0} to {max_faces} triangles opened the "
+                                          "surface; the landmarks take longer on the full surface")]
+    v = np.asarray(mesh.vertices)[:: max(1, len(mesh.vertices) // 5000)]
+    d = dec.nearest.on_surface(v)[1]
+    return dec, [Repair(level, file, f"decimated {n0} -> {len(dec.faces)} triangles for the landmarks (the input's "
+                                     f"vertices lie within {np.max(d) * 1e3:.2f} mm of the decimated surface, 99 % "
+                                     f"within {np.quantile(d, 0.99) * 1e3:.2f} mm)")]
+
+
 def read_specimen(path, units: str = "mm", axes: str = "LPS", pattern: str | None = None,
                   require=None, max_hole_m: float = MAX_HOLE_PERIMETER_M,
-                  turn_inside_out: bool = False) -> SpecimenMeshes:
+                  turn_inside_out: bool = False, max_faces: int = MAX_WORKING_FACES) -> SpecimenMeshes:
     """Read and check a folder of vertebra surfaces (see the module doc); ``require``: vertebrae (``"L4"``) or
     units (``"L4-L5"``) that must be present; ``turn_inside_out``: see :func:`close_surface` (an inside-out
-    surface is an error otherwise). Returns the meshes in metres, in the input's axes, with the repair log."""
+    surface is an error otherwise); ``max_faces``: see :func:`working_density`. Returns the meshes in metres, in the
+    input's axes, with the repair log."""
     import trimesh  # noqa: PLC0415 - mesh library where meshes are built (docs/design.md)
     check_units_axes(units, axes)
     files = find_level_files(path, pattern)
@@ -329,6 +360,8 @@ def read_specimen(path, units: str = "mm", axes: str = "LPS", pattern: str | Non
             raise SpecimenError(f"{f}: {lv} mesh has {len(mesh.faces)} triangle(s); expected a closed vertebra surface")
         check_size(mesh, lv, f, units)
         mesh, rep = close_surface(mesh, lv, f, max_hole_m, turn_inside_out=turn_inside_out)
+        repairs += rep
+        mesh, rep = working_density(mesh, lv, f, max_faces)
         repairs += rep
         meshes[lv] = mesh
     check_neighbours(meshes, files, axes)
@@ -356,7 +389,12 @@ def check_neighbours(meshes: dict, files: dict, axes: str = "LPS") -> None:
         A, B = meshes[up], meshes[lo]
         where = f"{up} ({files[up]}) and {lo} ({files[lo]})"
         pa, pb = _dense_points(A), _dense_points(B)
-        gap = float(cKDTree(pb).query(pa)[0].min())
+        lo, hi = pb.min(0) - MAX_NEIGHBOUR_GAP_M, pb.max(0) + MAX_NEIGHBOUR_GAP_M
+        near = pa[np.all((pa >= lo) & (pa <= hi), axis=1)]     # the rest are farther than the threshold anyway
+        gap = float(cKDTree(pb).query(near, distance_upper_bound=2 * MAX_NEIGHBOUR_GAP_M)[0].min()) if len(near) \
+            else np.inf
+        if not np.isfinite(gap):                                # beyond the bound: the exact gap for the message
+            gap = float(cKDTree(pb[:: max(1, len(pb) // 20000)]).query(pa[:: max(1, len(pa) // 20000)])[0].min())
         if gap > MAX_NEIGHBOUR_GAP_M:
             raise SpecimenError(f"{where}: neighbouring vertebrae {gap * 1e3:.0f} mm apart (nearest surface points); "
                                 f"expected within {MAX_NEIGHBOUR_GAP_M * 1e3:.0f} mm (neighbours touch at their facet "
