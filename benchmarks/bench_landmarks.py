@@ -14,7 +14,8 @@ is recorded before and after). Target: < 3 s per vertebra. Usage::
 triangle split into four K times (trimesh.remesh.subdivide; K = 2 gives 16x the triangles, 129,000-425,000 per
 vertebra, as a 0.3-0.5 mm export has), written as STL in millimetres, then read (``read_specimen``: the checks and
 the decimation to ``MAX_WORKING_FACES``) and built; beside it, in the same run, the same files with the decimation
-switched off (the baseline), and the landmarks' distance between the two. Its committed result is
+switched off (the baseline), and the landmarks' distance between the two in the input's coordinates (what the
+bone carries) and the difference of the two project frames found from the anatomy. Its committed result is
 ``benchmarks/results/landmarks_dense.json``::
 
     python benchmarks/bench_landmarks.py --dense 2 > benchmarks/results/landmarks_dense.json
@@ -29,6 +30,8 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_
 import argparse  # noqa: E402
 import json  # noqa: E402
 import time  # noqa: E402
+
+import numpy as np  # noqa: E402
 
 from lumbar.geometry import load_geometry  # noqa: E402
 from lumbar.geometry.specimen_accuracy import ct_pose  # noqa: E402
@@ -73,12 +76,16 @@ def main(argv=None):
     return 0
 
 
+def _to_input(P, T):
+    Ti = np.linalg.inv(T)
+    return P @ Ti[:3, :3].T + Ti[:3, 3]
+
+
 def dense(verts, k):
     """Reading + building a finely exported specimen, with and without the decimation (module doc)."""
     import tempfile  # noqa: PLC0415
     from pathlib import Path  # noqa: PLC0415
 
-    import numpy as np  # noqa: PLC0415
     import trimesh  # noqa: PLC0415
 
     from lumbar.geometry.specimen_io import MAX_WORKING_FACES, read_specimen  # noqa: PLC0415
@@ -103,16 +110,24 @@ def dense(verts, k):
             runs[name] = dict(wall_s=time.perf_counter() - t0, cpu_s=time.process_time() - c0,
                               cpu_seconds_per_vertebra=(time.process_time() - c0) / len(verts),
                               repairs=[str(r) for r in read.repairs],
+                              transform=sp.alignment.transform,
                               points=np.vstack([np.asarray(lm["ligaments"][n][e]).reshape(-1, 3)
                                                 for lv, lm in sorted(sp.landmarks.items())
                                                 for n in sorted(lm["ligaments"]) for e in (0, 1)]))
-    d = np.linalg.norm(runs["decimated"].pop("points") - runs["baseline_full_surface"].pop("points"), axis=1) * 1e3
+    # the points in the input's coordinates (the files'): what the bone carries, apart from the frame found
+    T = {k: r.pop("transform") for k, r in runs.items()}
+    P = {k: _to_input(r.pop("points"), T[k]) for k, r in runs.items()}
+    d = np.linalg.norm(P["decimated"] - P["baseline_full_surface"], axis=1) * 1e3
+    M = T["decimated"] @ np.linalg.inv(T["baseline_full_surface"])
+    frame = dict(turn_deg=float(np.degrees(np.arccos(np.clip((np.trace(M[:3, :3]) - 1) / 2, -1, 1)))),
+                 origin_shift_mm=float(np.linalg.norm(M[:3, 3]) * 1e3))
     dec = runs["decimated"]
     return dict(benchmark="landmarks_dense", subdivisions=k, vertebrae=verts, triangles_per_vertebra=faces,
                 max_working_faces=MAX_WORKING_FACES, runs=runs,
                 cpu_ratio_decimated_over_baseline=dec["cpu_s"] / runs["baseline_full_surface"]["cpu_s"],
                 ligament_points_moved_by_decimation_mm=dict(median=float(np.median(d)), p95=float(np.quantile(d, 0.95)),
-                                                            max=float(d.max())),
+                                                            max=float(d.max()), coordinates="input"),
+                project_frame_moved_by_decimation=frame,
                 target_seconds_per_vertebra=TARGET_S_PER_VERTEBRA,
                 within_target=bool(dec["cpu_seconds_per_vertebra"] < TARGET_S_PER_VERTEBRA),
                 load_average_before=load0, load_average_after=os.getloadavg()[0],

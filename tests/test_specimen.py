@@ -100,6 +100,96 @@ def test_landmarks_invariant_under_rigid_motion(project_meshes, reference_specim
     assert not _agree(raw, ref) and np.abs(raw - ref).max() > 0.01
 
 
+def _renumbered(mesh, seed):
+    """The same surface with its vertices in another order (faces re-indexed): what another file format gives."""
+    import trimesh
+    perm = np.random.default_rng(seed).permutation(len(mesh.vertices))
+    inv = np.empty_like(perm)
+    inv[perm] = np.arange(len(perm))
+    return trimesh.Trimesh(np.asarray(mesh.vertices)[perm], inv[np.asarray(mesh.faces)], process=False)
+
+
+def _file_order_stride(mesh, n):
+    """The first version's sample: every k-th vertex in the file's order."""
+    v = np.asarray(mesh.vertices, float)
+    idx = np.arange(0, len(v), max(1, int(np.ceil(len(v) / n))))
+    return v[idx], idx
+
+
+def test_surface_sample_ignores_vertex_order_and_pose_and_is_even_over_the_area(vh):
+    import trimesh
+
+    from lumbar.geometry.register import mesh_sample, surface_sample, welded
+    m = welded(vh.vertebrae["L4"].mesh)
+    v = np.asarray(m.vertices)
+    perm = np.random.default_rng(0).permutation(len(v))
+    a = surface_sample(v, 1500)
+    assert 1000 < len(a) <= 1500
+    assert np.array_equal(surface_sample(v[perm], 1500), a)
+    T = _pose(_rot([0.2, -1.0, 0.4], 70.0), (0.3, -0.1, 0.9))
+    assert np.allclose(surface_sample(v @ T[:3, :3].T + T[:3, 3], 1500), a @ T[:3, :3].T + T[:3, 3], atol=1e-12)
+    b, _ = mesh_sample(m, 1500)
+    assert np.array_equal(mesh_sample(_renumbered(m, 1), 1500)[0], b)
+    # control: every k-th vertex in file order is another sample of the same surface
+    assert not np.array_equal(np.sort(_file_order_stride(_renumbered(m, 1), 1500)[0], 0),
+                              np.sort(_file_order_stride(m, 1500)[0], 0))
+    # even over the area: one half of the surface subdivided (4x its vertices there) keeps its share of an area-even
+    # sample (its share of the area), while a stride over the vertices follows the vertex count
+    half = m.triangles_center[:, 0] > np.median(m.triangles_center[:, 0])
+    vv, ff = trimesh.remesh.subdivide(m.vertices, m.faces, face_index=np.flatnonzero(half))
+    dense = trimesh.Trimesh(vv, ff)
+    cut = np.median(m.triangles_center[:, 0])
+    share_area = m.area_faces[half].sum() / m.area
+    assert abs(np.mean(mesh_sample(dense, 1500)[0][:, 0] > cut) - share_area) < 0.05
+    assert np.mean(surface_sample(dense.vertices, 1500)[:, 0] > cut) - share_area > 0.15
+
+
+def test_landmarks_independent_of_the_vertex_order(monkeypatch, project_meshes, reference_specimen):
+    """The same surfaces with their vertices renumbered (as STL, OBJ, PLY and VTK readers number them differently)
+    give the same landmarks; control: sampling every k-th vertex in file order moves them (a median 0.1-0.3 mm here;
+    before the registration followed the surface, over 1 mm)."""
+    import lumbar.geometry.specimen as spm
+    import lumbar.geometry.specimen_landmarks as sl
+    sl.default_atlas()          # built (and cached for the session) with the package's own sample first
+    shuffled = {v: _renumbered(m, i) for i, (v, m) in enumerate(project_meshes.items())}
+    assert np.abs(_points(build_specimen(shuffled, axes="project")) - _points(reference_specimen)).max() < 1e-6
+    monkeypatch.setattr(spm, "mesh_sample", _file_order_stride)
+    monkeypatch.setattr(sl, "mesh_sample", _file_order_stride)
+    d = np.linalg.norm(_points(build_specimen(shuffled, axes="project"))
+                       - _points(build_specimen(project_meshes, axes="project")), axis=1)
+    assert np.median(d) > 5e-5 and d.max() > 3e-4
+
+
+def test_registration_follows_the_surface_not_its_sample(monkeypatch, project_meshes):
+    """Two equally valid samples of the same target surface (the other half of its vertices) give nearly the same
+    landmarks when the pairs pull along the surface normal onto the whole surface (register.TANGENTIAL = 0, the
+    target's vertices as ``dense``); control: point-to-point pairs on the sample (the earlier registration) move them
+    several times as far."""
+    import lumbar.geometry.register as rg
+    import lumbar.geometry.specimen_landmarks as sl
+
+    def spread():
+        pts = []
+        for offset in (0, 1):
+            def sample(mesh, n, offset=offset):
+                _, idx = rg.mesh_sample(mesh, 2 * n)      # two disjoint halves of an area-even sample of 2n vertices
+                idx = idx[offset::2]
+                return np.asarray(mesh.vertices)[idx], idx
+            monkeypatch.setattr(sl, "mesh_sample", sample)
+            pts.append(_points(build_specimen(project_meshes, axes="project")))
+        return float(np.median(np.linalg.norm(pts[0] - pts[1], axis=1)))
+
+    sl.default_atlas()          # built (and cached for the session) with the package's own sample first
+    near = spread()
+    register = sl.register
+    monkeypatch.setattr(rg, "TANGENTIAL", 1.0)
+    monkeypatch.setattr(sl, "register", lambda X, Y, method="full", normals=None, dense=None:
+                        register(X, Y, method=method, normals=normals))
+    far = spread()
+    print(f"median landmark distance between two samples: {1e3 * near:.2f} mm, point to point {1e3 * far:.2f} mm")
+    assert near < 0.5e-3 and far > 2.0 * near
+
+
 def test_lps_and_ras_inputs_agree(project_meshes, reference_specimen):
     tilt = _rot([1.0, 0.3, 0.0], 25.0)
     lps = build_specimen(_moved(project_meshes, _pose(LPS_FROM_PROJECT @ tilt, (0.01, 0.2, -0.9))), axes="LPS")
@@ -312,7 +402,7 @@ def test_automatic_facet_contact_surfaces_face_the_joint(monkeypatch, vh, vh_acc
 
 
 #: what the leave-one-out measurement reaches (docs/specimen.md, "Accuracy"), with a small margin
-ACCURACY = dict(overall_median_mm=2.0, structure_median_mm=3.5, facet_bone_median_mm=1.25, facet_cartilage_median_mm=1.7,
+ACCURACY = dict(overall_median_mm=1.8, structure_median_mm=3.2, facet_bone_median_mm=0.9, facet_cartilage_median_mm=1.4,
                 length_rel=0.15, length_exempt=("CL_L", "CL_R"), exempt_length_rel=0.3)
 
 
@@ -338,9 +428,11 @@ def test_accuracy_on_the_visible_human_set_leave_one_out(monkeypatch, vh_accurac
     # control: the atlas without the registration step (templates only moved onto the target's centroid)
     c = visible_human_accuracy(seed=0, method="translation")["summary"].set_index("structure")
     assert c.loc["all ligament groups", "median_mm"] > ACCURACY["overall_median_mm"]
-    # control of the facet faces: without the rigid fit of the articular process (the warp alone) they miss both
+    # control of the facet faces: without touching faces (the inferior face on the upper bone's closest points) they
+    # miss the cartilage threshold (measured 1.64-1.66 mm, seeds 0-3; the rigid fit of the articular process moves
+    # the faces by about 0.1 mm, docs/specimen.md, and has its own test:
+    # test_process_fit_places_a_facet_face_moved_along_its_plane)
     import lumbar.geometry.specimen_landmarks as sl
-    monkeypatch.setattr(sl, "FACET_PROCESS_RADIUS_M", 0.0)
+    monkeypatch.setattr(sl, "_facing_face", lambda upper, lower, sup: sl._closest(upper, sup))
     f = visible_human_accuracy(seed=0)["summary"].set_index("structure")
     assert f.loc["facet faces vs cartilage nodes", "median_mm"] > ACCURACY["facet_cartilage_median_mm"]
-    assert f.loc["facet faces vs their bone points", "median_mm"] > ACCURACY["facet_bone_median_mm"]

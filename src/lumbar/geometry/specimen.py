@@ -28,13 +28,14 @@ import numpy as np
 
 from . import analysis as A
 from .core import GeometryError, VERTEBRA_NAMES
+from .register import mesh_sample, welded
 
 MM = 1e-3
 #: project directions of the letters of an axes code (x anterior, y left, z superior)
 LETTERS = {"A": (0, 1.0), "P": (0, -1.0), "L": (1, 1.0), "R": (1, -1.0), "S": (2, 1.0), "I": (2, -1.0)}
 AXES_ALIASES = {"project": "ALS"}
 END_SLAB_M = 0.012          # anterior rule: width of the end slabs compared
-MAX_SAMPLES = 3000          # vertices per vertebra used by the frame rules (deterministic stride)
+MAX_SAMPLES = 3000          # vertices per vertebra used by the frame rules (register.mesh_sample)
 SYMMETRY_ITERATIONS = 25
 ENDPLATE_BAND_M = 0.005
 ENDPLATE_RADIUS_M = 0.012
@@ -76,9 +77,7 @@ def check_winding(mesh, name: str, source: str = "") -> float:
 
 
 def _samples(mesh) -> np.ndarray:
-    v = np.asarray(mesh.vertices, float)
-    step = max(1, int(np.ceil(len(v) / MAX_SAMPLES)))
-    return v[::step]
+    return mesh_sample(welded(mesh), MAX_SAMPLES)[0]
 
 
 def symmetry_plane(points: np.ndarray, normal0: np.ndarray, iterations: int = SYMMETRY_ITERATIONS):

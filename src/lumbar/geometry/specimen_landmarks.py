@@ -23,11 +23,11 @@ import functools
 import numpy as np
 
 from .core import LEVEL_NAMES, LIGAMENT_NAMES, level_vertebrae
-from .register import register
+from .register import mesh_sample, register, welded
 
 ON_SURFACE_M = 1e-3
 N_TEMPLATES = 3              # atlas vertebrae registered per target vertebra and role
-REG_SAMPLES = 1500           # template/target vertices used by the registration (deterministic stride)
+REG_SAMPLES = 1500           # template/target vertices used by the registration (register.mesh_sample)
 FACET_KEYS = {"upper": "facet_inferior", "lower": "facet_superior"}
 SEGMENTS = "_segments"        # atlas key: per ligament and level the fibre vectors upper - lower (canonical order)
 SPANS = "_spans"              # atlas key: per scaled ligament and level (mean fibre length, disc height) [m]
@@ -40,11 +40,6 @@ FACET_PROCESS_ITERATIONS = 20
 #: ligaments whose fibre length (segment and via-point path) is scaled with the target's own disc height
 #: (:func:`lumbar.geometry.specimen.level_disc`): the ALL's path spans the anterior disc and onto the bodies
 DISC_SCALED = ("ALL",)
-
-
-def _stride(v, n=REG_SAMPLES):
-    v = np.asarray(v, float)
-    return v[::max(1, int(np.ceil(len(v) / n)))]
 
 
 def _canonical_order(up, lo):
@@ -118,7 +113,7 @@ def default_atlas(path=None) -> dict:
 def build_atlas(geo) -> dict:
     """{vertebra: {"points": (n,3) registration samples, "mesh": Trimesh, "upper"/"lower": {structure: dict(
     points (k,3), on_surface (k,), extra (k,) or None)}}} from a geometry with insertion sites (Visible Human)."""
-    atlas = {v: {"points": _stride(vt.mesh.vertices), "mesh": vt.mesh, "upper": {}, "lower": {}}
+    atlas = {v: {"points": mesh_sample(welded(vt.mesh), REG_SAMPLES)[0], "mesh": vt.mesh, "upper": {}, "lower": {}}
              for v, vt in geo.vertebrae.items()}
     atlas[SEGMENTS], atlas[SPANS] = {}, {}
     for lv, lev in geo.levels.items():
@@ -196,11 +191,14 @@ def transfer(target: str, mesh, role: str, atlas: dict, exclude=(), warps: dict 
         temps = templates_for(target, role, atlas)
     if not temps:
         raise ValueError(f"no atlas template for the {role} role of {target} (excluded: {list(exclude)})")
-    Y = _stride(mesh.vertices)
+    surf = welded(mesh)
+    Y, iy = mesh_sample(surf, REG_SAMPLES)
+    normals = np.asarray(surf.vertex_normals)[iy]
     warps = {} if warps is None else warps
     for t in temps:
         if t not in warps:
-            warps[t] = register(atlas[t]["points"], Y, method=method)
+            warps[t] = register(atlas[t]["points"], Y, method=method, normals=normals,
+                                dense=(np.asarray(surf.vertices), np.asarray(surf.vertex_normals)))
     out = {}
     names = sorted(set.intersection(*[set(atlas[t][role]) for t in temps]))
     tree = None
