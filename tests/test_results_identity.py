@@ -158,7 +158,8 @@ def numeric_differences(ref: bytes, now: bytes, rtol=RTOL, fit=False, rtol_fit=N
             else:
                 tol = (rtol_fit or RTOL_FIT) * np.abs(xf) + ATOL_FIT * scale if fit else rtol * scale
                 tol = np.where(cable, np.maximum(tol, RTOL_REGISTRATION * scale), tol)
-                ok = np.abs(xf - yf) <= np.maximum(tol, 1e-300)
+                with np.errstate(invalid="ignore"):                  # inf - inf; decided on the next line
+                    ok = np.abs(xf - yf) <= np.maximum(tol, 1e-300)
             ok = np.where(np.isinf(xf) | np.isinf(yf), xf == yf, ok)       # an infinity only equals itself
             same = (np.isnan(xf) & np.isnan(yf)) | ok
             if not same.all():
