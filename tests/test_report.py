@@ -565,3 +565,15 @@ def test_first_page_says_in_words_which_trivial_model_the_model_does_not_beat():
     assert "3 of 5 within against 2 (the mean)" in s and s.count("does not beat") == 1      # control
     assert "which it does not beat" in null_models_sentence(t.iloc[2:].assign(model_beats_null=False))
     assert null_models_sentence(t.iloc[:0]) == ""
+
+
+def test_contact_sentence_reads_the_joints_once_and_apart_at_the_lumbosacral_level():
+    import pandas as pd
+
+    from lumbar.report.landmark_accuracy_section import contact_sentence
+    f = pd.DataFrame(dict(level=["L3-L4", "L3-L4", "L4-L5", "L4-L5", "L5-S1"],
+                          side=["left", "left", "right", "right", "left"], face=["superior", "inferior"] * 2 + ["inferior"],
+                          contact_normal_angle_deg=[6.0, 6.0, 14.0, 14.0, 23.0]))
+    s = contact_sentence(f)
+    assert "6-14 deg above L5-S1" in s and "23 deg at L5-S1" in s
+    assert contact_sentence(f.drop(columns="contact_normal_angle_deg")) == ""    # an older table: no sentence

@@ -59,6 +59,28 @@ def _move(T, P):
     return P @ T[:3, :3].T + T[:3, 3]
 
 
+def _contact_normal_angles(level, reference_level, to_specimen) -> dict:
+    """{side: angle [deg] between the joint's Eq. 4 contact surface normal on the specimen's landmarks and on the
+    reference's (carried into the specimen's frame)}: the orientation the facet force acts along, which the centroid
+    distances do not score."""
+    from lumbar.mechanics.elements.facet import fit_surface  # noqa: PLC0415 - the model's own Eq. 4 fit
+
+    def normals(lev):
+        out = {}
+        for side, fl in lev.facets.items():
+            medial = np.array([0.0, -1.0 if side == "left" else 1.0, 0.0])
+            out[side] = fit_surface(fl.superior, fl.inferior, medial_hint=medial,
+                                    contact=getattr(fl, "contact", "mean_surface"),
+                                    contact_points=getattr(fl, "contact_points", None)).axes[2]
+        return out
+    if level is None:
+        return {}
+    ref = normals(reference_level)
+    R = np.asarray(to_specimen, float)[:3, :3]
+    return {side: float(np.degrees(np.arccos(np.clip(n @ (R @ ref[side]), -1.0, 1.0))))
+            for side, n in normals(level).items() if side in ref}
+
+
 def accuracy_tables(specimen, reference, to_specimen, length_level="L4-L5"):
     """(groups, facets, lengths) DataFrames comparing a specimen's landmarks with a reference geometry whose points
     ``to_specimen`` (4x4) carries into the specimen's project frame (module doc); fibre lengths at ``length_level``
@@ -88,6 +110,7 @@ def accuracy_tables(specimen, reference, to_specimen, length_level="L4-L5"):
                 lengths.append(dict(level=lv, structure=name, compared="total (via points)" if use_total else
                                     "straight", length_mm=1e3 * got, reference_mm=1e3 * want,
                                     relative_error=got / want - 1.0))
+        angles = _contact_normal_angles(specimen.geometry.levels.get(lv), ref, to_specimen)
         for side, (sup, inf) in lm["facets"].items():
             f = ref.facets[side]
             for face, body, P, Q in (("superior", L, sup, f.superior), ("inferior", U, inf, f.inferior)):
@@ -100,7 +123,8 @@ def accuracy_tables(specimen, reference, to_specimen, length_level="L4-L5"):
                                    centroid_error_mm=1e3 * float(np.linalg.norm(P.mean(0) - _move(to_specimen,
                                                                                                     Q).mean(0))),
                                    bone_centroid_error_mm=1e3 * float(np.linalg.norm(
-                                       P.mean(0) - _move(to_specimen, Qb).mean(0)))))
+                                       P.mean(0) - _move(to_specimen, Qb).mean(0))),
+                                   contact_normal_angle_deg=angles.get(side, np.nan)))
     return pd.DataFrame(groups), pd.DataFrame(facets), pd.DataFrame(lengths)
 
 

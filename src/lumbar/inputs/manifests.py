@@ -245,7 +245,7 @@ MANIFESTS: dict[str, Manifest] = {m.stage: m for m in (
         "summary": _o("geometry/landmark_accuracy_summary.csv", "landmark_accuracy", final=True),
         "groups": _o("geometry/landmark_accuracy_groups.csv", "landmark_accuracy"),
         "lengths": _o("geometry/landmark_accuracy_lengths.csv", "landmark_accuracy", final=True),
-        "facets": _o("geometry/landmark_accuracy_facets.csv", "landmark_accuracy"),
+        "facets": _o("geometry/landmark_accuracy_facets.csv", "landmark_accuracy", final=True),
         "effect": _o("geometry/landmark_error_effect.csv", "landmark_accuracy", final=True),
     }, report_module="lumbar.report.landmark_accuracy_section", when=("landmark_accuracy", "run")),
     Manifest("load_sharing", {

@@ -37,9 +37,24 @@ def accuracy_sentence(s: pd.DataFrame, lengths: pd.DataFrame) -> str:
     return txt
 
 
+def contact_sentence(facets: pd.DataFrame) -> str:
+    """The orientation of the joints' contact surfaces against the reference's, read from the facets table."""
+    if "contact_normal_angle_deg" not in facets or not len(facets):
+        return ""
+    joints = facets.drop_duplicates(["level", "side"])
+    parts = []
+    for name, sel in (("above L5-S1", joints["level"] != "L5-S1"), ("at L5-S1", joints["level"] == "L5-S1")):
+        a = joints.loc[sel, "contact_normal_angle_deg"]
+        if len(a):
+            parts.append(f"{fmt(a.min(), 2)}-{fmt(a.max(), 2)} deg {name}")
+    return (" The joints' contact surfaces (Eq. 4, fitted to these faces) are turned " + " and ".join(parts)
+            + " from the reference's: the direction the facet force acts along, which the distances do not score.")
+
+
 @report_section("landmark_accuracy", "Automatic landmarks where the truth is known", after="models")
 def landmark_accuracy_section(b: ReportBuilder):
-    summary, lengths_table, effect = (b.out("landmark_accuracy", role) for role in ("summary", "lengths", "effect"))
+    summary, lengths_table, effect, facets_table = (b.out("landmark_accuracy", role)
+                                                    for role in ("summary", "lengths", "effect", "facets"))
     if not b.has(summary):
         b.missing("Landmark accuracy on the Visible Human meshes (landmark_accuracy.run: false)")
         return
@@ -50,7 +65,8 @@ def landmark_accuracy_section(b: ReportBuilder):
            "placed automatically. Scored where the truth is known: the embedded Visible Human meshes written as a "
            "user would give them (turned and moved into a CT-like pose, millimetres, LPS) and read back, each "
            "vertebra placed with an atlas built without it (leave one out), against the model's own insertion sites "
-           "and facet cartilage. " + accuracy_sentence(s, lengths))
+           "and facet cartilage. " + accuracy_sentence(s, lengths) + contact_sentence(
+               pd.read_csv(b.path(facets_table)) if b.has(facets_table) else pd.DataFrame()))
     b.table_block("Automatic landmarks against the reference model (Visible Human, leave one out)",
                   ["structure", "groups", "median distance [mm]", "largest distance [mm]"],
                   [[r.structure, int(r.n_groups), fmt(r.median_mm, 2), fmt(r.max_mm, 2)] for r in s.itertuples()],
