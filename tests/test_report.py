@@ -577,3 +577,17 @@ def test_contact_sentence_reads_the_joints_once_and_apart_at_the_lumbosacral_lev
     s = contact_sentence(f)
     assert "6-14 deg above L5-S1" in s and "23 deg at L5-S1" in s
     assert contact_sentence(f.drop(columns="contact_normal_angle_deg")) == ""    # an older table: no sentence
+
+
+def test_internal_load_checks_say_when_they_cannot_fail_for_a_missing_load():
+    """An acceptance interval down to zero (an in-vitro mean - 2 SD below 0) passes a load the model does not carry;
+    the tables count such rows and give the ratio to the measured mean; control: an interval above zero is not
+    counted."""
+    import numpy as np
+    import pandas as pd
+
+    from lumbar.experiments import validation as V
+    rows = pd.DataFrame(dict(band_low=[0.0, -3.0, 10.0, np.nan]))
+    assert V.zero_floor_count(rows) == 2
+    assert V.mean_ratio(115.0, 51.5) == pytest.approx(2.233, abs=1e-3)
+    assert np.isnan(V.mean_ratio(1.0, 0.0)) and np.isnan(V.mean_ratio(np.nan, 3.0))

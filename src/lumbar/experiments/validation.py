@@ -593,6 +593,19 @@ def distinct_comparisons(df: pd.DataFrame) -> pd.DataFrame:
     return res.sort_values("_o", kind="stable").drop(columns="_o").reset_index(drop=True)
 
 
+def mean_ratio(sim, measured) -> float:
+    """Simulated over measured value (NaN where the measured value is not positive or either is missing)."""
+    sim, measured = float(sim), float(measured)
+    return sim / measured if np.isfinite(sim) and np.isfinite(measured) and measured > 0 else np.nan
+
+
+def zero_floor_count(rows: pd.DataFrame) -> int:
+    """How many comparisons have an acceptance interval reaching zero (a mean - 2 SD at or below 0, a range from 0):
+    such a check cannot fail for a load the model does not carry at all."""
+    lo = pd.to_numeric(rows.get("band_low", pd.Series(dtype=float)), errors="coerce")
+    return int((lo <= 0).sum())
+
+
 def role_counts(distinct: pd.DataFrame) -> dict[str, tuple[int, int]]:
     """{role: (within, total)} over the distinct comparisons, in ``ROLE_ORDER``."""
     out = {}
