@@ -591,3 +591,24 @@ def test_internal_load_checks_say_when_they_cannot_fail_for_a_missing_load():
     assert V.zero_floor_count(rows) == 2
     assert V.mean_ratio(115.0, 51.5) == pytest.approx(2.233, abs=1e-3)
     assert np.isnan(V.mean_ratio(1.0, 0.0)) and np.isnan(V.mean_ratio(np.nan, 3.0))
+
+
+def test_voxelised_landmark_rows_and_sentence_read_each_input_once():
+    """Table G2 and its sentence: one row per input (surface meshes first, then each voxel edge), the groups' and
+    facet faces' distances read from the table; no label volume, no sentence."""
+    import pandas as pd
+
+    from lumbar.report.landmark_accuracy_section import voxelised_rows, voxelised_sentence
+    structures = ["all ligament groups", "facet faces vs their bone points", "facet faces vs cartilage nodes"]
+    t = pd.DataFrame(dict(input=["surface meshes"] * 3 + ["label volume"] * 6,
+                          voxel_mm=[float("nan")] * 3 + [1.0] * 3 + [1.5] * 3, structure=structures * 3,
+                          n_groups=[81, 18, 18] * 3, median_mm=[1.53, 0.77, 1.27, 1.43, 0.98, 1.62, 1.46, 0.77, 1.58],
+                          max_mm=[6.8, 1.8, 2.1, 7.3, 2.6, 3.0, 7.1, 2.6, 2.9],
+                          facet_surfaces_supported=[True] * 3 + [False] * 6))
+    rows = voxelised_rows(t)
+    assert [r[0] for r in rows] == ["surface meshes", "label volume, 1 mm voxels", "label volume, 1.5 mm voxels"]
+    assert rows[1][1:] == ["1.4", "7.3", "0.98", "2.6", "1.6", "no"] and rows[0][-1] == "yes"
+    s = voxelised_sentence(t)
+    assert "voxelised at 1 and 1.5 mm" in s and "a median 1.4-1.5 mm from the reference (surface meshes: 1.5 mm)" in s
+    assert "0.77-0.98 mm from their bone points" in s
+    assert voxelised_sentence(t[t["input"] == "surface meshes"]) == ""

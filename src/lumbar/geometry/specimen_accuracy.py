@@ -147,6 +147,12 @@ def summary(groups: pd.DataFrame, facets: pd.DataFrame, lengths: pd.DataFrame) -
     return out
 
 
+def _scored(sp, ref, to_specimen, length_level, **extra) -> dict:
+    groups, facets, lengths = accuracy_tables(sp, ref, to_specimen, length_level=length_level)
+    return dict(groups=groups, facets=facets, lengths=lengths, summary=summary(groups, facets, lengths),
+                specimen=sp, to_specimen=to_specimen, **extra)
+
+
 def visible_human_accuracy(seed: int = 0, method: str = "full", leave_one_out: bool = True, folder=None,
                            vertebrae=("L1", "L2", "L3", "L4", "L5", "S1"), length_level: str = "L4-L5"):
     """Run the Visible Human meshes, posed as a CT (:func:`ct_pose`), through files and the whole path, and score them
@@ -163,7 +169,137 @@ def visible_human_accuracy(seed: int = 0, method: str = "full", leave_one_out: b
         meshes = read_specimen_meshes(where, units="mm", axes="LPS")
         sp = build_specimen(meshes, axes="LPS", sources={v: str(f) for v, f in files.items()},
                             leave_one_out=leave_one_out, method=method, units="mm", name="visible_human_posed")
-    to_specimen = sp.alignment.transform @ pose
-    groups, facets, lengths = accuracy_tables(sp, ref, to_specimen, length_level=length_level)
-    return dict(groups=groups, facets=facets, lengths=lengths, summary=summary(groups, facets, lengths),
-                specimen=sp, pose=pose, to_specimen=to_specimen)
+    return _scored(sp, ref, sp.alignment.transform @ pose, length_level, pose=pose)
+
+
+# ------------------------------------------------------------------------- a CT-like segmentation of the same bones
+RAS_FROM_LPS = np.diag([-1.0, -1.0, 1.0, 1.0])
+
+
+def _inside_voxels(mesh, origin, shape, voxel_mm: float) -> np.ndarray:
+    """Boolean [i, j, k] of the voxels (centres ``origin + voxel_mm * (i, j, k)``) whose centre lies inside the closed
+    surface ``mesh`` (VTK's scan-line rasteriser, vtkPolyDataToImageStencil)."""
+    import pyvista as pv  # noqa: PLC0415 - VTK, only to rasterise surfaces
+    from vtkmodules.util.numpy_support import vtk_to_numpy  # noqa: PLC0415
+    from vtkmodules.vtkImagingStencil import vtkImageStencilToImage, vtkPolyDataToImageStencil  # noqa: PLC0415
+    stencil = vtkPolyDataToImageStencil()
+    stencil.SetInputData(pv.PolyData.from_regular_faces(np.asarray(mesh.vertices, float), np.asarray(mesh.faces)))
+    stencil.SetOutputOrigin(*map(float, origin))
+    stencil.SetOutputSpacing(voxel_mm, voxel_mm, voxel_mm)
+    stencil.SetOutputWholeExtent(0, shape[0] - 1, 0, shape[1] - 1, 0, shape[2] - 1)
+    image = vtkImageStencilToImage()
+    image.SetInputConnection(stencil.GetOutputPort())
+    image.SetInsideValue(1)
+    image.SetOutsideValue(0)
+    image.SetOutputScalarTypeToUnsignedChar()
+    image.Update()
+    flat = vtk_to_numpy(image.GetOutput().GetPointData().GetScalars())
+    return flat.reshape(tuple(shape[::-1])).transpose(2, 1, 0).astype(bool)
+
+
+def _depth(mesh, points) -> np.ndarray:
+    """Signed distance of ``points`` from the closed surface ``mesh`` (negative inside; VTK's implicit distance)."""
+    import pyvista as pv  # noqa: PLC0415 - VTK, only to rasterise surfaces
+    poly = pv.PolyData.from_regular_faces(np.asarray(mesh.vertices, float), np.asarray(mesh.faces))
+    return np.asarray(pv.PolyData(np.asarray(points, float)).compute_implicit_distance(poly)["implicit_distance"])
+
+
+def voxelise(meshes_mm: dict, voxel_mm: float, pad: int = 3):
+    """A CT-like label volume of closed surfaces given in millimetres in world axes: a voxel belongs to a vertebra when
+    its centre lies inside that vertebra's surface (a segmentation thresholded at half the partial volume, so the
+    meshed label keeps the bone's volume instead of growing by half a voxel); a voxel whose centre lies inside two
+    surfaces (meshes that interpenetrate, as the Visible Human bones do at the facet joints) goes to the one it lies
+    deeper in. The grid is axis-aligned in the world axes (the scanner's), so a spine posed at an angle is
+    staircased as in a CT. Returns (labels int16 [i, j, k], affine 4x4 voxel -> world mm, {level: label value},
+    number of contested voxels)."""
+    h = float(voxel_mm)
+    if not h > 0:
+        raise ValueError(f"voxel_mm {voxel_mm!r}: expected a voxel edge > 0 [mm]")
+    levels = list(meshes_mm)
+    values = {v: 20 + k for k, v in enumerate(levels)}
+    lo = np.floor(np.min([m.bounds[0] for m in meshes_mm.values()], axis=0) / h).astype(int) - pad
+    hi = np.ceil(np.max([m.bounds[1] for m in meshes_mm.values()], axis=0) / h).astype(int) + pad
+    labels = np.zeros(tuple(hi - lo + 1), np.int16)
+    contested = 0
+    for v in levels:
+        m = meshes_mm[v]
+        a = np.floor(m.bounds[0] / h).astype(int) - 1 - lo
+        b = np.ceil(m.bounds[1] / h).astype(int) + 1 - lo
+        inside = _inside_voxels(m, (lo + a) * h, b - a + 1, h)
+        sub = labels[a[0]:b[0] + 1, a[1]:b[1] + 1, a[2]:b[2] + 1]
+        clash = inside & (sub != 0)
+        if clash.any():
+            contested += int(clash.sum())
+            ijk = np.argwhere(clash)
+            centres = (ijk + a + lo) * h
+            owners = sub[clash]
+            mine = _depth(m, centres)
+            theirs = np.empty(len(ijk))
+            for other, val in values.items():
+                sel = owners == val
+                if sel.any():
+                    theirs[sel] = _depth(meshes_mm[other], centres[sel])
+            keep_theirs = np.zeros_like(inside)
+            keep_theirs[tuple(ijk[theirs < mine].T)] = True
+            inside &= ~keep_theirs
+        sub[inside] = values[v]
+    affine = np.diag([h, h, h, 1.0])
+    affine[:3, 3] = lo * h
+    return labels, affine, values, contested
+
+
+def voxelised_accuracy(voxel_mm: float = 1.0, seed: int = 0, folder=None, length_level: str = "all",
+                       vertebrae=("L1", "L2", "L3", "L4", "L5", "S1")) -> dict:
+    """The Visible Human meshes given as a CT segmentation would give them: posed as in :func:`ct_pose`, in NIfTI's
+    RAS world axes, voxelised at ``voxel_mm`` (:func:`voxelise`) into one multi-label NIfTI file with its label
+    table, meshed by the label-volume path (:func:`lumbar.geometry.specimen_io.label_volume_to_meshes`: marching
+    cubes, smoothing, decimation), read back and placed with leave one out, scored like
+    :func:`visible_human_accuracy`. The surfaces a user's CT gives are staircased, smoothed and separated at the
+    joints by what the segmentation made of them; this scores the landmarks on such surfaces. Returns the dict of
+    :func:`visible_human_accuracy` plus ``meshing`` (the meshing report), ``resolution`` (what the voxel size
+    supports) and ``contested_voxels``."""
+    import nibabel  # noqa: PLC0415 - NIfTI writer, only here
+    from .loader import load_geometry  # noqa: PLC0415 - the reference is read only here
+    from .specimen_build import build_specimen  # noqa: PLC0415 - the path under test
+    from .specimen_io import label_volume_to_meshes, read_specimen_meshes  # noqa: PLC0415
+    ref = load_geometry("visible_human")
+    pose = RAS_FROM_LPS @ ct_pose(seed)
+    meshes = {}
+    for v in vertebrae:
+        m = ref.vertebrae[v].mesh.copy().apply_transform(pose)
+        m.apply_scale(1e3)
+        meshes[v] = m
+    labels, affine, values, contested = voxelise(meshes, voxel_mm)
+    with tempfile.TemporaryDirectory() as tmp:
+        where = Path(folder) if folder is not None else Path(tmp)
+        where.mkdir(parents=True, exist_ok=True)
+        img = nibabel.Nifti1Image(labels, affine)
+        img.header.set_xyzt_units("mm")
+        nibabel.save(img, where / "labels.nii.gz")
+        pd.DataFrame({"label": list(values), "value": list(values.values())}).to_csv(where / "labels.csv", index=False)
+        files = label_volume_to_meshes(where / "labels.nii.gz", where / "meshes", label_table=where / "labels.csv")
+        meshing = pd.read_csv(where / "meshes" / "meshing_report.csv")
+        resolution = pd.read_csv(where / "meshes" / "resolution_limits.csv")
+        read = read_specimen_meshes(where / "meshes", units="mm", axes="RAS")
+        sp = build_specimen(read, axes="RAS", sources={v: str(f) for v, f in files.items()}, leave_one_out=True,
+                            units="mm", name=f"visible_human_voxelised_{voxel_mm:g}mm")
+    return _scored(sp, ref, sp.alignment.transform @ pose, length_level, pose=pose, meshing=meshing,
+                   resolution=resolution, contested_voxels=contested)
+
+
+def voxelised_tables(mesh_summary: pd.DataFrame, runs: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(summary, facets): the surface meshes' summary (:func:`visible_human_accuracy`) beside each label volume's
+    (``runs``: voxel edge [mm] -> :func:`voxelised_accuracy` result), with whether the voxels resolve the facet joint
+    space; and every label volume's facet faces."""
+    rows = [mesh_summary.assign(input="surface meshes", voxel_mm=float("nan"), facet_surfaces_supported=True)]
+    faces = []
+    for h, v in runs.items():
+        lim = v["resolution"]
+        facet_ok = bool(lim.loc[lim["feature"].str.startswith("facet"), "supported"].all())
+        rows.append(v["summary"].assign(input="label volume", voxel_mm=float(h), facet_surfaces_supported=facet_ok))
+        faces.append(v["facets"].assign(voxel_mm=float(h)))
+    cols = ["input", "voxel_mm", "structure", "n_groups", "median_mm", "max_mm", "facet_surfaces_supported"]
+    facet_cols = ["voxel_mm", "level", "side", "face", "body", "centroid_error_mm", "bone_centroid_error_mm",
+                  "contact_normal_angle_deg"]
+    facets = pd.concat(faces, ignore_index=True)[facet_cols] if faces else pd.DataFrame(columns=facet_cols)
+    return pd.concat(rows, ignore_index=True)[cols], facets

@@ -247,6 +247,8 @@ MANIFESTS: dict[str, Manifest] = {m.stage: m for m in (
         "lengths": _o("geometry/landmark_accuracy_lengths.csv", "landmark_accuracy", final=True),
         "facets": _o("geometry/landmark_accuracy_facets.csv", "landmark_accuracy", final=True),
         "effect": _o("geometry/landmark_error_effect.csv", "landmark_accuracy", final=True),
+        "voxelised": _o("geometry/landmark_accuracy_voxelised.csv", "landmark_accuracy", final=True),
+        "voxelised_facets": _o("geometry/landmark_accuracy_voxelised_facets.csv", "landmark_accuracy", final=True),
     }, report_module="lumbar.report.landmark_accuracy_section", when=("landmark_accuracy", "run")),
     Manifest("load_sharing", {
         "curves": _o("load_sharing/curves_{set}.csv", "load_sharing_curves"),
