@@ -5,6 +5,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 import trimesh
 from hypothesis import HealthCheck, given, settings
@@ -556,3 +557,41 @@ def test_dense_surface_decimated_for_the_landmarks_and_logged(tmp_path):
     np.testing.assert_allclose(out.volume, dense.volume, rtol=0.01)
     same, none = S.working_density(out, "L4", tmp_path / "L4.stl", max_faces=20_000)
     assert same is out and none == []                                       # control: below the limit, untouched
+
+
+def test_landmarks_command_takes_a_label_volume(tmp_path):
+    """``lumbar landmarks`` on TotalSegmentator's masks (L4, L5): the masks are meshed into OUT/meshes as the
+    workflow's label_volume geometry is, and the landmarks' input columns are the NIfTI world's (RAS, mm: each point
+    within a voxel of its vertebra's voxels); the 3 mm voxels cannot resolve the facet joints, so levels.csv says so
+    and leaves the facet numbers empty. Controls: --axes LPS with a label volume, and --label-table with surface
+    files, are refused with exit 2 before any meshing."""
+    import nibabel
+
+    from lumbar.cli import main
+    masks = tmp_path / "masks"
+    masks.mkdir()
+    for f in ("vertebrae_L4.nii.gz", "vertebrae_L5.nii.gz"):
+        shutil.copy(TS_MASKS / f, masks / f)
+    out = tmp_path / "out"
+    assert main(["landmarks", str(masks), "--out", str(out), "--backend", "none"]) == 0
+    assert sorted(p.name for p in (out / "meshes").glob("*.stl")) == ["L4.stl", "L5.stl"]
+    lm = pd.read_csv(out / "landmarks.csv")
+    for body, f in (("L4", "vertebrae_L4.nii.gz"), ("L5", "vertebrae_L5.nii.gz")):
+        img = nibabel.load(masks / f)
+        ijk = np.argwhere(np.asarray(img.dataobj) > 0.5)
+        world = ijk @ img.affine[:3, :3].T + img.affine[:3, 3]
+        pts = lm.loc[lm["body"] == body, ["x_input", "y_input", "z_input"]].to_numpy()
+        assert len(pts) > 20
+        assert (pts >= world.min(0) - 3.0).all() and (pts <= world.max(0) + 3.0).all()
+    lv = pd.read_csv(out / "levels.csv")
+    assert lv["facet_numbers"].str.startswith("not supported").all()
+    facet_cols = [c for c in lv.columns if c.startswith("facet_") and c != "facet_numbers"
+                  and not c.endswith("_contact")]
+    assert facet_cols and lv[facet_cols].isna().all().all()
+    assert main(["landmarks", str(masks), "--axes", "LPS", "--out", str(tmp_path / "x"), "--backend", "none"]) == 2
+    assert not (tmp_path / "x" / "meshes").exists()
+    meshes = tmp_path / "stl"
+    meshes.mkdir()
+    shutil.copy(out / "meshes" / "L4.stl", meshes / "L4.stl")
+    assert main(["landmarks", str(meshes), "--label-table", str(tmp_path / "t.csv"), "--out",
+                 str(tmp_path / "y"), "--backend", "none"]) == 2

@@ -309,13 +309,12 @@ def facet_numbers_supported(b: SpecimenBuild) -> tuple[bool, str]:
     return bool(lim["supported"]), lim["reason"]
 
 
-def write_outputs(b: SpecimenBuild, out_dir, skipped: list[tuple[str, str]]) -> dict:
-    """landmarks.csv, levels.csv, transform.json (:func:`lumbar.geometry.specimen_tables.write_tables`) and
-    skipped_stages.csv (stage, reason) in ``out_dir``. Where a label volume's voxels cannot resolve the facet joints,
-    the facet columns of levels.csv (bone gap, Eq. 4 fits) are left empty and ``facet_numbers`` says why, instead
-    of precise-looking numbers; returns the paths."""
-    import pandas as pd  # noqa: PLC0415 - table writing, only in the geometry rule
-    from ..inputs.io import write_table_atomic  # noqa: PLC0415
+def write_specimen_tables(b: SpecimenBuild, out_dir) -> dict:
+    """landmarks.csv, levels.csv, transform.json (:func:`lumbar.geometry.specimen_tables.write_tables`) in
+    ``out_dir``. Where a label volume's voxels cannot resolve the facet joints, the facet columns of levels.csv (bone
+    gap, Eq. 4 fits) are left empty and ``facet_numbers`` says why, instead of precise-looking numbers; returns the
+    paths."""
+    from ..inputs.io import write_table_atomic  # noqa: PLC0415 - table writing, only for the specimen's tables
     from .specimen_tables import level_table, write_tables  # noqa: PLC0415 - the rule's tables only
     paths = write_tables(b.specimen, out_dir)
     ok, why = facet_numbers_supported(b)
@@ -325,6 +324,15 @@ def write_outputs(b: SpecimenBuild, out_dir, skipped: list[tuple[str, str]]) -> 
         lv[facet_cols] = np.nan
     lv["facet_numbers"] = "measured from the surfaces" if ok else f"not supported: {why}"
     write_table_atomic(lv, paths["levels"])
+    return paths
+
+
+def write_outputs(b: SpecimenBuild, out_dir, skipped: list[tuple[str, str]]) -> dict:
+    """The specimen's tables (:func:`write_specimen_tables`) and skipped_stages.csv (stage, reason) in ``out_dir``;
+    returns the paths."""
+    import pandas as pd  # noqa: PLC0415 - table writing, only in the geometry rule
+    from ..inputs.io import write_table_atomic  # noqa: PLC0415
+    paths = write_specimen_tables(b, out_dir)
     paths["skipped_stages"] = Path(out_dir) / "skipped_stages.csv"
     write_table_atomic(pd.DataFrame(skipped, columns=["stage", "reason"]), paths["skipped_stages"])
     return paths

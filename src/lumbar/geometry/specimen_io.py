@@ -117,6 +117,18 @@ def _is_volume(p: Path) -> bool:
     return p.is_file() and p.name.lower().endswith((".nii.gz", ".nii"))
 
 
+def input_kind(path) -> str:
+    """"label_volume" for a NIfTI file or a folder of NIfTI masks without surface files, else "meshes"."""
+    p = Path(path)
+    if p.is_file():
+        return "label_volume" if _is_volume(p) else "meshes"
+    if p.is_dir():
+        files = list(p.iterdir())
+        if any(_is_volume(f) for f in files) and not any(_is_mesh(f) for f in files):
+            return "label_volume"
+    return "meshes"
+
+
 def _scan(path, pattern: str | None, keep=_is_mesh) -> tuple[dict[str, list[Path]], list[tuple[Path, str]]]:
     """Level -> the files of folder ``path`` (those ``keep`` accepts) naming it, and the files naming none."""
     folder = Path(path)

@@ -6,7 +6,8 @@ disc centre), in a sagittal and an oblique view: pyvista off-screen, matplotlib 
 :mod:`lumbar.plots.render` (fixed cameras, millimetres, PNG without time metadata).
 
 ``lumbar landmarks MESH_DIR --units mm --axes LPS --out OUT_DIR`` reads a folder of vertebra surfaces
-(``lumbar.geometry.specimen_io.read_specimen``), aligns them to the project frame from the anatomy, places the
+(``lumbar.geometry.specimen_io.read_specimen``; or a CT label volume, meshed into ``OUT_DIR/meshes`` first as the
+workflow's ``label_volume`` geometry is, :func:`lumbar.geometry.configured.build`), aligns them to the project frame from the anatomy, places the
 landmarks of every level present (any subset of L1-L5, S1) and writes ``landmarks.csv``, ``levels.csv``,
 ``transform.json`` and one ``qa_<level>.png`` per level (docs/specimen.md).
 """
@@ -109,40 +110,68 @@ def render_landmarks(geometry, level: str, path, backend: str = "auto") -> str:
 
 
 def main(argv=None, prog: str = "lumbar landmarks") -> int:
-    from ..geometry.specimen_build import build_specimen  # noqa: PLC0415 - the command's work, not the figure's
-    from ..geometry.specimen_io import read_specimen  # noqa: PLC0415
+    from ..geometry import configured  # noqa: PLC0415 - the command's work, not the figure's
+    from ..geometry.specimen_build import build_specimen  # noqa: PLC0415
+    from ..geometry.specimen_io import input_kind, read_specimen  # noqa: PLC0415
     from ..geometry.specimen_tables import write_tables  # noqa: PLC0415
     p = argparse.ArgumentParser(prog=prog, description="Landmarks of a specimen: align a folder of vertebra surfaces "
-                                "to the project frame from the anatomy and place every ligament insertion, facet "
-                                "face and disc of each level present (docs/specimen.md).")
-    p.add_argument("mesh_dir", help="folder with one surface per vertebra (L1..L5, S1 in the file names)")
-    p.add_argument("--units", default="mm", choices=("mm", "m"), help="units of the mesh coordinates")
-    p.add_argument("--axes", default="LPS", help="axes of the mesh coordinates: LPS (3D Slicer, DICOM), RAS (NIfTI "
-                   "world), project (x anterior, y left, z superior), any (right-handed, at any angle: the "
-                   "orientation from the anatomy alone)")
+                                "(or a CT label volume, meshed first) to the project frame from the anatomy and place "
+                                "every ligament insertion, facet face and disc of each level present "
+                                "(docs/specimen.md).")
+    p.add_argument("mesh_dir", help="folder with one surface per vertebra (L1..L5, S1 in the file names); or a CT "
+                   "label volume: a folder of NIfTI masks (TotalSegmentator's vertebrae_L1.nii.gz .. sacrum.nii.gz) "
+                   "or one multi-label NIfTI file with --label-table")
+    p.add_argument("--units", default=None, choices=("mm", "m"),
+                   help="units of the mesh coordinates (default mm; a label volume: the NIfTI header's, in mm)")
+    p.add_argument("--axes", default=None, help="axes of the mesh coordinates: LPS (3D Slicer, DICOM; the default), "
+                   "RAS (NIfTI world), project (x anterior, y left, z superior), any (right-handed, at any angle: "
+                   "the orientation from the anatomy alone); a label volume is in NIfTI's RAS world")
     p.add_argument("--pattern", default=None, help="file pattern with {level}, e.g. '{level}_vertebra.obj', where "
-                   "a folder holds several surfaces per level")
+                   "a folder holds several surfaces (or masks) per level")
+    p.add_argument("--label-table", default=None, help="CSV with columns label,value (e.g. 'L4,24') naming the "
+                   "vertebrae of a multi-label NIfTI file")
     p.add_argument("--turn-inside-out", action="store_true",
                    help="turn a surface whose faces all wind inwards instead of refusing it (refused by default: "
                         "the signature of a mirrored export); only when the coordinates are not mirrored")
-    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--out", required=True, help="output folder (a label volume's meshes go to OUT/meshes)")
     p.add_argument("--backend", default="auto", choices=("auto", "pyvista", "matplotlib", "none"),
                    help="QA figure engine ('none': no figures)")
     a = p.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    kind = input_kind(a.mesh_dir)
+    note = ""
     try:
-        read = read_specimen(a.mesh_dir, units=a.units, axes=a.axes, pattern=a.pattern,
-                             turn_inside_out=a.turn_inside_out)
-        sources = {v: str(f) for v, f in read.files.items()}
-        sp = build_specimen(read.meshes, axes=a.axes, sources=sources, units=a.units, name=Path(a.mesh_dir).name)
-        paths = write_tables(sp, a.out)
+        if kind == "label_volume":
+            for flag, given, only in (("--axes", a.axes, "RAS"), ("--units", a.units, "mm")):
+                if given not in (None, only):
+                    raise GeometryError(f"{a.mesh_dir}: {flag} {given} with a label volume: its meshes are in the "
+                                        f"NIfTI header's world frame (RAS, millimetres); leave {flag} out")
+            g = {"kind": kind, "path": a.mesh_dir, "pattern": a.pattern, "label_table": a.label_table}
+            b = configured.build({k: v for k, v in g.items() if v is not None}, mesh_dir=Path(a.out) / "meshes")
+            sp, axes = b.specimen, "RAS (NIfTI world, mm)"
+            paths = configured.write_specimen_tables(b, a.out)
+            ok, why = configured.facet_numbers_supported(b)
+            note = "" if ok else f"# facet numbers of levels.csv left empty: {why}"
+        else:
+            if a.label_table:
+                raise GeometryError(f"{a.mesh_dir}: --label-table names the vertebrae of a multi-label NIfTI file; "
+                                    "the input holds surface files")
+            axes = a.axes or "LPS"
+            read = read_specimen(a.mesh_dir, units=a.units or "mm", axes=axes, pattern=a.pattern,
+                                 turn_inside_out=a.turn_inside_out)
+            sources = {v: str(f) for v, f in read.files.items()}
+            sp = build_specimen(read.meshes, axes=axes, sources=sources, units=a.units or "mm",
+                                name=Path(a.mesh_dir).name)
+            paths = write_tables(sp, a.out)
     except GeometryError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     det = sp.alignment.detected
     print(f"# {a.mesh_dir}: vertebrae {', '.join(sp.meshes)}; levels {', '.join(sp.geometry.levels) or 'none'}")
     print(f"# alignment: superior from the {det['superior_rule']}; anterior votes {det['anterior_votes']}; "
-          f"{det.get('angle_to_declared_deg', 'n/a')} deg from the declared axes {a.axes}")
+          f"{det.get('angle_to_declared_deg', 'n/a')} deg from the declared axes {axes}")
+    if note:
+        print(note)
     for key, path in paths.items():
         print(f"{key}: {path}")
     if a.backend != "none":
