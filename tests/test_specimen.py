@@ -444,6 +444,29 @@ def test_accuracy_on_the_visible_human_set_leave_one_out(monkeypatch, vh_accurac
     assert (control["facets"]["contact_normal_angle_deg"] > 90.0).any()
 
 
+def test_fibre_lengths_follow_the_specimen_size(monkeypatch):
+    """A specimen 20 % larger than the atlas (the Visible Human L4-L5 scaled, the truth with it): every L4-L5 fibre
+    length keeps its relative error (measured, also at 0.8: within 0.5 percentage points for the fibres that keep the
+    atlas's own vector, CL, ALL, PLL; ISL 4 points at 0.8), and the insertion-group distances scale with the size.
+    Control: the atlas's fibre vectors at the atlas's size (no size ratio) make the capsule fibres of the larger
+    specimen 12 points shorter, the error of a real specimen of another size than the Visible Human male's."""
+    import lumbar.geometry.specimen_landmarks as sl
+
+    def lengths(scale):
+        r = visible_human_accuracy(seed=0, vertebrae=("L4", "L5"), scale=scale)
+        return (r["lengths"].set_index("structure")["relative_error"],
+                r["summary"].set_index("structure").loc["all ligament groups", "median_mm"])
+    (base, d1), (big, d12) = lengths(1.0), lengths(1.2)
+    kept = ["CL_L", "CL_R", "ALL", "PLL"]
+    assert (big[kept] - base[kept]).abs().max() < 0.01
+    assert (big - base).abs().max() < 0.03
+    assert d12 == pytest.approx(1.2 * d1, rel=0.1)
+    fixed = sl._fibre_rule
+    monkeypatch.setattr(sl, "_fibre_rule", lambda *a, size=1.0, **k: fixed(*a, **k))
+    control, _ = lengths(1.2)
+    assert (control[["CL_L", "CL_R"]] - base[["CL_L", "CL_R"]]).min() < -0.1
+
+
 def test_voxelise_keeps_the_volume_and_splits_an_overlap_by_depth():
     """The CT-like label map of closed surfaces: a voxel is a bone's when its centre is inside it, so the labelled
     volume is the surface's (a sphere, within 2 %; control: trimesh's voxelisation with its surface voxels filled
@@ -489,7 +512,7 @@ def test_landmarks_on_a_ct_label_map_of_the_visible_human_set():
     assert s.loc["facet faces vs cartilage nodes", "median_mm"] <= 2.0
     assert r["contested_voxels"] > 0                       # the Visible Human bones interpenetrate at the facets
     assert list(r["meshing"]["level"]) == ["L1", "L2", "L3", "L4", "L5", "S1"]
-    table, faces = voxelised_tables(s.reset_index().assign(), {1.0: r})
+    table, faces = voxelised_tables(s.reset_index(), {1.0: r})
     assert list(table["input"].unique()) == ["surface meshes", "label volume"] and len(faces) == 18
     # 1 mm voxels do not resolve the facet joint space (half of its sourced lower bound): said, not hidden
     assert not table.loc[table["input"] == "label volume", "facet_surfaces_supported"].iloc[0]

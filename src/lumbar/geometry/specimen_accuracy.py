@@ -87,6 +87,7 @@ def accuracy_tables(specimen, reference, to_specimen, length_level="L4-L5"):
     ("all": every level)."""
     import trimesh  # noqa: PLC0415 - mesh library, imported where used (docs/design.md)
     groups, facets, lengths = [], [], []
+    size = float(np.cbrt(abs(np.linalg.det(np.asarray(to_specimen, float)[:3, :3]))))  # 1 unless the truth is scaled
     for lv, lm in specimen.landmarks.items():
         if lv not in reference.levels:
             continue
@@ -104,7 +105,7 @@ def accuracy_tables(specimen, reference, to_specimen, length_level="L4-L5"):
                 straight = float(np.linalg.norm(up - lo, axis=1).mean())
                 ref_straight = float(np.linalg.norm(ru - rl, axis=1).mean())
                 total = straight + float(np.mean(extra))
-                ref_total = float(r.lengths.mean())
+                ref_total = size * float(r.lengths.mean())
                 use_total = bool(np.mean(r.extra_length) > 0)
                 got, want = (total, ref_total) if use_total else (straight, ref_straight)
                 lengths.append(dict(level=lv, structure=name, compared="total (via points)" if use_total else
@@ -154,15 +155,17 @@ def _scored(sp, ref, to_specimen, length_level, **extra) -> dict:
 
 
 def visible_human_accuracy(seed: int = 0, method: str = "full", leave_one_out: bool = True, folder=None,
-                           vertebrae=("L1", "L2", "L3", "L4", "L5", "S1"), length_level: str = "L4-L5"):
+                           vertebrae=("L1", "L2", "L3", "L4", "L5", "S1"), length_level: str = "L4-L5",
+                           scale: float = 1.0):
     """Run the Visible Human meshes, posed as a CT (:func:`ct_pose`), through files and the whole path, and score them
-    (:func:`accuracy_tables`, fibre lengths at ``length_level``, "all": every level). Returns dict(groups, facets,
-    lengths, summary, specimen, pose)."""
+    (:func:`accuracy_tables`, fibre lengths at ``length_level``, "all": every level). ``scale``: the bones (and the
+    truth with them) enlarged about the project origin, a specimen of another size than the atlas's. Returns
+    dict(groups, facets, lengths, summary, specimen, pose)."""
     from .loader import load_geometry  # noqa: PLC0415 - the reference is read only here
     from .specimen_build import build_specimen  # noqa: PLC0415 - the path under test
     from .specimen_io import read_specimen_meshes  # noqa: PLC0415
     ref = load_geometry("visible_human")
-    pose = ct_pose(seed)
+    pose = ct_pose(seed) @ np.diag([scale, scale, scale, 1.0])
     with tempfile.TemporaryDirectory() as tmp:
         where = Path(folder) if folder is not None else Path(tmp)
         files = write_posed_meshes(ref, pose, where, vertebrae)

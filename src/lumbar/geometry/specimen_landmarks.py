@@ -238,12 +238,15 @@ def level_landmarks(meshes: dict, level: str, atlas: dict, leave_one_out: bool =
     lo = transfer(L, meshes[L], "lower", atlas, exclude=(L,) if leave_one_out else (), warps=warps.setdefault(L, {}),
                   method=method)
     ligs, facets, spread = {}, {}, {}
+    # the size of the level against the atlas's vertebrae: every registration onto its two vertebrae (the via-point
+    # extra lengths are scaled by their own template's; the fibre vectors of _fibre_rule by this)
+    size = float(np.median([w.scale for v in (U, L) for w in warps[v].values()]))
     for name in LIGAMENT_NAMES:
         if name in up and name in lo and len(up[name]["points"]) == len(lo[name]["points"]):
             ex = [e for e in (up[name]["extra"], lo[name]["extra"]) if e is not None]
             extra = np.mean(ex, axis=0) if ex else np.zeros(len(up[name]["points"]))
             u, lo_, extra = _fibre_rule(name, up[name]["points"], lo[name]["points"], extra, level, meshes, atlas,
-                                        exclude=(U, L) if leave_one_out else ())
+                                        exclude=(U, L) if leave_one_out else (), size=size)
             ligs[name] = (u, lo_, extra)
             spread[name] = (up[name]["spread_m"], lo[name]["spread_m"])
     for side in ("left", "right"):
@@ -289,15 +292,16 @@ def _allowed(per_level: dict, exclude, shape=None) -> list:
             and (shape is None or np.shape(v) == shape)]
 
 
-def _fibre_rule(name, up, lo, extra, level, meshes, atlas, exclude=()):
+def _fibre_rule(name, up, lo, extra, level, meshes, atlas, exclude=(), size: float = 1.0):
     """Fibres that span a narrow gap keep their own geometry instead of two independently carried ends; returns
     (upper (k,3), lower (k,3), extra (k,)):
 
     * capsule fibres (CL, 2-2.6 mm across the joint's rim) and via-point fibres (ALL, PLL with ``extra`` > 0: a
       short segment at the disc, off the bone): the fibre is centred on the carried midpoint (the mean of its two
-      carried ends) with the atlas's own fibre vector (median over the atlas levels not involving ``exclude``), not
-      snapped: its length is the atlas's, which the two independently carried and snapped ends do not keep (the
-      capsule fibres came out twice or half as long, and a unit with half-length capsule fibres was twice as stiff).
+      carried ends) with the atlas's own fibre vector (median over the atlas levels not involving ``exclude``) times
+      ``size``, the registrations' size ratio (target / atlas vertebrae), not snapped: its length is the atlas's at
+      the target's size, which the two independently carried and snapped ends do not keep (the capsule fibres came
+      out twice or half as long, and a unit with half-length capsule fibres was twice as stiff).
     * ``DISC_SCALED`` ligaments (ALL): the whole fibre (segment and via-point path) is then scaled so that its mean
       length is the target's own disc height (:func:`disc_height`, measured on the target's endplates) times the
       atlas's ratio of mean length to disc height (median over the same atlas levels, their disc heights measured
@@ -309,7 +313,7 @@ def _fibre_rule(name, up, lo, extra, level, meshes, atlas, exclude=()):
     vecs = _allowed(atlas.get(SEGMENTS, {}).get(name, {}), exclude, up.shape)
     if not vecs or not (name.startswith("CL") or np.any(extra > 0)):
         return up, lo, extra
-    vec = np.median(np.stack(vecs), axis=0)
+    vec = float(size) * np.median(np.stack(vecs), axis=0)
     spans = _allowed(atlas.get(SPANS, {}).get(name, {}), exclude)
     if name in DISC_SCALED and spans:
         ratio = float(np.median([length / height for length, height in spans]))
