@@ -582,7 +582,9 @@ def test_landmarks_command_takes_a_label_volume(tmp_path):
         world = ijk @ img.affine[:3, :3].T + img.affine[:3, 3]
         pts = lm.loc[lm["body"] == body, ["x_input", "y_input", "z_input"]].to_numpy()
         assert len(pts) > 20
-        assert (pts >= world.min(0) - 3.0).all() and (pts <= world.max(0) + 3.0).all()
+        # within the table's tolerance of its vertebra's voxels (capsule ends 5 mm, via points 10 mm off the bone);
+        # LPS coordinates would lie 100-200 mm away in x and y
+        assert (pts >= world.min(0) - 10.0).all() and (pts <= world.max(0) + 10.0).all()
     lv = pd.read_csv(out / "levels.csv")
     assert lv["facet_numbers"].str.startswith("not supported").all()
     facet_cols = [c for c in lv.columns if c.startswith("facet_") and c != "facet_numbers"
