@@ -612,3 +612,34 @@ def test_voxelised_landmark_rows_and_sentence_read_each_input_once():
     assert "voxelised at 1 and 1.5 mm" in s and "a median 1.4-1.5 mm from the reference (surface meshes: 1.5 mm)" in s
     assert "0.77-0.98 mm from their bone points" in s
     assert voxelised_sentence(t[t["input"] == "surface meshes"]) == ""
+
+
+def test_first_page_of_a_specimen_run_names_it_and_shows_its_landmark_qa(fake_full):
+    """A user's specimen (geometry kind meshes): the first page names the specimen, its units and what its facets
+    rest on, and shows the calibrated unit's landmark QA figure; the methods do not call it the myo-sim meshes.
+    Control: the Visible Human run's first page has no specimen paragraph."""
+    import copy
+
+    import pandas as pd
+    from matplotlib.figure import Figure
+
+    tmp, config, inputs = fake_full
+    default_text = parse_report(_build(tmp, config, inputs, name="default")[0]).text
+    assert "Specimen:" not in default_text
+    g = Path("results/geometry")
+    g.mkdir(parents=True, exist_ok=True)
+    pd.DataFrame({"level": ["L3-L4", "L4-L5"], "disc_height_mm": [8.04, 10.6],
+                  "facet_numbers": ["measured from the surfaces", "not supported: voxels of 3 mm."]}).to_csv(
+        g / "levels.csv", index=False)
+    fig = Figure(figsize=(2, 2))
+    fig.add_subplot().plot([0, 1], [0, 1])
+    fig.savefig(g / "qa_L4-L5.png")
+    spec = copy.deepcopy(config)
+    spec["geometry"] = {"kind": "meshes", "path": "/data/spec12/stl", "units": "mm", "axes": "LPS"}
+    html, _, _ = _build(tmp, spec, inputs + [str(g / "levels.csv"), str(g / "qa_L4-L5.png")], name="spec")
+    text = parse_report(html).text
+    assert "Specimen: stl (vertebra surfaces, /data/spec12/stl; mm, LPS axes)" in text
+    assert "Units built: L3-L4, L4-L5 (endplate disc heights 8-11 mm)" in text
+    assert "Facet joints: not supported: voxels of 3 mm." in text
+    assert "Fig. Q" in text and "qa_L4-L5.png" in html.read_text()
+    assert "myo-sim meshes" not in text and "a user's specimen: vertebra surfaces" in text

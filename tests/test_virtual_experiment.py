@@ -87,3 +87,38 @@ def test_non_converged_specimen_dropped_and_logged(geometry, cs, caplog):
     assert not ((t["stage"] == "wo_all") & (t["direction"] == "flexion") & (t["moment_nm"] == 10.5)).any()
     # the row is left out and a log line names the scenario (wording: lumbar.experiments.virtual_experiment)
     assert re.search(r"equilibrium at wo_all flexion 10\.5", caplog.text), caplog.text
+
+
+def test_specimen_outside_a_laws_domain_is_left_out_and_logged(geometry, cs, monkeypatch, caplog):
+    """A virtual specimen on which a ligament law cannot be built (a pre-elongation longer than its short fibres
+    allow, LawDomainError) has no model: its ROM is NaN and not converged, an INFO line names it, and the other
+    specimens are those of the run without it (the same rng stream). Control: the law check itself raises on such a
+    fibre, and any other error still stops the run."""
+    import pandas as pd
+
+    import lumbar.experiments.virtual_experiment as ve
+    from lumbar.experiments.fsu import LawDomainError, softplus_fibre_params
+    from lumbar.inputs.characteristics import SoftplusLaw
+
+    law = SoftplusLaw(20.0, -5.0, -0.5, 2.0, 50.0, law_length_m=0.002)           # 1 mm pre-elongation
+    with pytest.raises(LawDomainError, match="slack length"):
+        softplus_fibre_params(law, np.array([1.1e-3, 3e-3]))
+    scen = pd.DataFrame({"stage": ["intact"], "direction": ["flexion"], "moment_nm": [5.0]})
+    ref, ref_conv = ve.rom_specimens(geometry, cs, 3, 3, scen)
+    real, calls = ve.build_fsu, []
+
+    def build(*a, **k):
+        calls.append(1)
+        if len(calls) == 2:
+            raise LawDomainError("ligament law on elongation L4-L5 CL_R: test")
+        return real(*a, **k)
+    monkeypatch.setattr(ve, "build_fsu", build)
+    with caplog.at_level(logging.INFO, logger="lumbar.experiments.virtual_experiment"):
+        rom, conv = ve.rom_specimens(geometry, cs, 3, 3, scen)
+    assert np.isnan(rom[1]).all() and not conv[1].any()
+    np.testing.assert_allclose(rom[[0, 2]], ref[[0, 2]], rtol=0, atol=0)
+    assert "virtual specimen 1, variant nominal: no model" in caplog.text
+    calls.clear()
+    monkeypatch.setattr(ve, "build_fsu", lambda *a, **k: (_ for _ in ()).throw(ValueError("bad geometry")))
+    with pytest.raises(ValueError, match="bad geometry"):
+        ve.rom_specimens(geometry, cs, 3, 1, scen)

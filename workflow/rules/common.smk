@@ -432,6 +432,8 @@ def report_inputs(wildcards):
         # discovery runs whose inputs no rule makes (in vivo before the muscle model) are not requested
         and (p not in discovery_files or p in discovery_final_outputs())
     ]
+    # a user's specimen: its first page names it and shows the calibrated unit's landmark QA
+    extra += [out("specimen", "levels")] + SPECIMEN_QA_FIGURES if SPECIMEN else []
     return results + [p for p in dict.fromkeys(extra) if p not in results]
 
 

@@ -145,6 +145,11 @@ def add_level(model: SpineModel, level, charset, facet_stiffness=None, k_shear=N
 MIN_SLACK_FRACTION = 0.2
 
 
+class LawDomainError(ValueError):
+    """A ligament law applied outside its domain on a geometry (a pre-elongation that leaves a fibre almost no slack
+    length): the model of that geometry cannot be built with that law."""
+
+
 def softplus_fibre_params(law, l_ref, where=""):
     """Per-fibre (prestrain (n,), Eq. 7 parameters (n, 4)) of a softplus law for fibres of reference lengths
     ``l_ref`` (n,) [m], in the model's own-strain form (eps = 100 (l / l0 - 1), l0 = l_ref / (1 + prestrain)).
@@ -160,7 +165,7 @@ def softplus_fibre_params(law, l_ref, where=""):
     L = float(law.law_length_m)
     l0 = l_ref - law.prestrain * L
     if np.any(l0 < MIN_SLACK_FRACTION * l_ref):
-        raise ValueError(f"ligament law on elongation {where}: pre-elongation {law.prestrain * L * 1e3:.3g} mm leaves "
+        raise LawDomainError(f"ligament law on elongation {where}: pre-elongation {law.prestrain * L * 1e3:.3g} mm leaves "
                          f"a slack length below {MIN_SLACK_FRACTION:g} x the shortest fibre "
                          f"({l_ref.min() * 1e3:.3g} mm); expected prestrain_pct * law_length < "
                          f"{(1 - MIN_SLACK_FRACTION) * l_ref.min() * 1e3:.3g} mm")

@@ -20,7 +20,7 @@ import numpy as np
 import pandas as pd
 
 from . import effects as fx
-from .fsu import MAIN_DIRECTIONS, STAGES, build_fsu
+from .fsu import MAIN_DIRECTIONS, STAGES, LawDomainError, build_fsu
 from ..mechanics.idp import DISC_AREA_M2, idp_per_newton
 from .l2s1 import LEVELS, derive_cables, run_set
 from .stepwise_reduction import simulate_stepwise_reduction
@@ -390,8 +390,11 @@ def rom_specimens(geometry, charset, seed, n_specimens, scenarios, variation=Non
     Specimen k is ``virtual_specimen(geometry, charset, rng_k)`` with ``rng_k`` from ``specimen_rngs(seed, n)``, the
     same specimens for every variant and for every call with that seed (the first k specimens do not depend on
     ``n_specimens``); the variants sharing a modification are solved as one
-    :class:`lumbar.experiments.effects.FsuVariants` batch per specimen. Returns (rom (K, G, n) with NaN where a
-    specimen has no equilibrium, converged (K, G, n))."""
+    :class:`lumbar.experiments.effects.FsuVariants` batch per specimen. A specimen whose variant puts a ligament law
+    outside its domain on the specimen's geometry (:class:`lumbar.experiments.fsu.LawDomainError`: a planted
+    prestrain on a specimen with short fibres) has no model: its rows are NaN and not converged, and an INFO line
+    says which. Returns (rom (K, G, n) with NaN where a specimen has no equilibrium or no model, converged
+    (K, G, n))."""
     _check_design(n_specimens, 0.0, "noise", "deg")
     v = _variation(variation)
     scen = scenarios.reset_index(drop=True)
@@ -405,7 +408,12 @@ def rom_specimens(geometry, charset, seed, n_specimens, scenarios, variation=Non
         geo_k, cs_k = virtual_specimen(geometry, charset, rng, v, levels=[level])
         for mod, js in groups.items():
             cs_m = modified_charset(cs_k, **dict(mod)) if mod else cs_k
-            fv = fx.FsuVariants(build_fsu(geo_k, cs_m, level, k_shear=k_shear))
+            try:
+                fv = fx.FsuVariants(build_fsu(geo_k, cs_m, level, k_shear=k_shear))
+            except LawDomainError as exc:
+                log.info("virtual specimen %d, variant %s: no model (%s); its ROM is left out", k,
+                         dict(mod) or "nominal", exc)
+                continue
             names = sorted({name for j in js for name in variants[j][0]})
             values = {name: np.array([float(variants[j][0].get(name, 0.0)) for j in js]) for name in names}
             if not values:

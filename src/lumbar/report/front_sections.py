@@ -214,8 +214,15 @@ def discrepancy_sentence(b):
 def methods(b):
     c = b.cfg
     g = c("geometry", default={}) or {}
-    geo = f"Geometry: '{fmt(g.get('kind'))}'" + (f" read from {g.get('path')}" if g.get("kind") ==
-                                                 "visible_human" else " (myo-sim meshes with project landmarks)")
+    kind = g.get("kind")
+    geo = f"Geometry: '{fmt(kind)}'" + {
+        "visible_human": f" read from {g.get('path')}",
+        "myo_sim": " (myo-sim meshes with project landmarks)",
+        "meshes": f" (a user's specimen: vertebra surfaces from {g.get('path')}, {g.get('units')}, {g.get('axes')} "
+                  "axes; frame from the anatomy, landmarks placed from the Visible Human atlas)",
+        "label_volume": f" (a user's specimen: a CT label volume from {g.get('path')}, meshed by the workflow; frame "
+                        "from the anatomy, landmarks placed from the Visible Human atlas)",
+    }.get(kind, "")
     b.doc.add(Para(
         f"{geo}; motion segment {fmt(c('fsu', 'level'))}. Characteristic sets: "
         f"{', '.join(SET_LABELS.get(s, s) for s in c('characteristics', 'sets', default=[]))} "
