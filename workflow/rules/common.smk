@@ -345,6 +345,21 @@ def muscle_passive_tables():
     )
 
 
+def paper2_calibrated_inputs():
+    """The calibrated passive chain's tables for the claims table (muscle_model.calibrated_variant), else none."""
+    if not config["muscle_model"].get("calibrated_variant", True):
+        return []
+    return [
+        out("muscle_model", k)
+        for k in (
+            "calibrated_validation",
+            "calibrated_metrics",
+            "calibrated_segment_loads",
+            "calibrated_flexion_relaxation",
+        )
+    ]
+
+
 def characteristics_dir():
     """characteristics.data_dir as the location input of a rule (ancient, so its mtime is never a trigger)."""
     return ancient(config["characteristics"]["data_dir"])

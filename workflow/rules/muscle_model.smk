@@ -36,6 +36,8 @@ rule muscle_validation:
         data=[
             "data/muscles/muscle_groups.csv",
             "data/anthropometry/upper_body_segments.csv",
+            "data/paper2/paper2_model_inputs_third_party.csv",
+            "data/paper2/paper2_claims_original_text.csv",
         ],
         published=published_model_results,
     output:
@@ -140,3 +142,51 @@ rule muscle_sobol:
         seed=config["seed"],
     script:
         "../scripts/muscle_sobol.py"
+
+
+rule muscle_validation_calibrated:
+    # the muscle model on the calibrated passive chain (disc, facets and ligaments of the workflow's calibrated set at
+    # every level of the muscle model's geometry): the same activities, its tables under names of their own
+    input:
+        in_vivo=config["muscle_model"]["in_vivo_table"],
+        landmarks=geometry_inputs,
+        passive=characteristic_tables(config["characteristics"]["calibrated_dir"], ["calibrated"]),
+        data=[
+            "data/muscles/muscle_groups.csv",
+            "data/anthropometry/upper_body_segments.csv",
+            "data/paper2/paper2_model_inputs_third_party.csv",
+        ],
+    output:
+        **stage_outputs("muscle_model", "muscle_validation_calibrated"),
+    log:
+        log_file("muscle_validation_calibrated"),
+    benchmark:
+        benchmark_file("muscle_validation_calibrated")
+    conda:
+        "../envs/lumbar.yaml"
+    params:
+        muscle_model=config["muscle_model"],
+        variant="calibrated_chain",
+    script:
+        "../scripts/muscle_validation.py"
+
+
+rule paper2_reproduction:
+    # paper 2's stated results (data/paper2/paper2_claims_original_text.csv) claim by claim against the reproduction
+    # model and the calibrated passive chain (lumbar.muscles.reproduction)
+    input:
+        claims="data/paper2/paper2_claims_original_text.csv",
+        validation=out("muscle_model", "validation"),
+        metrics=out("muscle_model", "metrics"),
+        segment_loads=out("muscle_model", "segment_loads"),
+        flexion_relaxation=out("muscle_model", "flexion_relaxation"),
+        sensitivity=out("muscle_model", "sensitivity"),
+        calibrated=paper2_calibrated_inputs(),
+    output:
+        **stage_outputs("muscle_model", "paper2_reproduction"),
+    log:
+        log_file("paper2_reproduction"),
+    conda:
+        "../envs/lumbar.yaml"
+    script:
+        "../scripts/paper2_reproduction.py"

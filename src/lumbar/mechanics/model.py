@@ -45,6 +45,8 @@ class DiscSpec:
     k_tension: float            # N/m
     torque: dict                # direction -> (p1, p2, p3)
     name: str = ""
+    law: str = "eq3"            # torque law (lumbar.mechanics.elements.disc.TORQUE_LAWS); "eq3" on the compiled core
+    k_shear_lateral: float | None = None   # N/m, lateral shear where it differs from k_shear (anterior-posterior)
 
 
 @dataclass
@@ -127,7 +129,15 @@ class SpineModel:
             self._contacts.append((upper, lower, q, sid, stiffness / len(pts)))
         return sid
 
+    def kernel_supported(self) -> bool:
+        """Whether the compiled core computes this model: its discs use the Eq. 3 torque law and one shear stiffness
+        (a 6-DOF spring with the ``cubic_deg`` law or anisotropic shear, paper 2's, runs on the numpy reference)."""
+        return all(d.law == "eq3" and d.k_shear_lateral is None for d in self.discs)
+
     def add_disc(self, spec: DiscSpec):
+        from .elements.disc import TORQUE_LAWS  # noqa: PLC0415
+        if spec.law not in TORQUE_LAWS:
+            raise ValueError(f"disc {spec.name!r}: unknown torque law {spec.law!r}; expected one of {TORQUE_LAWS}")
         spec._ia, spec._ib = np.array([spec.upper]), np.array([spec.lower])
         self.discs.append(spec)
 
@@ -330,7 +340,7 @@ class SpineModel:
         On the compiled core (:mod:`lumbar.mechanics.kernel`) when it is active, else on the numpy reference
         :meth:`evaluate_reference` (same arguments, same results up to round-off)."""
         from . import kernel  # noqa: PLC0415 - numba only where equilibria are computed (lumbar/__init__.py)
-        if kernel.active():
+        if kernel.active() and self.kernel_supported():
             return kernel.evaluate(self, x, R, loads, fmask, cmask, jacobian, params)
         return self.evaluate_reference(x, R, loads, fmask, cmask, jacobian, params)
 
@@ -412,10 +422,11 @@ class SpineModel:
             kt = params.get("k_tension", spec.k_tension)
             kt = np.reshape(kt, (-1, 1)) if np.ndim(kt) else kt
             Fz, dFz = disc_axial_force(r[..., 2], spec.k_quadratic, spec.k_linear, kt)
-            F_loc = np.stack([-spec.k_shear * r[..., 0], -spec.k_shear * r[..., 1], Fz], axis=-1)
+            ksl = spec.k_shear if spec.k_shear_lateral is None else spec.k_shear_lateral
+            F_loc = np.stack([-spec.k_shear * r[..., 0], -ksl * r[..., 1], Fz], axis=-1)
             D = np.zeros(r.shape + (3,))
             D[..., 0, 0] = -spec.k_shear
-            D[..., 1, 1] = -spec.k_shear
+            D[..., 1, 1] = -ksl
             D[..., 2, 2] = dFz
             # K = R_B frame^T D frame R_B^T = sum_k D_kk (R_B e_k)(R_B e_k)^T
             v = self._rotate(R, ib, np.broadcast_to(spec.frame, (x.shape[0], 1, 3, 3)).copy())
@@ -426,7 +437,7 @@ class SpineModel:
             Rrel = np.swapaxes(RB[:, 0], -1, -2) @ Ra[:, 0]
             phi = so3.log(Rrel)
             off = params.get("disc_phi_offset")
-            T, dT = disc_torque(phi if off is None else phi - np.reshape(off, (-1, 3)), spec.torque)
+            T, dT = disc_torque(phi if off is None else phi - np.reshape(off, (-1, 3)), spec.torque, spec.law)
             tau = np.einsum("bij,bj->bi", RB[:, 0], T)                 # torque on the lower body
             if spec.upper >= 0:
                 Q[:, spec.upper, 3:] -= tau
@@ -458,9 +469,10 @@ class SpineModel:
             RB = R[:, spec.lower][:, None] if spec.lower >= 0 else np.broadcast_to(np.eye(3), (x.shape[0], 1, 3, 3))
             r = ((P - spec.centre) @ spec.frame.T)[:, 0]
             Fz, _ = disc_axial_force(r[:, 2], spec.k_quadratic, spec.k_linear, spec.k_tension)
-            F = np.stack([-spec.k_shear * r[:, 0], -spec.k_shear * r[:, 1], Fz], axis=-1)
+            ksl = spec.k_shear if spec.k_shear_lateral is None else spec.k_shear_lateral
+            F = np.stack([-spec.k_shear * r[:, 0], -ksl * r[:, 1], Fz], axis=-1)
             phi = so3.log(np.swapaxes(RB[:, 0], -1, -2) @ Ra[:, 0])
-            T, _ = disc_torque(phi, spec.torque)
+            T, _ = disc_torque(phi, spec.torque, spec.law)
             out["phi"].append(phi)
             out["r"].append(r)
             out["force"].append(F)

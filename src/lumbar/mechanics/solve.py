@@ -100,7 +100,8 @@ def newton(model, x, R, loads, fmask=1.0, cmask=1.0, params=None, max_iter=50, t
     muscle model, which adds its own terms to the SpineModels' residuals) and the reference mode run
     :func:`newton_reference`."""
     from . import kernel  # noqa: PLC0415 - numba only where equilibria are computed (lumbar/__init__.py)
-    if isinstance(model, SpineModel) and type(model).evaluate is SpineModel.evaluate and kernel.active():
+    if isinstance(model, SpineModel) and type(model).evaluate is SpineModel.evaluate and kernel.active() \
+            and model.kernel_supported():
         nb = x.shape[1]
         return kernel.newton(model, x, R, loads, fmask, cmask, params, max_iter, tol_force, tol_moment,
                              max_step_trans, max_step_rot, _regularisation(nb, damping), _scaling(nb), LENGTH_SCALE)

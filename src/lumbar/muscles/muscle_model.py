@@ -1,21 +1,27 @@
 """Muscle-driven lumbar spine (paper 2, Sect. 2.1-2.4): L1-L5 free, thorax fused to L1, sacrum/pelvis fixed.
 
-Passive intervertebral behaviour: the project's disc, facet and ligament elements at every level
-(:func:`lumbar.experiments.fsu.add_level`), from the passive set named by ``passive_set`` (config
-``muscle_model.passive_set``, :func:`passive_characteristics`): ``workflow_calibrated`` = the workflow's own
-calibration output (role calibration.characteristics, fitted on the passive models' geometry) applied unchanged at
-every level (ligament laws on elongation, the same facet and disc shear stiffness: the adopted "as_calibrated" rule of
-:mod:`lumbar.experiments.level_transfer`), ``published_table3`` = paper 1's published Table 3 set as printed
-(data/characteristics, set "calibrated" there), or a literature set by name. With ``symmetric_passive`` (default, config
-``muscle_model.symmetric_passive``) the geometry is first mirror-averaged about y = 0
-(:func:`lumbar.geometry.symmetry.mirror_average`: left/right partner points averaged, midline points
-projected to y = 0, disc centres/normals and body centroids on the plane) and the segment COMs are put on
-y = 0, so that with the mirrored fascicles the model is exactly bilateral (the myo-sim landmarks are not:
-midline ligament insertions snapped to mesh vertices off y = 0, lateral force up to 7 N on a level at rest). Muscles: the 210 MyoTorso fascicles
-(:mod:`lumbar.muscles`), Hill-type without tendon compliance. Upper-body weights: de Leva (1996) fractions
-for a ``body_mass_kg`` body plus the MyoTorso lumbar slice masses (``data/anthropometry``). Activities
-(paper Sect. 2.4): thorax sagittal rotation targets and the 190 N crate held 25 / 55 cm anterior to the
-L5-S1 disc, applied to the L1+thorax body. The redundancy solver is :mod:`lumbar.muscles.redundancy`.
+Two variants of the passive spine (``passive_model``, config ``muscle_model.passive_model``):
+
+* ``springs`` (the default, the reproduction model): paper 2's own model, one massless 6-DOF spring per level with
+  nonlinear rotational and linear translational diagonal terms (:mod:`lumbar.muscles.springs`, values from the
+  paper's model code, data/paper2/paper2_model_inputs_third_party.csv);
+* ``detailed`` (the calibrated passive chain): the project's disc, facet and ligament elements at every level
+  (:func:`lumbar.experiments.fsu.add_level`) from the passive set named by ``passive_set`` (config
+  ``muscle_model.passive_set``, :func:`passive_characteristics`): ``workflow_calibrated`` = the workflow's own
+  calibration output applied unchanged at every level (ligament laws on elongation, the same facet and disc shear
+  stiffness: the adopted "as_calibrated" rule of :mod:`lumbar.experiments.level_transfer`), ``published_table3`` =
+  paper 1's published Table 3 set as printed, or a literature set by name.
+
+With ``symmetric_passive`` (default) the geometry is first mirror-averaged about y = 0
+(:func:`lumbar.geometry.symmetry.mirror_average`) and the segment COMs are put on y = 0, so that with the mirrored
+fascicles the model is exactly bilateral. Muscles: the 210 MyoTorso fascicles (:mod:`lumbar.muscles`), Hill-type
+without tendon compliance, PCSA = maximum force / 46.6 N/cm^2 as in the paper's model, in-situ sarcomere lengths
+(paper 2 Table 2) in solved upright standing (``in_situ_posture``, the paper's multifidus is at 2.27 um in
+standing). Upper-body weights: de Leva (1996) fractions for a ``body_mass_kg`` body plus the MyoTorso lumbar slice
+masses (``data/anthropometry``). Intra-abdominal pressure: the paper's model's force on the thorax
+(:meth:`LumbarMuscleModel.follower_forces`). Activities (paper Sect. 2.4): thorax sagittal rotation targets and the
+190 N crate held 25 / 55 cm anterior to the L5-S1 disc, applied to the L1+thorax body. The redundancy solver is
+:mod:`lumbar.muscles.redundancy`.
 
 One passive model per level (same bodies) gives each level's intervertebral load and its exact
 derivative; their sum is the spine. Muscle forces are constant-tension cables per path segment (exact
@@ -50,6 +56,13 @@ DATA = resources.data_dir()
 LENGTH_SCALE = 0.05   # m, moments -> forces in the FSU-load cost
 PROP_FIELDS = ("spt_pa", "k_pa", "ssl_um", "in_situ_sl_um", "pennation_rad")
 IN_SITU_POSTURES = ("reference", "standing")   # where the fascicles have their in-situ sarcomere length
+#: how each level's passive structures are modelled (config ``muscle_model.passive_model``)
+PASSIVE_MODELS = {
+    "springs": "paper 2's model (Sect. 2.1): one 6-DOF spring per level, its rotational terms fitted to the intact "
+               "L4-L5 unit of the passive set (lumbar.muscles.springs)",
+    "detailed": "the project's disc, facet joints and ligaments of the passive set at every level, on the muscle "
+                "model's geometry",
+}
 
 
 @dataclass(frozen=True)
@@ -153,16 +166,25 @@ class LumbarMuscleModel:
     """Bodies, passive levels, muscles and weights; ``evaluate`` is the equilibrium residual + Jacobian."""
 
     def __init__(self, geometry=None, charset=None, muscle_set: MuscleSet | None = None, body_mass_kg=71.0,
-                 anthropometry_csv=None, iap_force_n=0.0, passive_set="published_table3", data_dir=None,
-                 calibrated_dir=None, symmetric_passive=True, in_situ_posture="reference"):
+                 anthropometry_csv=None, iap_force_n=None, passive_set="published_table3", data_dir=None,
+                 calibrated_dir=None, symmetric_passive=True, in_situ_posture="standing", passive_model="springs",
+                 pcsa_source_spt_n_per_cm2=None):
         from ..geometry import load_geometry
         from ..geometry.symmetry import mirror_average
         if not body_mass_kg > 0:
             raise ValueError(f"body_mass_kg must be > 0, got {body_mass_kg}")
+        from .springs import paper2_iap
+        self.iap = paper2_iap()
+        if iap_force_n is None:
+            iap_force_n = self.iap.force_n
         if not iap_force_n >= 0:
-            raise ValueError(f"iap_force_n must be >= 0, got {iap_force_n}")
+            raise ValueError(f"muscle_model.iap_force_n must be >= 0 N (or null for the source's value), got {iap_force_n}")
         if in_situ_posture not in IN_SITU_POSTURES:
             raise ValueError(f"in_situ_posture must be one of {IN_SITU_POSTURES}, got {in_situ_posture!r}")
+        if passive_model not in PASSIVE_MODELS:
+            raise ValueError(f"muscle_model.passive_model must be one of {sorted(PASSIVE_MODELS)}, got "
+                             f"{passive_model!r}")
+        self.passive_model = passive_model
         self.geo = geometry if geometry is not None else load_geometry("default")
         self.symmetric_passive = bool(symmetric_passive)
         if self.symmetric_passive:
@@ -172,7 +194,7 @@ class LumbarMuscleModel:
         self.passive_set = "given" if charset is not None else passive_set
         self.charset = charset if charset is not None else passive_characteristics(passive_set, data_dir,
                                                                                    calibrated_dir)
-        self.ms = muscle_set if muscle_set is not None else load_muscle_set()
+        self.ms = muscle_set if muscle_set is not None else load_muscle_set(source_spt_n_per_cm2=pcsa_source_spt_n_per_cm2)
         self.nb = len(FREE)
         cents = np.array([self.geo.vertebrae[v].centroid for v in FREE])
         self.c = cents
@@ -186,10 +208,19 @@ class LumbarMuscleModel:
         self.levels = list(LEVEL_NAMES)
         self.level_models = []
         self.facet_sides = []              # per level: the side of each facet surface, in surface order
+        self.spring_law = None
+        if passive_model == "springs":
+            from .springs import paper2_spring_law
+            self.spring_law = paper2_spring_law()
         for lv in self.levels:
             m = SpineModel()
             bodies(m)
-            _, sides = add_level(m, self.geo.levels[lv], self.charset)
+            if self.spring_law is not None:
+                from .springs import add_spring_level
+                add_spring_level(m, self.geo.levels[lv], self.spring_law)
+                sides = []
+            else:
+                _, sides = add_level(m, self.geo.levels[lv], self.charset)
             self.level_models.append(m.finalize())
             self.facet_sides.append(list(sides))
         self.paths = MusclePaths(self.ms, self.body_index, cents)
@@ -255,13 +286,17 @@ class LumbarMuscleModel:
         return PointForces(f + list(self.follower_forces()))
 
     def follower_forces(self):
-        """The intra-abdominal pressure force (``iap_force_n``, follower on the thorax, below the diaphragm
-        centre anterior to L1) as a :class:`PointForces`; empty when off. Passed to the solver as ``forces``
-        beside the per-activity arrays of :meth:`load_arrays`."""
+        """The intra-abdominal pressure force (``iap_force_n``; paper 2 Sect. 2.1, point and direction from
+        :func:`lumbar.muscles.springs.paper2_iap`): a follower force on the thorax, along its superior axis tilted
+        posteriorly, applied anterior to the T12 centroid (stand-in: the L1 centroid moved up by the L1-L2 centroid
+        spacing) at its height, as a :class:`PointForces`; empty when off. Passed to the solver as ``forces`` beside
+        the per-activity arrays of :meth:`load_arrays`."""
         if not self.iap_force_n:
             return PointForces([])
-        p = self.c[0] + np.array([0.06, 0, 0.05])
-        return PointForces([(self.thorax, np.array([0, 0, self.iap_force_n]), p, True)])
+        t12 = self.c[0] + (self.c[0] - self.c[1])
+        p = t12 + np.array([self.iap.anterior_offset_m, 0.0, 0.0])
+        f = self.iap.vector_body() * (self.iap_force_n / self.iap.force_n)
+        return PointForces([(self.thorax, f, p, True)])
 
     def upper_body_weight_n(self):
         return sum(m for _, _, m, _ in self.segments) * G
@@ -284,6 +319,16 @@ class LumbarMuscleModel:
             P[i, -1] = [self.l5s1_centre[0] + act.crate_anterior_m, 0.0, segs[1][3][2]]
             F[i, -1, 2] = -act.crate_n
         return F, P
+
+    def load_params(self, activities) -> dict:
+        """Every external load of the activities as solver ``params``: the per-activity arrays of :meth:`load_arrays`
+        (``force_vec``, ``force_pt``) and, when on, the IAP follower force (``forces``): what a residual of this model
+        in these activities needs, nothing left out."""
+        F, P = self.load_arrays(activities)
+        params = {"force_vec": F, "force_pt": P}
+        if self.iap_force_n:
+            params["forces"] = self.follower_forces()
+        return params
 
     @property
     def load_bodies(self):
@@ -508,8 +553,9 @@ def model_from_config(cfg: dict, passive_dir) -> LumbarMuscleModel:
     d = Path(passive_dir)
     return LumbarMuscleModel(body_mass_kg=cfg["body_mass_kg"], passive_set=cfg["passive_set"], data_dir=d,
                              calibrated_dir=d, symmetric_passive=cfg.get("symmetric_passive", True),
-                             in_situ_posture=cfg.get("in_situ_posture", "reference"),
-                             iap_force_n=cfg.get("iap_force_n", 0.0))
+                             in_situ_posture=cfg.get("in_situ_posture", "standing"),
+                             iap_force_n=cfg.get("iap_force_n"), passive_model=cfg.get("passive_model", "springs"),
+                             pcsa_source_spt_n_per_cm2=cfg.get("pcsa_source_spt_n_per_cm2"))
 
 
 def write_baseline(sols, names, path) -> Path:
@@ -555,10 +601,7 @@ def solve_postures(model, solver, activities, props_list=None, start=None):
     """Solve the activities (names) as one batch; ``props_list``: per-scenario MuscleProperties;
     ``start``: per-scenario PostureSolution to warm-start from (e.g. the baseline of the same posture)."""
     acts = [get_activity(a) for a in activities]
-    F, P = model.load_arrays(acts)
-    params = {"force_vec": F, "force_pt": P}
-    if model.iap_force_n:
-        params["forces"] = model.follower_forces()
+    params = model.load_params(acts)
     if props_list is not None:
         params["prop_stack"] = model.props_stack(props_list)
     kw = {}

@@ -14,8 +14,11 @@ Bodies: sacrum (which carries the pelvis sites) -> fixed ``S1``; ``lumbar1``..``
 ``torso`` (thorax, ribs) and everything above -> ``L1`` (the "L1+thorax" body); ``Abdomen`` (a child of
 lumbar5 in the MJCF) -> ``L5``, its kinematic parent.
 
-Per fascicle: ``f_max_n`` = MJCF ``gainprm[2]`` (peak active force); PCSA = f_max / 100 N/cm^2 (the paper's
-baseline specific tension, so that SpT = 100 N/cm^2 reproduces the MJCF forces); group, in-situ sarcomere
+Per fascicle: ``f_max_n`` = MJCF ``gainprm[2]`` (peak active force; 1.02-1.14 x Christophy et al. 2012's
+maximum forces for the back muscles); PCSA = f_max / 46.6 N/cm^2, the specific tension Christophy's maximum forces are
+read with in the paper's own model code (data/paper2/paper2_model_inputs_third_party.csv), so that the paper's SpT =
+K = 100 N/cm^2 give the paper's muscles (until 2026-11-29 f_max / 100 N/cm^2: muscles 2.15x weaker, passive force
+too). Group, in-situ sarcomere
 length, pennation and fibre ratio from ``data/muscles/muscle_groups.csv``. The MJCF's MuJoCo muscle ranges
 do not give a physical optimal fibre length, so it is derived (see :mod:`lumbar.muscles.paths`):
 ``L_opt = fibre_ratio * L_path(reference) * 2.8 um / SL_in_situ`` (Christophy's normalisation).
@@ -40,7 +43,6 @@ ABDOMINALS = ("EO", "IO", "RA")
 SCENARIOS = {"MUL": ("MF",), "EXT": EXTENSORS, "EXT+PS": EXTENSORS + ("Ps",), "ALL": GROUPS}
 BODY_MAP = {"sacrum": "S1", "lumbar1": "L1", "lumbar2": "L2", "lumbar3": "L3", "lumbar4": "L4",
             "lumbar5": "L5", "torso": "L1", "Abdomen": "L5"}
-SOURCE_SPT_N_PER_M2 = 100.0e4          # 100 N/cm^2
 OPTIMAL_SL_UM = 2.8                    # Delp et al. 2001 (paper Sect. 2.5)
 DATA_DIR = resources.data_dir() / "muscles"
 
@@ -143,8 +145,16 @@ def _symmetrize(names, sites) -> list:
     return fixed
 
 
-def load_muscle_set(group_table=None) -> MuscleSet:
-    """All fascicles of the MyoTorso actuators with their sites (project frame) and parameters."""
+def load_muscle_set(group_table=None, source_spt_n_per_cm2=None) -> MuscleSet:
+    """All fascicles of the MyoTorso actuators with their sites (project frame) and parameters; PCSA = maximum force
+    / ``source_spt_n_per_cm2`` (the specific tension the source model's maximum forces assume; default
+    the paper's model: 46.6 N/cm^2, data/paper2/paper2_model_inputs_third_party.csv)."""
+    if source_spt_n_per_cm2 is None:
+        from .springs import paper2_pcsa_source_spt_n_per_cm2  # noqa: PLC0415 (the paper-2 inputs table)
+        source_spt_n_per_cm2 = paper2_pcsa_source_spt_n_per_cm2()
+    spt = float(source_spt_n_per_cm2) * 1e4
+    if not spt > 0:
+        raise ValueError(f"muscle_model.pcsa_source_spt_n_per_cm2 must be > 0, got {source_spt_n_per_cm2}")
     m, d = _compiled()
     to_p = _to_project(m, d)
     gt = read_group_table(group_table).set_index("prefix")
@@ -187,7 +197,7 @@ def load_muscle_set(group_table=None) -> MuscleSet:
                      to_p(d.xipos[i] if b != "Arm_attachment" else d.xpos[i]))
     return MuscleSet(
         names=names, groups=np.array(groups), sides=np.array(sides), sites=sites, f_max_n=fmax,
-        pcsa_m2=fmax / SOURCE_SPT_N_PER_M2,
+        pcsa_m2=fmax / spt,
         in_situ_sl_um=np.array([gt.loc[p, "in_situ_sl_um"] for p in pref], float),
         pennation_rad=np.radians([gt.loc[p, "pennation_deg"] for p in pref]),
         fibre_ratio=np.array([gt.loc[p, "fibre_ratio"] for p in pref], float),

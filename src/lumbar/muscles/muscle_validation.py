@@ -15,22 +15,28 @@ from .paths import N_PER_CM2
 
 def flexion_relaxation(model, sols, names):
     """Sum of active and passive extensor (and abdominal active) forces [N] per solved posture, with the
-    extensors' sarcomere lengths (PCSA-weighted mean and max [um]) and the PCSA fraction beyond their slack
-    sarcomere length (where passive force starts)."""
+    extensors' sarcomere lengths (PCSA-weighted mean and max [um]), the multifidus's PCSA-weighted mean sarcomere
+    length [um] and the PCSA fraction beyond their slack sarcomere length (where passive force starts)."""
     rows = []
     ext = np.isin(model.ms.groups, EXTENSORS)
     abd = np.isin(model.ms.groups, ABDOMINALS)
+    mf = model.ms.groups == "MF"
     w = model.props.pcsa_m2[ext]
     for name, s in zip(names, sols):
         _, _, act, pas, sl = model.muscle_forces(s.x[None], s.R[None], s.a)
         se = sl[0, ext]
         rows.append({"activity": name, "extensor_active_n": float(act[0, ext].sum()),
+                     "mf_sl_mean_um": float(np.average(sl[0, mf], weights=model.props.pcsa_m2[mf])),
                      "extensor_passive_n": float(pas[0, ext].sum()),
                      "abdominal_active_n": float(act[0, abd].sum()), "converged": s.converged,
                      **certificate(s),
                      "extensor_sl_mean_um": float(np.sum(w * se) / np.sum(w)), "extensor_sl_max_um": float(se.max()),
                      "extensor_pcsa_fraction_beyond_ssl": float(np.sum(w[se > model.props.ssl_um[ext]]) / np.sum(w))})
     return pd.DataFrame(rows)
+
+
+FACET_CONTACT_COLUMNS = ["activity", "level", "side", "contact_n", "min_gap_mm", "rest_min_gap_mm",
+                         "rest_face_separation_mm", "facet_stiffness_n_per_m", "reached", "passive_set"]
 
 
 def _facet_gaps(m, x, R):
@@ -65,6 +71,8 @@ def facet_contact(model, sols, names) -> pd.DataFrame:
     x0, R0 = model.reference_state()
     rows = []
     for lv, m, sides in zip(model.levels, model.level_models, model.facet_sides):
+        if not sides:          # a level without facet joints (paper 2's 6-DOF springs)
+            continue
         rest = _facet_gaps(m, x0, R0)[0]
         space = {side: face_separation(surf, fl) for side, fl, surf in facet_surfaces(model.geo.levels[lv])}
         for name, s in zip(names, sols):
@@ -76,7 +84,7 @@ def facet_contact(model, sols, names) -> pd.DataFrame:
                              "rest_face_separation_mm": 1e3 * space[side],
                              "facet_stiffness_n_per_m": float(model.charset.facet.stiffness),
                              "reached": bool(s.reached), "passive_set": model.passive_set})
-    return pd.DataFrame(rows)
+    return pd.DataFrame(rows, columns=FACET_CONTACT_COLUMNS)
 
 
 def capacity_check(model, x, R, activity, a=None, props=None) -> pd.DataFrame:

@@ -39,6 +39,11 @@ log = logging.getLogger(__name__)
 POSE_SCALE = np.r_[np.full(3, 1e-3), np.full(3, 1e-2)]   # m and rad per NLP pose unit (mm, 10 mrad)
 
 
+#: an activation within this of 0 or 1 is at its bound (IPOPT's interior-point optima leave 1e-10..1e-8 there; a
+#: least-squares multiplier that treated them as free would fail a certificate at IPOPT's own optimum)
+BOUND_TOL = 1e-6
+
+
 @dataclass
 class NLPResult:
     x: np.ndarray            # (nb, 3)
@@ -301,11 +306,12 @@ class IpoptPostureSolver:
         prob = self.prob
         _, _, grad, Jg = prob.evaluate(z)[:4]
         a = z[prob.n:]
-        free = np.r_[np.ones(prob.n, bool), (a > 1e-9) & (a < 1 - 1e-9)]
+        tol = BOUND_TOL
+        free = np.r_[np.ones(prob.n, bool), (a > tol) & (a < 1 - tol)]
         lam = np.linalg.lstsq(Jg[:, free].T, -grad[free], rcond=None)[0]
         r = grad + Jg.T @ lam
-        lo = np.r_[np.zeros(prob.n, bool), a <= 1e-9]
-        hi = np.r_[np.zeros(prob.n, bool), a >= 1 - 1e-9]
+        lo = np.r_[np.zeros(prob.n, bool), a <= tol]
+        hi = np.r_[np.zeros(prob.n, bool), a >= 1 - tol]
         lam_x = np.zeros_like(r)
         lam_x[lo] = np.minimum(-r[lo], 0.0)
         lam_x[hi] = np.maximum(-r[hi], 0.0)

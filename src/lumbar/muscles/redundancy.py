@@ -359,7 +359,7 @@ class RedundancySolver:
         n = 6 * m.nb
         idx = np.arange(len(st["a"])) if idx is None else np.asarray(idx)
         out = np.empty(len(idx))
-        bound_tol = 1e-9
+        from .nlp import BOUND_TOL as bound_tol  # noqa: PLC0415 (an activation this near 0 or 1 is at its bound)
         for k, i in enumerate(idx):
             a = st["a"][i]
             Fs = (st["FL"][i] * self.fscale).reshape(-1)
@@ -454,7 +454,7 @@ class RedundancySolver:
         """IPOPT (:mod:`lumbar.muscles.nlp`) certifies every reached posture: its convergence test at the
         SQP's optimum; where that fails, IPOPT iterates from there (exact gradients, Hessian by differences of
         them) and its optimum replaces the SQP's if it is reached. ``kkt_residual`` is IPOPT's final NLP
-        error; ``sqp_kkt_residual`` keeps the SQP's own measure. Unreached postures get IPOPT's error at the
+        error; ``sqp_kkt_residual`` is the SQP's own measure at the reported point. Unreached postures get IPOPT's error at the
         returned point (no certificate)."""
         B = len(out)
         t0 = time.perf_counter()
@@ -489,6 +489,7 @@ class RedundancySolver:
                     o.residual_moment_nm = float(np.abs(Q[:, 3:]).max())
                     o.iterations += r.iterations
                     o.certified, o.kkt_residual, o.ipopt_status = True, r.kkt_residual, r.status
+                    o.sqp_kkt_residual = float(self.kkt_residuals(st)[0])   # the SQP's measure at the reported point
                 else:
                     o.certified = False
                     o.ipopt_status = r.status

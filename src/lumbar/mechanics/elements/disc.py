@@ -12,6 +12,11 @@ import numpy as np
 
 # axis order of the project frame: x anterior (lateral bending), y left (flexion/extension), z superior (axial)
 AXIS_DIRECTIONS = ("lateral_bending", "flexion", "axial_rotation")
+#: torque laws of a 6-DOF spring: ``eq3`` (paper 1, Eq. 3, angle in rad) and ``cubic_deg``, the polynomial
+#: ``T = (p1 |d|^2 + p2 |d| + p3) d`` with d the angle in degrees and T in N*m (the nonlinear rotational terms of
+#: paper 2's intervertebral springs, lumbar.muscles.springs)
+TORQUE_LAWS = ("eq3", "cubic_deg")
+_DEG = 180.0 / np.pi
 
 
 def torque_angle(phi, p1, p2, p3):
@@ -24,7 +29,17 @@ def torque_angle(phi, p1, p2, p3):
     return T, dT
 
 
-def disc_torque(phi, torque_params):
+def torque_cubic_deg(phi, p1, p2, p3):
+    """The ``cubic_deg`` torque [N*m] and its derivative [N*m/rad] at angle ``phi`` [rad]: odd in ``phi``, monotone
+    where ``3 p1 d^2 + 2 p2 d + p3 > 0``."""
+    phi = np.asarray(phi, dtype=float)
+    d = np.abs(phi) * _DEG
+    T = (p1 * d * d + p2 * d + p3) * phi * _DEG
+    dT = (3.0 * p1 * d * d + 2.0 * p2 * d + p3) * _DEG
+    return T, dT
+
+
+def disc_torque(phi, torque_params, law="eq3"):
     """Restoring torque components of the disc for relative rotation vector ``phi`` (..., 3).
 
     ``torque_params`` maps 'flexion', 'extension', 'lateral_bending', 'axial_rotation' to
@@ -32,16 +47,19 @@ def disc_torque(phi, torque_params):
     exerts *against* the rotation magnitude, i.e. positive T opposes positive phi.
     Flexion is +phi_y, extension -phi_y; lateral bending and axial rotation are symmetric.
     """
+    if law not in TORQUE_LAWS:
+        raise ValueError(f"unknown disc torque law {law!r}; expected one of {TORQUE_LAWS}")
+    f = torque_angle if law == "eq3" else torque_cubic_deg
     phi = np.asarray(phi, dtype=float)
     T = np.empty_like(phi)
     D = np.empty_like(phi)
-    T[..., 0], D[..., 0] = torque_angle(phi[..., 0], *torque_params["lateral_bending"])
-    Tf, Df = torque_angle(phi[..., 1], *torque_params["flexion"])
-    Te, De = torque_angle(phi[..., 1], *torque_params["extension"])
+    T[..., 0], D[..., 0] = f(phi[..., 0], *torque_params["lateral_bending"])
+    Tf, Df = f(phi[..., 1], *torque_params["flexion"])
+    Te, De = f(phi[..., 1], *torque_params["extension"])
     flex = phi[..., 1] >= 0.0
     T[..., 1] = np.where(flex, Tf, Te)
     D[..., 1] = np.where(flex, Df, De)
-    T[..., 2], D[..., 2] = torque_angle(phi[..., 2], *torque_params["axial_rotation"])
+    T[..., 2], D[..., 2] = f(phi[..., 2], *torque_params["axial_rotation"])
     return T, D
 
 
