@@ -299,34 +299,36 @@ def test_sensitivity_directions(model, solver, standing):
     assert len(r) == 1 and r["idp_mpa"].iloc[0] > 1.1 * base
     pen = ok[ok["parameter"] == "pennation_deg"]
     assert np.all(np.abs(pen["idp_mpa"] / base - 1) < 0.05)
-    assert "negligible" in out[out["parameter"] == "pennation_deg"]["paper_change"].iloc[0]
+    assert "pen_all_30_standing" in out[out["parameter"] == "pennation_deg"]["paper_claims"].iloc[1].split(";")
     # the mechanism: passive extensor force appears with the short slack length (none at baseline)
     assert r["extensor_passive_n"].iloc[0] > 10.0 > pen["extensor_passive_n"].max()
 
 
-def test_sensitivity_direction_classification():
-    """Each paper statement gets the direction it asserts; a posture not reached counts as not reached, a
-    reached one whose optimum is not certified keeps its direction (marked); an increase needs more than 5 %,
-    "unchanged" statements use their own tolerance."""
-    from lumbar.muscles.muscle_sensitivity import paper_direction, sensitivity_directions
-    assert paper_direction("IDP doubled (Sect. 3.2.1)") == "increase"
-    assert paper_direction("36 deg flexion not reached (Sect. 3.2.1)") == "not_reached"
-    assert paper_direction("change <= 20% (Sect. 3.2.2)") == "unchanged"
-    assert paper_direction("") == ""
-    df = pd.DataFrame({"parameter": "x", "value": 1.0, "ssl_um": np.nan, "group_scope": "MUL", "posture": "standing",
-                       "paper_change": ["IDP doubled (Sect. 3.2.1)", "IDP doubled (Sect. 3.2.1)",
-                                        "36 deg flexion not reached (Sect. 3.2.1)", "change <= 20% (Sect. 3.2.2)",
-                                        "negligible (Sect. 3.2.5)", "negligible (Sect. 3.2.5)", "",
-                                        "36 deg flexion not reached (Sect. 3.2.1)"],
-                       "change_pct": [95.0, 3.0, 40.0, -15.0, -6.0, 4.9, 50.0, 12.0],
-                       "converged": [True, True, False, True, True, True, True, False],
-                       "reached": [True, True, False, True, True, True, True, True]})
-    d = sensitivity_directions(df)
-    assert len(d) == 7
-    assert d["simulated_direction"].tolist() == ["increase", "unchanged", "not_reached", "unchanged", "decrease",
-                                                 "unchanged", "increase"]
-    assert d["agrees"].tolist() == [True, False, True, True, False, True, False]
-    assert d["certified"].tolist() == [True, True, False, True, True, True, False]
+def test_sensitivity_claims_read_the_sweep():
+    """Each one-at-a-time scenario names the paper's claims about it; the sweep's table read against them gives a
+    verdict per claim from the change in IDP, the reachability and the certificate: a posture not reached where the
+    paper says not reached is reproduced, an uncertified optimum is not comparable, a negligible-effect bound and a
+    headline change are told apart by their class."""
+    from lumbar.muscles.muscle_sensitivity import paper_claim_ids, sensitivity_directions
+    assert paper_claim_ids("ssl_um", 2.0, None, "MUL", "standing") == ["ssl_mul_20_standing"]
+    assert paper_claim_ids("ssl_um", 2.0, None, "EXT", "flexion") == ["ssl_ext_20_flexion_nr"]
+    assert paper_claim_ids("k_n_per_cm2", 1000.0, 2.4, "ALL", "standing") == ["k_all_10_1000_standing_ssl24"]
+    assert paper_claim_ids("ssl_um", 2.0, 2.4, "MUL", "standing") == []          # another interplay SSL: no claim
+    df = pd.DataFrame({"parameter": ["ssl_um", "ssl_um", "pennation_deg", "ssl_um"], "value": [2.0, 2.0, 30.0, 2.0],
+                       "ssl_um": np.nan, "group_scope": ["MUL", "EXT", "ALL", "EXT+PS"],
+                       "posture": ["standing", "flexion", "standing", "standing"],
+                       "idp_mpa": [0.76, 1.0, 0.39, 3.0], "idp_moment_mpa": 0.0, "change_pct": [100.0, 10.0, 2.6, 689.0],
+                       "reached": [True, False, True, True], "certified": [True, False, True, False]})
+    base = pd.DataFrame({"activity": ["upright_standing", "flexion_36deg"], "idp_sim_mpa": [0.38, 0.88],
+                         "idp_moment_mpa": [0.0, 0.3], "reached": True, "certified": True})
+    d = sensitivity_directions(df, base).set_index("claim_id")
+    assert d.loc["ssl_mul_20_standing", "verdict"] == "reproduced"
+    assert d.loc["ssl_ext_20_flexion_nr", "verdict"] == "reproduced"           # not reached, as the paper
+    assert d.loc["pen_all_30_standing", "verdict"] == "reproduced" and \
+        d.loc["pen_all_30_standing", "claim_class"] == "sensitivity_bound"
+    assert d.loc["ssl_extps_20_standing", "verdict"] == "not comparable"       # uncertified: not counted
+    assert d.loc["ssl_mul_24_standing" if "ssl_mul_24_standing" in d.index else "ssl_mul_32_standing",
+                 "verdict"] == "not comparable"                                # scenario not in this sweep
 
 
 def test_capacity_check_balances_and_scales(model, standing):

@@ -1,5 +1,5 @@
 """Identity of the results: the test-config DAG writes the same result tables as the reference run
-(tests/data/results_sha256_test_config.json: SHA-256 of the tables of every stage except the muscle model and
+(tests/data/results_sha256_test_config.json: SHA-256 of the tables of every stage except the Sobol indices and
 the two *_vs_paper tables, whose paper columns come from ../shared; tests/data/results_test_config.tar.gz: the
 tables themselves). A table whose bytes differ is compared cell by cell with the reference: floating-point
 round-off differs between CPUs and BLAS builds (the manifest of 2ed2998 was not reproduced byte for byte on

@@ -27,9 +27,12 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 MANIFEST = HERE / "results_sha256_test_config.json"
 SNAPSHOT = HERE / "results_test_config.tar.gz"
-# muscle-model tables: changed by the muscle solver speed work; *_vs_paper: their paper columns come from ../shared
-# (paths.published_model_results), which the test DAG's copy of the repository does not have beside it
-EXCLUDE = ("benchmarks/", "muscle", "sobol", "sensitivity", "in_vivo", "flexion_relaxation", "_vs_paper")
+# *_vs_paper: their paper columns come from ../shared (paths.published_model_results), which the test DAG's copy of
+# the repository does not have beside it; sobol: the polynomial-chaos fit to 16 samples and its bootstrap quantiles
+# amplify the solver's certified tolerance beyond the fit tolerance. The muscle model's other tables (segment loads,
+# in-vivo validation, flexion-relaxation, sensitivity, paper 2's claims) are covered: downstream of a certified
+# optimum (IPOPT tol 1e-5), compared to the fit tolerance of tests/test_results_identity.py.
+EXCLUDE = ("benchmarks/", "sobol", "_vs_paper")
 
 
 def covered(results: Path) -> list[str]:

@@ -356,6 +356,8 @@ def paper2_calibrated_inputs():
             "calibrated_metrics",
             "calibrated_segment_loads",
             "calibrated_flexion_relaxation",
+            "calibrated_facet_contact",
+            "calibrated_rotations",
         )
     ]
 

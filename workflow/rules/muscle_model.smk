@@ -181,6 +181,8 @@ rule paper2_reproduction:
         segment_loads=out("muscle_model", "segment_loads"),
         flexion_relaxation=out("muscle_model", "flexion_relaxation"),
         sensitivity=out("muscle_model", "sensitivity"),
+        facet_contact=out("muscle_model", "facet_contact"),
+        rotations=out("muscle_model", "rotations"),
         calibrated=paper2_calibrated_inputs(),
     output:
         **stage_outputs("muscle_model", "paper2_reproduction"),

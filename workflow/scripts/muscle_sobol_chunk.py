@@ -34,7 +34,7 @@ def main(snakemake, log):
     unc = out["reached"] & ~out["certified"]
     log.info("Sobol %s chunk %d: %d samples in %.1f s, %d not reached, %d reached but not certified%s", posture, k + 1,
              len(out), time.perf_counter() - t0, int((~out["reached"]).sum()), int(unc.sum()),
-             f" (IPOPT: {', '.join(sorted(set(out.loc[unc, 'ipopt_status'].astype(str))))}; kept in the expansion)"
+             f" (IPOPT: {', '.join(sorted(set(out.loc[unc, 'ipopt_status'].astype(str))))}; left out of the expansion)"
              if unc.any() else "")
     write_table_atomic(out, snakemake.output[0])
 

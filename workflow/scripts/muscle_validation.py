@@ -81,6 +81,18 @@ def main(snakemake, log):
     Path(snakemake.output.metrics).write_text(json.dumps(metrics, indent=2, sort_keys=True) + "\n")
     write_table_atomic(fr, snakemake.output.flexion_relaxation)
     log.info("in-vivo validation (%s): %s", variant, metrics)
+    # paper 2's rotation check (10 deg extension, 40 deg flexion; changes from upright standing, Sect. 2.4)
+    rot_names = list(mm.ROTATION_CHECK)
+    rot_sols = mm.solve_postures(model, solver, rot_names)
+    rot = mv.intervertebral_rotations(model, sols + rot_sols, names + rot_names)
+    rot = rot[rot["activity"].isin(rot_names + ["flexion_36deg"])]
+    rot["healthy_range"] = ("Wong et al. 2004's per-level ranges (100 volunteers, the paper's comparison) are not "
+                            "available here")
+    write_table_atomic(rot, snakemake.output.rotations)
+    for a, d in rot.groupby("activity", sort=False):
+        log.info("intervertebral rotations from standing, %s (reached %s, certified %s): %s", a,
+                 bool(d["reached"].iat[0]), bool(d["certified"].iat[0]),
+                 {r["level"]: round(float(r["rotation_from_standing_deg"]), 1) for _, r in d.iterrows()})
     contact = mv.facet_contact(model, sols, names)
     contact = contact[contact["activity"].isin(keep)]
     write_table_atomic(contact, snakemake.output.facet_contact)

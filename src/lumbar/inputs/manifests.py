@@ -310,6 +310,8 @@ MANIFESTS: dict[str, Manifest] = {m.stage: m for m in (
         "facet_contact": _o("tables/muscle_facet_contact.csv", "muscle_validation"),
         "capacity": _o("tables/muscle_capacity.csv", "muscle_validation", "muscle_capacity", _MM, final=True,
                        report="optional"),
+        "rotations": _o("tables/muscle_intervertebral_rotations.csv", "muscle_validation",
+                        "muscle_intervertebral_rotations", _MM, final=True, report="optional"),
         # the calibrated passive chain (rule muscle_validation_calibrated, config muscle_model.calibrated_variant)
         "calibrated_segment_loads": _o("tables/muscle_model_segment_loads_calibrated_chain.csv",
                                        "muscle_validation_calibrated", report="optional", name="segment_loads"),
@@ -322,11 +324,15 @@ MANIFESTS: dict[str, Manifest] = {m.stage: m for m in (
                                             name="flexion_relaxation"),
         "calibrated_facet_contact": _o("tables/muscle_facet_contact_calibrated_chain.csv",
                                        "muscle_validation_calibrated", report="optional", name="facet_contact"),
+        "calibrated_rotations": _o("tables/muscle_intervertebral_rotations_calibrated_chain.csv",
+                                   "muscle_validation_calibrated", report="optional", name="rotations"),
         # paper 2's claims against both variants (rule paper2_reproduction, lumbar.muscles.reproduction)
         "reproduction": _o("tables/paper2_reproduction.csv", "paper2_reproduction", "paper2_reproduction", _MM,
                            final=True, report="optional"),
         "reproduction_counts": _o("tables/paper2_reproduction_counts.csv", "paper2_reproduction",
                                   "paper2_reproduction_counts", _MM, final=True, report="optional"),
+        "chain_admissibility": _o("tables/muscle_chain_admissibility.csv", "paper2_reproduction",
+                                  "muscle_chain_admissibility", _MM, final=True, report="optional"),
         # {chunk}: the Paramspace pattern of the sweep (muscle_model.smk fills it)
         "sensitivity_chunk": _o("muscle_model/sensitivity/{chunk}.csv", "muscle_sensitivity"),
         "sensitivity": _o("tables/sensitivity_idp.csv", "muscle_sensitivity_table", "sensitivity_idp", _MM,

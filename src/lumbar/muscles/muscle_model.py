@@ -85,7 +85,13 @@ ACTIVITIES = {
                           note="in vivo: crate about 60 cm in front of the body; model 55 cm as in the paper"),
     "flexion_36deg": Activity("flexion_36deg", 36.0, in_vivo_row="flexion_36deg",
                               note="in vivo trunk flexion includes hip flexion; here all of it is lumbar (pelvis fixed)"),
+    # the postures of paper 2's rotation check (Sect. 2.4: intervertebral rotations from upright standing against
+    # Wong et al. 2004); no in-vivo IDP
+    "extension_10deg": Activity("extension_10deg", -10.0, note="rotation check (paper 2 Sect. 2.4)"),
+    "flexion_40deg": Activity("flexion_40deg", 40.0, note="rotation check (paper 2 Sect. 2.4)"),
 }
+#: the activities of the rotation check and the posture their rotations are measured from
+ROTATION_CHECK = ("extension_10deg", "flexion_40deg")
 
 
 def get_activity(name) -> Activity:
@@ -585,7 +591,7 @@ def uncertified_message(what, which, table, statuses=()) -> str | None:
     """The one warning of a job for the reached postures ``which`` whose optimum IPOPT could not certify (None if
     there are none): a reported value (a row of the validation or of the sensitivity study) that may not be the
     optimum; postures the muscles cannot reach are expected outcomes (red stars), counted in the job's summary line.
-    The Sobol chunks do not warn: their uncertified samples are kept in the expansion by design and counted in
+    The Sobol chunks do not warn: their uncertified samples are left out of the expansion and counted in
     sobol_indices.csv (n_uncertified)."""
     if not len(which):
         return None

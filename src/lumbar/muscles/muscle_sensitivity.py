@@ -1,5 +1,5 @@
 """The muscle model's sensitivity studies (paper 2, Sect. 3.2): one parameter at a time against the paper's
-statements (:data:`PAPER_CHANGES`, :func:`sensitivity_rows`, :func:`run_sensitivity`,
+statements (data/paper2/paper2_claims_original_text.csv, :func:`sensitivity_rows`, :func:`run_sensitivity`,
 :func:`sensitivity_directions`) and the Sobol indices of the five parameters from a polynomial-chaos surrogate
 (:func:`sobol_samples`, :func:`sobol_evaluate`, :func:`sobol_indices`, :func:`sobol_study`). The parameters are set
 by :func:`lumbar.muscles.muscle_model.apply_parameter`."""
@@ -24,81 +24,22 @@ from .muscle_set import ABDOMINALS, EXTENSORS
 
 log = logging.getLogger(__name__)
 
-# what the paper states (Sect. 3.2, original_text); keyed by (parameter, value, ssl_um or None, scope, posture)
-PAPER_CHANGES = {
-    ("ssl_um", 2.0, None, "MUL", "standing"): "IDP doubled (Sect. 3.2.1)",
-    ("ssl_um", 2.0, None, "EXT", "standing"): "IDP x7 (Sect. 3.2.1)",
-    ("ssl_um", 2.0, None, "EXT+PS", "standing"): "IDP x10 (Sect. 3.2.1)",
-    ("ssl_um", 2.0, None, "MUL", "flexion"): "36 deg flexion not reached (Sect. 3.2.1)",
-    ("ssl_um", 2.0, None, "EXT", "flexion"): "36 deg flexion not reached (Sect. 3.2.1)",
-    ("ssl_um", 2.0, None, "EXT+PS", "flexion"): "36 deg flexion not reached (Sect. 3.2.1)",
-    ("ssl_um", 2.0, None, "ALL", "flexion"): "36 deg flexion not reached (Sect. 3.2.1)",
-    ("ssl_um", 3.2, None, "ALL", "standing"): "total IDP unchanged for SSL > 2.8 (Sect. 3.2.1)",
-    ("ssl_um", 3.6, None, "ALL", "standing"): "total IDP unchanged for SSL > 2.8 (Sect. 3.2.1)",
-    ("k_n_per_cm2", 10.0, None, "ALL", "standing"): "change <= 20% (Sect. 3.2.2)",
-    ("k_n_per_cm2", 50.0, None, "ALL", "standing"): "change <= 20% (Sect. 3.2.2)",
-    ("k_n_per_cm2", 10.0, None, "ALL", "flexion"): "change <= 20% (Sect. 3.2.2)",
-    ("k_n_per_cm2", 50.0, None, "ALL", "flexion"): "change <= 20% (Sect. 3.2.2)",
-    ("k_n_per_cm2", 500.0, 2.4, "MUL", "flexion"): "IDP ~1 -> ~2 MPa (Sect. 3.2.2)",
-    ("k_n_per_cm2", 1000.0, 2.4, "MUL", "flexion"): "IDP ~1 -> ~3 MPa (Sect. 3.2.2)",
-    ("in_situ_sl_um", 3.6, None, "EXT", "standing"): "+79% (0.38 -> 0.68 MPa) (Sect. 3.2.3)",
-    ("in_situ_sl_um", 3.6, None, "EXT", "flexion"): "+380% (0.88 -> 3.34 MPa) (Sect. 3.2.3)",
-    ("spt_n_per_cm2", 10.0, None, "ALL", "flexion"): "+39% (Sect. 3.2.4)",
-    ("spt_n_per_cm2", 10.0, None, "EXT", "standing"): "upright not reached (Sect. 3.2.4)",
-    ("spt_n_per_cm2", 5.0, None, "EXT", "standing"): "upright not reached (Sect. 3.2.4)",
-    ("spt_n_per_cm2", 5.0, None, "EXT+PS", "standing"): "upright not reached (Sect. 3.2.4)",
-    ("spt_n_per_cm2", 5.0, None, "ALL", "standing"): "upright not reached (Sect. 3.2.4)",
-    **{("pennation_deg", v, None, s, p): "negligible (Sect. 3.2.5)" for v in (0.0, 7.5, 15.0, 22.5, 30.0)
-       for s in ("MUL", "EXT", "EXT+PS", "ALL") for p in ("standing", "flexion")},
-}
+def sensitivity_directions(df: pd.DataFrame, baseline: pd.DataFrame, claims: pd.DataFrame | None = None) -> pd.DataFrame:
+    """Paper 2's sensitivity statements (the sensitivity, reachability and direction claims of
+    ``data/paper2/paper2_claims_original_text.csv``, :mod:`lumbar.muscles.reproduction`) read against this sweep
+    (``df``, the sensitivity table with ``change_pct``, ``reached``, ``certified``) and the baseline postures'
+    validation table ``baseline``: one row per claim with the paper's value, ours, the verdict and the reason. The
+    headline changes, the effects the paper calls small or negligible and the reachability statements are told apart
+    by ``claim_class``, so that negligible effects cannot carry the count."""
+    from . import reproduction as rp  # noqa: PLC0415 (reproduction reads this module's tables)
 
-
-# expected direction of each statement in PAPER_CHANGES: "increase" (IDP up by more than the tolerance),
-# "unchanged" (|change| within the tolerance [%]) or "not_reached" (the posture cannot be held)
-UNCHANGED_PCT = {"change <= 20% (Sect. 3.2.2)": 20.0, "total IDP unchanged for SSL > 2.8 (Sect. 3.2.1)": 10.0,
-                 "negligible (Sect. 3.2.5)": 5.0}
-INCREASE_MIN_PCT = 5.0
-
-
-def paper_direction(statement: str) -> str:
-    """Direction a PAPER_CHANGES statement asserts: ``not_reached``, ``unchanged`` or ``increase``."""
-    if not statement:
-        return ""
-    if "not reached" in statement:
-        return "not_reached"
-    if statement in UNCHANGED_PCT:
-        return "unchanged"
-    return "increase"
-
-
-def sensitivity_directions(df: pd.DataFrame) -> pd.DataFrame:
-    """One row per paper statement (``paper_change`` of the sensitivity table, with ``change_pct``,
-    ``converged`` and ``reached``): the direction the paper states, the simulated one and whether they agree.
-    A posture not reached (no equilibrium, or the thorax misses its target by more than 1 deg: the paper's
-    red star) is ``not_reached``; a reached posture whose optimality the SQP did not certify (``converged``
-    False) keeps its direction and is marked in ``certified``. An increase needs more than
-    ``INCREASE_MIN_PCT``; "unchanged" statements use their tolerance (``UNCHANGED_PCT``)."""
-    rows = []
-    for _, r in df[df["paper_change"].fillna("") != ""].iterrows():
-        want = paper_direction(r["paper_change"])
-        tol = UNCHANGED_PCT.get(r["paper_change"], INCREASE_MIN_PCT)
-        ch = float(r["change_pct"])
-        reached = bool(r["reached"]) if "reached" in r else bool(r["converged"])
-        if not reached:
-            got = "not_reached"
-        elif ch > tol:
-            got = "increase"
-        elif ch < -tol:
-            got = "decrease"
-        else:
-            got = "unchanged"
-        rows.append({"parameter": r["parameter"], "value": r["value"], "ssl_um": r["ssl_um"],
-                     "group_scope": r["group_scope"], "posture": r["posture"], "paper_change": r["paper_change"],
-                     "paper_direction": want, "tolerance_pct": tol, "change_pct": ch, "reached": reached,
-                     "certified": bool(r["certified"] if "certified" in r else r["converged"]),
-                     "kkt_residual": float(r["kkt_residual"]) if "kkt_residual" in r else np.nan,
-                     "simulated_direction": got, "agrees": got == want})
-    return pd.DataFrame(rows)
+    claims = rp.read_claims() if claims is None else claims
+    keep = claims[claims["claim_class"].isin(["sensitivity_headline", "sensitivity_bound", "sensitivity_direction",
+                                              "reachability"])]
+    empty = pd.DataFrame(columns=["activity"])
+    res = rp.results_from_frames(baseline, {}, pd.DataFrame(columns=["level", "activity"]), empty, df)
+    t = rp.claims_table(keep, {"reproduction": res})
+    return t.drop(columns=["variant"])
 
 
 def sensitivity_rows(parameter, ssl_um, values, scopes, postures) -> pd.DataFrame:
@@ -136,10 +77,23 @@ def run_sensitivity(model, solver, rows: pd.DataFrame, baseline: dict, area_m2=1
     out["extensor_active_n"] = [float(a[0, ext].sum()) for a, _ in forces]
     out["extensor_passive_n"] = [float(q[0, ext].sum()) for _, q in forces]
     out["abdominal_active_n"] = [float(a[0, abd].sum()) for a, _ in forces]
-    out["paper_change"] = [PAPER_CHANGES.get((r["parameter"], float(r["value"]),
-                                              None if pd.isna(r["ssl_um"]) else float(r["ssl_um"]),
-                                              r["group_scope"], r["posture"]), "")
-                           for _, r in out.iterrows()]
+    out["paper_claims"] = [";".join(paper_claim_ids(r["parameter"], float(r["value"]),
+                                                     None if pd.isna(r["ssl_um"]) else float(r["ssl_um"]),
+                                                     r["group_scope"], r["posture"])) for _, r in out.iterrows()]
+    return out
+
+
+def paper_claim_ids(parameter, value, ssl_um, scope, posture, claims: pd.DataFrame | None = None) -> list:
+    """The ids of paper 2's claims about one one-at-a-time scenario (data/paper2/paper2_claims_original_text.csv)."""
+    from . import reproduction as rp  # noqa: PLC0415
+
+    c = rp.read_claims() if claims is None else claims
+    out = []
+    for _, r in c[(c["parameter"] == parameter) & (c["scope"] == scope) & (c["posture"] == posture)].iterrows():
+        vals = [float(v) for v in str(r["value"]).split("->")] if r["value"] != "" else []
+        ssl = None if r["ssl_um"] == "" else float(r["ssl_um"])
+        if ssl == ssl_um and any(np.isclose(v, value) for v in vals):
+            out.append(r["claim_id"])
     return out
 
 
@@ -222,17 +176,18 @@ def sobol_evaluate(model, solver, baseline: dict, X: np.ndarray, rows, posture: 
 
 def sobol_indices(samples: pd.DataFrame, n_train: int, degree: int, seed: int, n_bootstrap: int = 500) -> pd.DataFrame:
     """First-order (S1) and total (ST) Sobol indices of L4-L5 IDP per posture from a Legendre polynomial chaos
-    expansion of total degree ``degree`` fitted by least squares on the reached samples (all ``n_train`` rows of
-    each posture, :func:`sobol_evaluate`); indices analytic from the coefficients (:mod:`lumbar.muscles.pce`).
+    expansion of total degree ``degree`` fitted by least squares on the certified samples (of the ``n_train`` rows of
+    each posture, :func:`sobol_evaluate`: reached, and IPOPT certified the optimum); indices analytic from the
+    coefficients (:mod:`lumbar.muscles.pce`).
 
     Columns: ``S1``, ``ST`` (point estimates from the fit to all reached samples); ``S1_lo``/``S1_hi``,
     ``ST_lo``/``ST_hi`` (bootstrap 95 % percentile interval, ``n_bootstrap`` resamples of the reached samples,
     each refitted); ``q2_loo`` (leave-one-out Q2 of the PCE, hat matrix) and ``fit_ok`` (Q2 >= ``SOBOL_Q2_MIN``);
     ``top_parameter`` (largest S1), ``top_s1_width`` (its S1_hi - S1_lo) and ``stable`` (that width <
     ``SOBOL_STABLE_WIDTH``); ``degree`` (the one fitted: lowered if the reached samples do not exceed the
-    number of terms), ``n_terms``, ``n_train``, ``n_fit`` (reached samples), ``n_failed`` (samples whose posture
+    number of terms), ``n_terms``, ``n_train``, ``n_fit`` (certified samples), ``n_failed`` (samples whose posture
     is not reached: left out, so the indices are those of the reached part of the parameter box),
-    ``n_uncertified`` (reached, KKT residual above the solver's tolerance: kept), ``kkt_residual_max``,
+    ``n_uncertified`` (reached, optimum not certified: left out too, counted), ``kkt_residual_max`` (of the fit),
     ``idp_mean_mpa`` and ``idp_sd_mpa`` (mean and standard deviation of the PCE)."""
 
     n = int(n_train)
@@ -243,7 +198,8 @@ def sobol_indices(samples: pd.DataFrame, n_train: int, degree: int, seed: int, n
         d = samples[samples["posture"] == posture].sort_values("sample")
         if list(d["sample"]) != list(range(n)):
             raise ValueError(f"Sobol samples of {posture}: expected rows 0..{n - 1} (n_train {n}), got {len(d)} rows")
-        ok = d["reached"].to_numpy(bool)
+        reached = d["reached"].to_numpy(bool)
+        ok = reached & d["certified"].to_numpy(bool)        # certified optima only
         U = pce.to_unit(d.loc[ok, list(PARAMETERS)].to_numpy(float), sobol_bounds())
         y = d.loc[ok, "idp_mpa"].to_numpy(float)
         deg = int(degree)
@@ -274,8 +230,8 @@ def sobol_indices(samples: pd.DataFrame, n_train: int, degree: int, seed: int, n
                          "top_parameter": PARAMETERS[top] if top is not None else "",
                          "top_s1_width": width, "stable": bool(np.isfinite(width) and width < SOBOL_STABLE_WIDTH),
                          "degree": deg, "n_terms": comb(len(PARAMETERS) + deg, deg), "n_train": n,
-                         "n_fit": int(ok.sum()), "n_bootstrap": int(n_bootstrap), "n_failed": int((~ok).sum()),
-                         "n_uncertified": int((ok & ~d["certified"].to_numpy(bool)).sum()),
+                         "n_fit": int(ok.sum()), "n_bootstrap": int(n_bootstrap), "n_failed": int((~reached).sum()),
+                         "n_uncertified": int((reached & ~ok).sum()),
                          "kkt_residual_max": float(kkt.max()) if len(kkt) else np.nan,
                          "idp_mean_mpa": mean, "idp_sd_mpa": sd, "scope": d["scope"].iloc[0]})
     return pd.DataFrame(rows)

@@ -174,6 +174,31 @@ def capacity_table(model, sols, names) -> pd.DataFrame:
     return pd.concat(out, ignore_index=True)
 
 
+def intervertebral_rotations(model, sols, names, reference="upright_standing") -> pd.DataFrame:
+    """Sagittal intervertebral rotation [deg] of every level (upper vertebra relative to the lower, flexion +) in each
+    solved posture, and its change from the ``reference`` posture (paper 2 Sect. 2.4 compares the changes from upright
+    standing in 10 deg extension and 40 deg flexion with Wong et al. 2004's healthy range)."""
+    from ..mechanics import so3  # noqa: PLC0415
+
+    def angles(s):
+        out = {}
+        for lv in model.levels:
+            lev = model.geo.levels[lv]
+            up, lo = model.body_index[lev.upper], model.body_index[lev.lower]
+            Rl = s.R[lo] if lo >= 0 else np.eye(3)
+            out[lv] = float(np.degrees(so3.log((Rl.T @ s.R[up])[None])[0, 1]))
+        return out
+
+    ref = angles(sols[names.index(reference)])
+    rows = []
+    for name, s in zip(names, sols):
+        a = angles(s)
+        for lv in model.levels:
+            rows.append({"activity": name, "level": lv, "rotation_deg": a[lv],
+                         "rotation_from_standing_deg": a[lv] - ref[lv], **certificate(s)})
+    return pd.DataFrame(rows)
+
+
 def validation(model, sols, names, in_vivo: pd.DataFrame, area_m2=18e-4):
     """Table 1 analog, Fig. 3 table, metrics and flexion-relaxation from solved activities."""
     seg = []

@@ -148,7 +148,8 @@ def evaluate_claim(c, res: _Results) -> dict:
         return out
 
     if comp == "within_range":
-        out["reason"] = "Wong et al. 2004's per-level ranges are not available here (docs/findings.md)"
+        out["reason"] = ("Wong et al. 2004's per-level ranges are not available here; the model's rotations are in "
+                         "muscle_intervertebral_rotations.csv")
         return out
     if c["claim_class"] in ("sensitivity_headline", "sensitivity_bound", "sensitivity_direction",
                             "reachability") and c["scope"] == "" and q not in ("mean_abs_change_flexion_over_standing",
@@ -288,6 +289,11 @@ def counts(table: pd.DataFrame) -> pd.DataFrame:
     return out
 
 
+def results_from_frames(validation, metrics, segment_loads, flexion_relaxation, sensitivity=None) -> _Results:
+    """A variant's results from its tables (``sensitivity`` None: the sweep is not run on it)."""
+    return _Results(validation, metrics, segment_loads, flexion_relaxation, sensitivity)
+
+
 def results_from_files(validation, metrics, segment_loads, flexion_relaxation, sensitivity=None) -> _Results:
     """A variant's results read from its files (``sensitivity`` None: the sweep is not run on it)."""
     return _Results(pd.read_csv(validation), json.loads(Path(metrics).read_text()), pd.read_csv(segment_loads),
@@ -303,3 +309,20 @@ def paper_flexion_relaxation(claims: pd.DataFrame | None = None) -> dict:
         out[act] = tuple(_num(c.loc[f"fr_{k}_{post}", "paper_value"]) for k in ("ext_active", "ext_passive",
                                                                                   "abd_active"))
     return out
+
+
+def chain_admissibility(variant, facet_contact: pd.DataFrame, rotations: pd.DataFrame) -> pd.DataFrame:
+    """Whether a variant's passive chain fits the muscle model's geometry, per level: facet contact points beyond
+    their surface at rest (``rest_min_gap_mm`` < 0: a preload before any load; none for a chain without facets) and
+    the level flexing when the thorax flexes 36 deg (its rotation from standing > 0)."""
+    rows = []
+    flex = rotations[rotations["activity"] == "flexion_36deg"].set_index("level")
+    for lv in flex.index:
+        fc = facet_contact[facet_contact["level"] == lv] if len(facet_contact) else facet_contact
+        gap = float(fc["rest_min_gap_mm"].min()) if len(fc) else np.nan
+        rot = float(flex.loc[lv, "rotation_from_standing_deg"])
+        rows.append({"variant": variant, "level": lv, "rest_min_gap_mm": gap,
+                     "facet_overlap_at_rest": bool(np.isfinite(gap) and gap < 0.0),
+                     "flexion_36deg_rotation_from_standing_deg": rot, "flexes_in_flexion": bool(rot > 0.0),
+                     "admissible": bool(not (np.isfinite(gap) and gap < 0.0) and rot > 0.0)})
+    return pd.DataFrame(rows)

@@ -9,7 +9,7 @@ from pathlib import Path
 import pandas as pd
 
 from .document import CHECK, CROSS, NC, Para
-from .front_sections import muscle_sentence
+from .front_sections import VARIANT_NAMES, muscle_sentence, paper2_claims_sentence
 from .sections import (
     DIRECTION_ABBR,
     NOT_BUILT,
@@ -141,6 +141,48 @@ def grid_table5(b, surrogate):
                   note=b.caption(rel, ""), surrogate=surrogate, marks=True, label="Table 5")
 
 
+def paper2_claims_tables(b):
+    """The claims the paper leads with (validation, flexion-relaxation, headline sensitivity changes, reachability,
+    directions) beside ours, per variant; the counts of every class; whether each passive chain fits the muscle
+    model's geometry. Table 1 and the small-effect bounds are counted there and listed in the CSV."""
+    rel = b.out("muscle_model", "reproduction")
+    if b.has(rel):
+        t = read_csv(b.path(rel))
+        b.shown.add(norm_path(rel))
+        keep = t[t["claim_class"].isin(["validation", "flexion_relaxation", "sensitivity_headline",
+                                        "reachability", "sensitivity_direction", "rotations"])]
+        piv = {}
+        for _, r in keep.iterrows():
+            key = r["claim_id"]
+            piv.setdefault(key, {"r": r})[r["variant"]] = r
+        variants = list(dict.fromkeys(t["variant"]))
+
+        def ours(r):
+            if r is None:
+                return ""
+            v = r["ours"]
+            txt = "" if pd.isna(v) else fmt(float(v), 3)
+            return f"{txt} ({r['verdict']}{'; ' + str(r['reason']) if isinstance(r['reason'], str) and r['reason'] else ''})"
+
+        rows = []
+        for key, d in piv.items():
+            r = d["r"]
+            what = " ".join(str(x) for x in (r["quantity"], r["posture"], r["parameter"], r["value"],
+                                             ("SSL " + str(r["ssl_um"])) if isinstance(r["ssl_um"], str) and r["ssl_um"]
+                                             else "", r["scope"]) if isinstance(x, str) and x and x != "nan")
+            rows.append([human_value(r["claim_class"]), what, f"{fmt(r['paper'])} {r['unit'] if r['unit'] != '-' else ''}"]
+                        + [ours(d.get(v)) for v in variants])
+        b.table_block("Paper 2's stated results beside ours (Table 1 and the small-effect bounds: counts below, every "
+                      "row in the CSV)", ["claim class", "claim", "paper"] +
+                      [VARIANT_NAMES.get(v, v) for v in variants], rows, source=rel, note=b.caption(rel, ""))
+    b.csv_table(b.out("muscle_model", "reproduction_counts"), "Verdict counts of paper 2's claims per variant and "
+                "claim class")
+    b.csv_table(b.out("muscle_model", "chain_admissibility"), "Each passive chain on the muscle model's geometry: "
+                "facet overlap at rest and whether every level flexes in 36 deg flexion")
+    b.csv_table(b.out("muscle_model", "rotations"), "Intervertebral rotations in the rotation-check postures "
+                "(change from upright standing)")
+
+
 def muscle_section(b):
     metrics = b.out("muscle_model", "metrics")
     files = [b.out("muscle_model", role) for role in ("segment_loads", "validation", "metrics", "flexion_relaxation",
@@ -150,6 +192,10 @@ def muscle_section(b):
     if not any(b.has(f) for f in files) and not figs:
         b.doc.add(Para(f"Muscle study: {NOT_BUILT}.", "note"))
         return
+    claims = paper2_claims_sentence(b)
+    if claims:
+        b.doc.add(Para(claims))
+        paper2_claims_tables(b)
     if b.has(metrics):
         b.doc.add(Para(muscle_sentence(b)))
         b.shown.add(norm_path(metrics))

@@ -560,9 +560,17 @@ class ReportBuilder:
         return null_models_sentence(read_csv(self.path(rel))) if self.has(rel) else ""
 
     def _muscle_abstract(self) -> str:
+        from .front_sections import paper2_claims_sentence  # noqa: PLC0415 (front_sections imports this module)
+        claims = paper2_claims_sentence(self, short=True)
         rel = self.out("muscle_model", "metrics")
         if not self.has(rel):
-            return f"Muscle model, in-vivo validation: {NOT_BUILT}."
+            return claims or f"Muscle model, in-vivo validation: {NOT_BUILT}."
+        if claims:
+            return claims + " " + self._muscle_validation_text()
+        return self._muscle_validation_text()
+
+    def _muscle_validation_text(self) -> str:
+        rel = self.out("muscle_model", "metrics")
         m = json.loads(self.path(rel).read_text())
         n, total = m.get("n"), m.get("n_total", m.get("n"))
         if m.get("r2") is None or m.get("rmse_mpa") is None:
