@@ -150,7 +150,9 @@ rule muscle_validation_calibrated:
     input:
         in_vivo=config["muscle_model"]["in_vivo_table"],
         landmarks=geometry_inputs,
-        passive=characteristic_tables(config["characteristics"]["calibrated_dir"], ["calibrated"]),
+        passive=characteristic_tables(
+            config["characteristics"]["calibrated_dir"], ["calibrated"]
+        ),
         data=[
             "data/muscles/muscle_groups.csv",
             "data/anthropometry/upper_body_segments.csv",
@@ -166,9 +168,8 @@ rule muscle_validation_calibrated:
         "../envs/lumbar.yaml"
     params:
         muscle_model=config["muscle_model"],
-        variant="calibrated_chain",
     script:
-        "../scripts/muscle_validation.py"
+        "../scripts/muscle_validation_calibrated.py"
 
 
 rule paper2_reproduction:

@@ -17,7 +17,7 @@ lumbar5 in the MJCF) -> ``L5``, its kinematic parent.
 Per fascicle: ``f_max_n`` = MJCF ``gainprm[2]`` (peak active force; 1.02-1.14 x Christophy et al. 2012's
 maximum forces for the back muscles); PCSA = f_max / 46.6 N/cm^2, the specific tension Christophy's maximum forces are
 read with in the paper's own model code (data/paper2/paper2_model_inputs_third_party.csv), so that the paper's SpT =
-K = 100 N/cm^2 give the paper's muscles (until 2026-11-29 f_max / 100 N/cm^2: muscles 2.15x weaker, passive force
+K = 100 N/cm^2 give the paper's muscles (read as f_max / 100 N/cm^2 before: muscles 2.15x weaker, passive force
 too). Group, in-situ sarcomere
 length, pennation and fibre ratio from ``data/muscles/muscle_groups.csv``. The MJCF's MuJoCo muscle ranges
 do not give a physical optimal fibre length, so it is derived (see :mod:`lumbar.muscles.paths`):

@@ -242,3 +242,107 @@ def validation(model, sols, names, in_vivo: pd.DataFrame, area_m2=18e-4):
                                      "target), including those whose optimum IPOPT could not certify (an equilibrium "
                                      "that may not be the optimum)")
     return seg, val, metrics
+
+
+VARIANTS = ("reproduction", "calibrated_chain")
+
+
+def validation_study(cfg: dict, passive_dir, in_vivo: pd.DataFrame, variant="reproduction", log=None) -> dict:
+    """The muscle stage's validation of one variant (config section ``muscle_model`` in ``cfg``): ``reproduction``
+    as configured, ``calibrated_chain`` on the workflow's calibrated disc, facets and ligaments at every level. Solves
+    the activities, the baseline postures of the sweep and the rotation-check postures; a baseline posture that IPOPT
+    cannot certify raises (the sensitivity study and the claims need certified baselines). Returns the tables
+    (``segment_loads``, ``validation``, ``metrics``, ``flexion_relaxation``, ``rotations``, ``facet_contact``) and
+    ``model``, ``sols``, ``names``, ``keep`` (the configured activities) for the reproduction's further outputs."""
+    import logging  # noqa: PLC0415
+    import time  # noqa: PLC0415
+
+    from . import muscle_model as mm  # noqa: PLC0415
+    from .reproduction import paper_flexion_relaxation  # noqa: PLC0415
+
+    log = log or logging.getLogger(__name__)
+    if variant not in VARIANTS:
+        raise ValueError(f"muscle validation variant must be one of {VARIANTS}, got {variant!r}")
+    p = dict(cfg)
+    if variant == "calibrated_chain":
+        p.update(passive_model="detailed", passive_set="workflow_calibrated")
+    model = mm.model_from_config(p, passive_dir)
+    log.info("muscle model variant %s: passive model %s, passive set %s, in-situ posture %s, IAP %.0f N, "
+             "extensor PCSA %.1f cm2", variant, model.passive_model, p["passive_set"], model.in_situ_posture,
+             model.iap_force_n, 1e4 * model.props.pcsa_m2[mm.group_mask(model.ms, "EXT")].sum())
+    solver = mm.make_solver(model, p["solver"])
+    names = list(p["activities"])
+    for post in mm.POSTURES.values():          # the baseline postures of the sweep are always solved
+        if post not in names:
+            names.append(post)
+    t0 = time.perf_counter()
+    sols = mm.solve_postures(model, solver, names)
+    log.info("%d activities solved in %.1f s; converged: %s", len(names), time.perf_counter() - t0,
+             {n: s.converged for n, s in zip(names, sols)})
+    bad = [n for n, s in zip(names, sols) if n in mm.POSTURES.values() and not s.certified]
+    if bad:
+        raise RuntimeError(f"muscle validation ({variant}): baseline posture(s) {bad} not certified "
+                           f"({[(s.reached, s.ipopt_status, s.message) for n, s in zip(names, sols) if n in bad]}); "
+                           "the sensitivity study and the claims need certified baselines (muscle_model.solver)")
+    for n, s in zip(names, sols):
+        log.info("%s: converged=%s reached=%s certified=%s KKT residual %.1e, residual %.1e N %.1e N*m, tracking "
+                 "error %.3f deg, %d iterations %s", n, s.converged, s.reached, s.certified, s.kkt_residual,
+                 s.residual_force_n, s.residual_moment_nm, s.tracking_error_deg, s.iterations, s.message)
+    keep = [n for n in names if n in p["activities"]]
+    seg, _, _ = validation(model, sols, names, in_vivo, p["disc_area_m2"])
+    seg = seg[seg["activity"].isin(keep)]
+    _, val, metrics = validation(model, [s for n, s in zip(names, sols) if n in keep], keep, in_vivo,
+                                 p["disc_area_m2"])
+    metrics["variant"] = variant
+    fr = flexion_relaxation(model, sols, names)
+    fr = fr[fr["activity"].isin(list(mm.POSTURES.values()))].copy()
+    paper = paper_flexion_relaxation()
+    fr["paper_extensor_active_n"] = [paper[a][0] for a in fr["activity"]]
+    fr["paper_extensor_passive_n"] = [paper[a][1] for a in fr["activity"]]
+    fr["paper_abdominal_active_n"] = [paper[a][2] for a in fr["activity"]]
+    fr["paper_source"] = "paraspinal_muscle_properties_spinal_loading.md, Sect. 3.1 (original_text)"
+    fr["note"] = (f"{variant}: as the paper (Sect. 2.1): pelvis fixed, all 36 deg of thorax rotation in L1-S1; SL = "
+                  f"in-situ SL x fibre length / its length in the {model.in_situ_posture} posture (Christophy 2012 "
+                  "normalisation); docs/findings.md, Muscle-driven model.")
+    # paper 2's rotation check (10 deg extension, 40 deg flexion; changes from upright standing, Sect. 2.4)
+    rot_names = list(mm.ROTATION_CHECK)
+    rot_sols = mm.solve_postures(model, solver, rot_names)
+    rot = intervertebral_rotations(model, sols + rot_sols, names + rot_names)
+    rot = rot[rot["activity"].isin(rot_names + ["flexion_36deg"])].copy()
+    rot["healthy_range"] = ("Wong et al. 2004's per-level ranges (100 volunteers, the paper's comparison) are not "
+                            "available here")
+    contact = facet_contact(model, sols, names)
+    contact = contact[contact["activity"].isin(keep)]
+    return {"segment_loads": seg[["level", "activity", "compressive_n", "shear_n", "moment_nm", "converged",
+                                  "lateral_moment_nm", "axial_moment_nm", "reached", "certified", "kkt_residual"]],
+            "validation": val, "metrics": metrics, "flexion_relaxation": fr, "rotations": rot,
+            "facet_contact": contact, "model": model, "sols": sols, "names": names, "keep": keep,
+            "uncertified": [n for n, s in zip(names, sols) if s.reached and not s.certified],
+            "ipopt_status": [s.ipopt_status for s in sols if s.reached and not s.certified]}
+
+
+def write_variant_tables(study: dict, output, log=None):
+    """The tables every variant writes (``output``: the rule's named outputs), with their log lines."""
+    import json  # noqa: PLC0415
+    import logging  # noqa: PLC0415
+    from pathlib import Path  # noqa: PLC0415
+
+    from ..inputs.io import write_table_atomic  # noqa: PLC0415
+
+    log = log or logging.getLogger(__name__)
+    write_table_atomic(study["segment_loads"], output.segment_loads)
+    write_table_atomic(study["validation"], output.validation)
+    Path(output.metrics).parent.mkdir(parents=True, exist_ok=True)
+    Path(output.metrics).write_text(json.dumps(study["metrics"], indent=2, sort_keys=True) + "\n")
+    write_table_atomic(study["flexion_relaxation"], output.flexion_relaxation)
+    write_table_atomic(study["rotations"], output.rotations)
+    write_table_atomic(study["facet_contact"], output.facet_contact)
+    log.info("in-vivo validation (%s): %s", study["metrics"]["variant"], study["metrics"])
+    for a, d in study["rotations"].groupby("activity", sort=False):
+        log.info("intervertebral rotations from standing, %s (reached %s, certified %s): %s", a,
+                 bool(d["reached"].iat[0]), bool(d["certified"].iat[0]),
+                 {r["level"]: round(float(r["rotation_from_standing_deg"]), 1) for _, r in d.iterrows()})
+    for lv, d in study["facet_contact"].groupby("level", sort=False):
+        log.info("facets %s (set %s, %.3g N/m): rest gap %.2f mm; contact force per posture %s", lv,
+                 d["passive_set"].iat[0], d["facet_stiffness_n_per_m"].iat[0], d["rest_min_gap_mm"].min(),
+                 {a: round(float(v), 1) for a, v in d.groupby("activity", sort=False)["contact_n"].sum().items()})

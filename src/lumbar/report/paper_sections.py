@@ -9,8 +9,10 @@ from pathlib import Path
 import pandas as pd
 
 from .document import CHECK, CROSS, NC, Para
-from .front_sections import VARIANT_NAMES, muscle_sentence, paper2_claims_sentence
+from .front_sections import muscle_sentence
 from .sections import (
+    VARIANT_NAMES,
+    paper2_claims_sentence,
     DIRECTION_ABBR,
     NOT_BUILT,
     SET_LABELS,
