@@ -215,8 +215,8 @@ def test_report_measured_stepwise_table_is_not_called_surrogate(fake_results):
     cfg = {**config, "stepwise_reduction": {**config["stepwise_reduction"], "measured_table": "heuer2007.csv"}}
     text = parse_report(_build(tmp, cfg, inputs)[0]).text
     assert "outliers against the measured reference table: calibrated (this model) 17 of 160" in text
-    assert "The outlier counts of Table 5 compare with SURROGATE data" in text
-    assert "Table 4 and Table 5 compare with SURROGATE" not in text
+    assert "Table 5 counts outliers against SURROGATE data" in text
+    assert "Table 4 and Table 5 count outliers against SURROGATE" not in text
 
 
 def test_report_muscle_and_discrepancy_sections(fake_muscle_discrepancy):
@@ -371,7 +371,7 @@ def test_first_page_abstract_counts_distinct_comparisons(fake_full):
     assert "in 7 distinct comparisons" in text
     assert "Independent checks: 2 of 4 within" in text and "Calibration targets (a fit quality, not a validation): " \
         "3 of 3 met" in text
-    assert "L4-L5 IDP in vivo (muscle model), 1 of 2 within" in text
+    assert "misses: L4-L5 ROM (paper's Table 3 set as published) 0 of 1; L4-L5 IDP in vivo 1 of 2." in text
     assert "Table R1. Independent checks (validation): 2 of 4 distinct comparisons within" in text
     assert "Table R2. Calibration targets (fit quality, not validation): 3 of 3 distinct comparisons within" in text
     assert "no value" in text and "2 characteristic sets" in text        # crate_far; the shared disc-only rows
@@ -390,6 +390,72 @@ def test_pdf_first_page_holds_abstract_and_scoreboard_figure(fake_full):
     page1 = [f for p, f in placed if p == 1]
     assert any(isinstance(f, Paragraph) and "distinct comparisons" in f.text for f in page1)
     assert any(isinstance(f, Image) and str(f.filename).endswith("validation_scoreboard.png") for f in page1)
+
+
+def first_page_problems(doc, builder, html_text: str) -> list[str]:
+    """What keeps the first page from being one page: more than 250 words before the scoreboard figure (in the HTML,
+    lumbar.report.figures_of_record.first_page_words), the figure not on the PDF's page 1 (reportlab's own record of
+    where it drew each flowable)."""
+    from reportlab.platypus import Image
+
+    from lumbar.report import render_pdf
+    from lumbar.report.figures_of_record import FIRST_PAGE_MAX_WORDS, first_page_words
+    out = []
+    words = first_page_words(html_text)
+    if words is None or words > FIRST_PAGE_MAX_WORDS:
+        out.append(f"{words} words before the scoreboard figure (at most {FIRST_PAGE_MAX_WORDS})")
+    placed = []
+    render_pdf(doc, builder, placed=placed)
+    pages = [p for p, f in placed if isinstance(f, Image) and str(f.filename).endswith("validation_scoreboard.png")]
+    if pages != [1]:
+        out.append(f"the scoreboard figure is on PDF page {pages}")
+    return out
+
+
+def test_first_page_is_one_page_with_the_scoreboard_figure(fake_full):
+    """At most 250 words before the scoreboard figure and the figure on PDF page 1. Control: the same document with
+    the findings that crowded it back before the figure (600 words) fails both."""
+    from lumbar.report import render_html
+    from lumbar.report.document import Figure, Para
+    doc, b = _document(*fake_full)
+    assert first_page_problems(doc, b, render_html(doc, b)) == []
+    at = next(i for i, x in enumerate(doc.blocks) if isinstance(x, Figure) and x.label == "Fig. R")
+    doc.blocks[at:at] = [Para(" ".join(["finding"] * 150), "abstract") for _ in range(4)]
+    found = first_page_problems(doc, b, render_html(doc, b))
+    assert len(found) == 2 and "words before the scoreboard figure" in found[0] and "PDF page [2]" in found[1], found
+
+
+def test_first_page_links_the_findings_it_leaves_to_their_sections(fake_full):
+    """The first page links the validation section and the flags (and, with internal loads, the posterior section:
+    test_dag_report_first_page_is_one_page); the links resolve to the sections' anchors in the HTML and are links in
+    the PDF too."""
+    html_path, pdf_path, _ = _build(*fake_full)
+    html = html_path.read_text()
+    first = html[:html.index("validation_scoreboard.png")]
+    for anchor in ("validation", "flags"):
+        assert f'<a href="#{anchor}">' in first and f'id="{anchor}"' in html, anchor
+    assert "](#" not in parse_report(html_path).text                     # no link markup left as text
+    assert pdf_path.read_bytes().count(b"/Subtype /Link") >= 3 and b"/Dest [" in pdf_path.read_bytes()   # PDF links
+
+
+def test_dag_report_first_page_is_one_page(dag_workdir):
+    """The test-config DAG's report: at most 250 words before the scoreboard figure in the HTML, and in the PDF
+    (pdftotext, Debian's poppler-utils; .ci/run installs it) page 1 holds the figure's caption with at most 250 words
+    before it."""
+    from lumbar.report.figures_of_record import FIRST_PAGE_MAX_WORDS, first_page_words
+    html = (dag_workdir / "results" / "report" / "paper.html").read_text()
+    assert first_page_words(html) <= FIRST_PAGE_MAX_WORDS
+    first = html[:html.index("validation_scoreboard.png")]
+    # the findings the first page leaves to their sections: linked (where the internal loads come from: posterior)
+    assert all(f'<a href="#{a}">' in first for a in ("validation", "posterior", "flags")), first[-3000:]
+    if shutil.which("pdftotext") is None:
+        pytest.skip("pdftotext not found: Debian's poppler-utils package is needed (.ci/run installs it as root)")
+    page1 = subprocess.run(["pdftotext", "-f", "1", "-l", "1", str(dag_workdir / "results" / "report" / "paper.pdf"),
+                            "-"], capture_output=True, text=True, check=True).stdout
+    caption = re.search(r"Fig\. R\s+Validation scoreboard", page1)
+    assert caption, page1[:3000]
+    before = [w for w in page1[:caption.start()].split() if re.search(r"\w", w)]
+    assert len(before) <= FIRST_PAGE_MAX_WORDS, (len(before), page1[:3000])
 
 
 def test_pdf_tables_never_wrap_a_word_and_fit_the_frame(fake_full):

@@ -440,7 +440,11 @@ def report_inputs(wildcards):
     "not built in this configuration"."""
     report_dir = str(Path(out("report", "html")).parent) + "/"
     discovery_files = set(manifests.report_optional(RESULTS, ["discovery"]))
-    results = [p for p in final_outputs() if not p.startswith(report_dir)]
+    results = [
+        p
+        for p in final_outputs()
+        if not p.startswith(report_dir) and p not in FIGURES_OF_RECORD
+    ]
     extra = [stepwise_reduction_experiment(wildcards), l2s1_idp_reference(wildcards)]
     extra += [
         p
@@ -452,6 +456,16 @@ def report_inputs(wildcards):
     # a user's specimen: its first page names it and shows the calibrated unit's landmark QA
     extra += [out("specimen", "levels")] + SPECIMEN_QA_FIGURES if SPECIMEN else []
     return results + [p for p in dict.fromkeys(extra) if p not in results]
+
+
+# ---- the figures of record (workflow/rules/figures_of_record.smk): read after every other final output
+FIGURES_OF_RECORD = manifests.paths("figures_of_record", "json", RESULTS)
+
+
+def figures_of_record_inputs(wildcards):
+    """Every other output of the default target (the stages this configuration runs): the figures are read from
+    them, and the jobs' benchmark files are all written by the time they exist."""
+    return [p for p in runnable_outputs(final_outputs()) if p not in FIGURES_OF_RECORD]
 
 
 # ---- L2-S1 IDP experiment

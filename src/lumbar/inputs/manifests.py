@@ -374,6 +374,11 @@ MANIFESTS: dict[str, Manifest] = {m.stage: m for m in (
         # one per docs/templates/<name>.md (report.smk fills {name})
         "doc": _o("report/{name}", "docs_numbers"),
     }),
+    # the figures of record (lumbar.report.figures_of_record): read from every other final output and the jobs'
+    # benchmark files after them; feeds nothing (not a report input), the default target's last job
+    Manifest("figures_of_record", {
+        "json": _o("figures_of_record.json", "figures_of_record", final=True),
+    }),
 )}
 
 

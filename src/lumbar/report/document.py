@@ -3,10 +3,19 @@ sections write (:mod:`lumbar.report.sections`) and the renderers draw (:mod:`lum
 :mod:`lumbar.report.pdf_renderer`)."""
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
 #: the marks of the check/cross grids (within the reference, outlier, no equilibrium)
 CHECK, CROSS, NC = "\u2713", "\u2717", "n.c."
+#: a link to a section inside a paragraph's text: ``[text](#anchor)`` (the anchor of a :class:`Heading`); the HTML
+#: and the PDF draw it as a link, :func:`plain` as its text
+LINK = re.compile(r"\[([^\[\]]+)\]\(#([A-Za-z0-9_-]+)\)")
+
+
+def plain(text: str) -> str:
+    """A paragraph's text as a reader reads it: every ``[text](#anchor)`` as its text."""
+    return LINK.sub(lambda m: m.group(1), str(text))
 
 
 @dataclass

@@ -75,6 +75,14 @@ def scoreboard_section(b):
                           "not carry at all would also pass: read the ratio to the measured value")
         b.table_block(title, head, rows, source=rel, label=f"Table {label}" if label else None, marks=True,
                       key_cols=2)
+    # after the tables (Tables R1 and R2 stay on one page): the independent checks beside trivial models, and where
+    # the judged extension facet force comes from
+    nulls = b.null_sentence()
+    if nulls:
+        b.doc.add(Para(f"{nulls} Every count: {b.out('validation', 'null_models')}."))
+    edge = b.facet_edge_sentence()
+    if edge:
+        b.doc.add(Para("Internal loads (Table R3): " + edge))
 
 
 def flags_section(b):

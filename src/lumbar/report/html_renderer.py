@@ -5,7 +5,7 @@ from __future__ import annotations
 import base64
 import html
 
-from .document import CHECK, CROSS, NC, Bullets, Contents, Doc, Figure, Heading, Para, Table
+from .document import CHECK, CROSS, LINK, NC, Bullets, Contents, Doc, Figure, Heading, Para, Table
 from .sections import TITLE, ReportBuilder
 
 
@@ -32,6 +32,11 @@ def _h(s) -> str:
     return html.escape(str(s), quote=True)
 
 
+def _text(s) -> str:
+    """A paragraph's text as HTML: escaped, its ``[text](#anchor)`` links as links."""
+    return LINK.sub(lambda m: f'<a href="#{m.group(2)}">{m.group(1)}</a>', _h(s))
+
+
 def render_html(doc: Doc, builder: ReportBuilder) -> str:
     out = ["<!DOCTYPE html>", '<html lang="en">', "<head>", '<meta charset="utf-8">',
            '<meta name="viewport" content="width=device-width, initial-scale=1">',
@@ -45,7 +50,7 @@ def render_html(doc: Doc, builder: ReportBuilder) -> str:
             out.append('<nav class="toc"><b>Contents</b><ol>' + "".join(f'<li><a href="#{_h(a)}">{_h(t)}</a></li>'
                                                           for t, a in b.items) + "</ol></nav>")
         elif isinstance(b, Para):
-            out.append(f'<p class="{b.style}">{_h(b.text)}</p>')
+            out.append(f'<p class="{b.style}">{_text(b.text)}</p>')
         elif isinstance(b, Bullets):
             out.append("<ul>" + "".join(f"<li>{_h(i)}</li>" for i in b.items) + "</ul>")
         elif isinstance(b, Figure):

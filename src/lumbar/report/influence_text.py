@@ -1,5 +1,6 @@
-"""The leave-one-row-out finding of the calibration in words (the calibration stage's role row_influence), shared by the
-first page (:mod:`.sections`) and the posterior section (:mod:`.posterior`); imports no report module."""
+"""The leave-one-row-out finding of the calibration in words (the calibration stage's role row_influence) and the
+posterior's share of draws meeting the judged limits, for the posterior section (:mod:`.posterior`; the first page
+links there); imports no report module."""
 from __future__ import annotations
 
 import numpy as np

@@ -23,7 +23,7 @@ from reportlab.platypus import TableStyle
 
 from lumbar import __version__
 
-from .document import CHECK, CROSS, NC, Bullets, Contents, Doc, Figure, Heading, Para, Table
+from .document import CHECK, CROSS, LINK, NC, Bullets, Contents, Doc, Figure, Heading, Para, Table
 from .sections import ReportBuilder
 
 log = logging.getLogger(__name__)
@@ -238,9 +238,11 @@ def story(doc: Doc, builder: ReportBuilder) -> list:
         if isinstance(b, Heading):
             if b.new_page:
                 out.append(PageBreak())
-            out.append(Paragraph(_pdf_text(b.text), st["title"] if b.level == 0 else st[min(b.level, 3)]))
+            target = f'<a name="{b.anchor}"/>' if b.anchor else ""       # where a paragraph's link goes
+            out.append(Paragraph(target + _pdf_text(b.text), st["title"] if b.level == 0 else st[min(b.level, 3)]))
         elif isinstance(b, Para):
-            out.append(Paragraph(_pdf_text(b.text), st.get(b.style, st["p"])))
+            text = LINK.sub(lambda m: f'<a href="#{m.group(2)}" color="#1a4f8b">{m.group(1)}</a>', _pdf_text(b.text))
+            out.append(Paragraph(text, st.get(b.style, st["p"])))
         elif isinstance(b, Contents):       # links for the HTML; the PDF's readers page through
             continue
         elif isinstance(b, Bullets):

@@ -10,6 +10,7 @@ import pandas as pd
 
 from ..experiments.posterior import METHOD_BOUND, METHOD_CLIPPED, METHOD_LINEAR, METHOD_NONLINEAR, natural_units
 from .influence_text import influence_sentence as _influence_sentence
+from .influence_text import posterior_judged_sentence as _posterior_judged_sentence
 from .influence_text import profile_sentence as _profile_sentence
 from .influence_text import spread_sentence as _spread_sentence
 from .sections import ReportBuilder, fmt, report_section
@@ -130,6 +131,11 @@ def posterior_section(b: ReportBuilder):
                            "draws' 5th to 95th percentile. Every direction and moment of the curves is in the CSV.")
     else:
         b.missing("Posterior bands of the intact curves (bands_calibrated.csv)")
+    draws = b.out("load_sharing", "band_draws")
+    if b.has(draws):
+        judged = _posterior_judged_sentence(pd.read_csv(b.path(draws)), fmt)
+        if judged:
+            b.para("How probable the judged limits of the internal loads are under the posterior: " + judged)
     influence_block(b)
 
 
