@@ -242,13 +242,23 @@ def align_to_project(meshes: dict, axes: str = "LPS", sources: dict | None = Non
         # widths: [the vertebra's own body end, its process end]
         normals[v], offsets[v], signs[v], widths[v], rms[v] = n, p0, sg * a, wid if sg > 0 else wid[::-1], r
     # one left-right axis: the mean of the per-vertebra symmetry normals (signs made consistent)
-    shape = {v: check_vertebra_shape(v, meshes[v], widths.get(v) if v != "S1" else None, sources.get(v, ""))
-             for v in names}
+    shape = {}
+    for v in names:
+        try:
+            shape[v] = check_vertebra_shape(v, meshes[v], widths.get(v) if v != "S1" else None, sources.get(v, ""))
+        except GeometryError as exc:
+            if v not in turned:
+                raise
+            raise GeometryError(f"{exc}; its surface was wound inside-out: a file mirrored about a plane across "
+                                "the vertebra?") from None
     ref = normals[lumbar[0]]
     nbar = sum(normals[v] * np.sign(normals[v] @ ref) for v in lumbar)
     nbar = _perp(nbar, s)
     votes = [np.sign(signs[v] @ np.cross(nbar, s)) for v in lumbar]
-    x = np.cross(nbar, s) * (1.0 if sum(votes) >= 0 else -1.0)
+    x = np.cross(nbar, s)
+    # the majority of the vertebrae decides; a tie (two vertebrae disagreeing) by the declared anterior, if any
+    tie = 1.0 if D is None or float((D @ x)[0]) >= 0 else -1.0
+    x = x * (1.0 if sum(votes) > 0 else -1.0 if sum(votes) < 0 else tie)
     # an inside-out file whose own body lies against the specimen's anterior: that file alone mirrored
     against = [v for v in turned if v in signs and float(signs[v] @ x) < 0]
     if against:
