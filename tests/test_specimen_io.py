@@ -576,9 +576,16 @@ def test_landmarks_command_takes_a_label_volume(tmp_path):
     masks.mkdir()
     for f in ("vertebrae_L4.nii.gz", "vertebrae_L5.nii.gz"):
         shutil.copy(TS_MASKS / f, masks / f)
+    ellipsoid(0.0, subdivisions=2).export(masks / "preview.stl")      # a surface naming no vertebra: listed
     out = tmp_path / "out"
     assert main(["landmarks", str(masks), "--out", str(out), "--backend", "none"]) == 0
     assert sorted(p.name for p in (out / "meshes").glob("*.stl")) == ["L4.stl", "L5.stl"]
+    import json
+    rec = json.loads((out / "transform.json").read_text())
+    assert [(Path(x["file"]).name, x["reason"]) for x in rec["ignored_files"]] == [
+        ("preview.stl", "a surface file; this folder is read as label masks")]
+    assert {v: Path(x["file"]).name for v, x in rec["inputs"].items()} == {"L4": "vertebrae_L4.nii.gz",
+                                                                        "L5": "vertebrae_L5.nii.gz"}
     lm = pd.read_csv(out / "landmarks.csv")
     for body, f in (("L4", "vertebrae_L4.nii.gz"), ("L5", "vertebrae_L5.nii.gz")):
         img = nibabel.load(masks / f)
