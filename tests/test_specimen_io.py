@@ -163,18 +163,22 @@ def test_orientation_and_repeated_faces_repaired_and_logged(tmp_path):
     faces[:10] = faces[:10, ::-1]                           # ten triangles turned
     trimesh.Trimesh(m.vertices, faces, process=False).export(tmp_path / "spec_L4.stl")
     inv = ellipsoid(-PITCH_MM)
-    inv.invert()                                            # the whole surface inside-out: a mirror's signature
+    inv.invert()                                            # the whole surface wound inwards
     inv.export(tmp_path / "spec_L5.stl")
-    with pytest.raises(GeometryError, match=r"spec_L5\.stl: L5 surface is inside-out.*mirrored export"):
-        S.read_specimen(tmp_path)
-    # the user states the coordinates are not mirrored: turned, and the log says why
-    r = S.read_specimen(tmp_path, turn_inside_out=True)
+    # declared axes: turned outwards, logged (the anatomy is checked against the axes when the frame is found)
+    r = S.read_specimen(tmp_path)
     log = {lv: " | ".join(x.what for x in r.repairs if x.level == lv) for lv in LEVELS3}
-    assert "orientation" in log["L4"] and "inside-out" in log["L5"] and "turn_inside_out" in log["L5"]
-    assert log["S1"] == ""                                  # L4 (mixed orientation) passed the first read
+    kinds = {lv: [x.kind for x in r.repairs if x.level == lv] for lv in LEVELS3}
+    assert "orientation" in log["L4"] and "wound inwards" in log["L5"] and "declared axes LPS" in log["L5"]
+    assert kinds["L5"] == ["inside_out"] and kinds["S1"] == [] and r.turned == ["L5"]
     for lv in ("L4", "L5"):
         assert r.meshes[lv].is_winding_consistent and r.meshes[lv].volume > 0
         np.testing.assert_allclose(r.meshes[lv].volume, m.volume * 1e-9, rtol=1e-6)
+    # no declared axes: nothing can show a mirror, so refused unless the user states the coordinates are not mirrored
+    with pytest.raises(GeometryError, match=r"spec_L5\.stl: L5 surface is inside-out.*axes are 'any'.*--turn-inside-out"):
+        S.read_specimen(tmp_path, axes="any")
+    r = S.read_specimen(tmp_path, axes="any", turn_inside_out=True)
+    assert r.turned == ["L5"] and "turn_inside_out" in [x.what for x in r.repairs if x.level == "L5"][0]
 
 
 def test_empty_and_unreadable_files(tmp_path):
@@ -572,9 +576,16 @@ def test_landmarks_command_takes_a_label_volume(tmp_path):
     masks.mkdir()
     for f in ("vertebrae_L4.nii.gz", "vertebrae_L5.nii.gz"):
         shutil.copy(TS_MASKS / f, masks / f)
+    ellipsoid(0.0, subdivisions=2).export(masks / "preview.stl")      # a surface naming no vertebra: listed
     out = tmp_path / "out"
     assert main(["landmarks", str(masks), "--out", str(out), "--backend", "none"]) == 0
     assert sorted(p.name for p in (out / "meshes").glob("*.stl")) == ["L4.stl", "L5.stl"]
+    import json
+    rec = json.loads((out / "transform.json").read_text())
+    assert [(Path(x["file"]).name, x["reason"]) for x in rec["ignored_files"]] == [
+        ("preview.stl", "a surface file; this folder is read as label masks")]
+    assert {v: Path(x["file"]).name for v, x in rec["inputs"].items()} == {"L4": "vertebrae_L4.nii.gz",
+                                                                        "L5": "vertebrae_L5.nii.gz"}
     lm = pd.read_csv(out / "landmarks.csv")
     for body, f in (("L4", "vertebrae_L4.nii.gz"), ("L5", "vertebrae_L5.nii.gz")):
         img = nibabel.load(masks / f)

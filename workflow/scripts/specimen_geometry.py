@@ -26,6 +26,8 @@ def main(snakemake, log):
              det["superior_rule"], det["anterior_votes"], det.get("angle_to_declared_deg", "n/a"), b.inputs.axes)
     for r in b.read.repairs:
         log.info("repair: %s", r)
+    for f, why in b.read.ignored:
+        log.info("not read: %s (%s)", f, why)
     ok, why = configured.facet_numbers_supported(b)
     if not ok:
         log.warning("facet numbers not supported: %s", why)

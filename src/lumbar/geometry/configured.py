@@ -253,18 +253,43 @@ def build(g: dict, mesh_dir=None) -> SpecimenBuild:
     return _build(si, Path(mesh_dir) if mesh_dir is not None else None)
 
 
+def _meshing_repairs(si: SpecimenInputs, mesh_dir: Path) -> list:
+    """The label volume's meshing as repairs (per vertebra: the voxels of smaller parts dropped, the decimation),
+    from ``mesh_dir/meshing_report.csv``, naming the NIfTI file."""
+    import pandas as pd  # noqa: PLC0415 - only the label-volume report reads tables
+    rep = pd.read_csv(mesh_dir / "meshing_report.csv", keep_default_na=False)
+    out = []
+    for r in rep.itertuples():
+        f = si.files.get(r.level, si.path)
+        if int(r.voxels_dropped):
+            out.append(specimen_io.Repair(r.level, f, f"kept the mask's largest connected part: {int(r.voxels_dropped)} "
+                                          f"voxel(s) of smaller parts dropped (of {int(r.n_voxels) + int(r.voxels_dropped)})",
+                                          "islands_dropped"))
+        if int(getattr(r, "voxels_filled", 0) or 0):
+            out.append(specimen_io.Repair(r.level, f, f"filled {int(r.voxels_filled)} voxel(s) of cavities enclosed by "
+                                          "the mask (a gap in the segmentation, not a surface of the bone)",
+                                          "holes_filled"))
+        if str(r.decimation) not in ("none", ""):
+            out.append(specimen_io.Repair(r.level, f, f"meshed surface decimated: {r.decimation}",
+                                          "decimation" if not str(r.decimation).startswith("skipped") else ""))
+    return out
+
+
 def _build(si: SpecimenInputs, mesh_dir: Path | None) -> SpecimenBuild:
     if si.kind == "label_volume":
         specimen_io.label_volume_to_meshes(si.path, mesh_dir, si.label_table, pattern=si.pattern)
         read = specimen_io.read_specimen(mesh_dir, units="mm", axes="RAS")
         sources = {v: str(si.files[v]) for v in read.files}
+        # the record names the user's files, not the meshes made from them
+        read.repairs = _meshing_repairs(si, mesh_dir) + read.repairs
+        read.files = {v: si.files[v] for v in read.files}
+        read.ignored = specimen_io.unread_files(si.path, si.files.values(), "label_volume", si.pattern)
     else:
         read = specimen_io.read_specimen(si.path, units=si.units, axes=si.axes, pattern=si.pattern,
                                          turn_inside_out=si.turn_inside_out)
         sources = {v: str(f) for v, f in read.files.items()}
     sp = specimen_build.build_specimen(read.meshes, axes=si.axes, sources=sources, units=si.units,
-                                       name=si.path.name)
-    checks.check_spine(sp.geometry)
+                                       name=si.path.name, turned=read.turned, input_log=read.log())
     diskcache.load_or_compute(cache_content(si), CACHE_KIND, build_tag(), lambda: geometry_to_arrays(sp.geometry),
                               what=str(si.path))
     return SpecimenBuild(si, read, sp, mesh_dir)

@@ -23,11 +23,19 @@ VTK_SUFFIXES = (".vtk", ".vtp")
 
 def _parse_mesh(path: str) -> dict:
     """Vertices and faces of a mesh file as trimesh loads and processes it (merged vertices); STL, OBJ, PLY through
-    trimesh, VTK/VTP polydata through pyvista (the VTK reader; trimesh has none)."""
+    trimesh, VTK/VTP polydata through pyvista (the VTK reader; trimesh has none). Non-finite coordinates are an
+    error naming their count: trimesh's processing drops such vertices with their triangles, which left a surface
+    with holes and a misleading error about its closedness."""
     import trimesh  # noqa: PLC0415 - see lumbar/__init__.py, lazy imports
     expected = "expected an STL/OBJ/PLY/VTK/VTP triangle mesh"
     if Path(path).stat().st_size == 0:
         raise GeometryError(f"{path}: mesh file is empty (0 bytes); {expected}")
+
+    def finite(v):
+        bad = ~np.all(np.isfinite(np.asarray(v, float)), axis=1)
+        if bad.any():
+            raise GeometryError(f"{path}: {int(bad.sum())} vertices with non-finite coordinates (NaN or infinite); "
+                                "expected finite numbers")
     try:
         if Path(path).suffix.lower() in VTK_SUFFIXES:
             import pyvista  # noqa: PLC0415 - VTK's reader (pyvista, vtk) only for the VTK formats, 1 s to import
@@ -36,9 +44,18 @@ def _parse_mesh(path: str) -> dict:
                 data = data.extract_surface()
             data = data.triangulate()
             faces = np.asarray(data.faces).reshape(-1, 4)[:, 1:] if data.n_cells else np.zeros((0, 3), int)
+            finite(data.points)
             mesh = trimesh.Trimesh(vertices=np.asarray(data.points, float), faces=faces, process=True)
         else:
-            mesh = trimesh.load(path, force="mesh", process=True)
+            raw = trimesh.load(path, force="mesh", process=False)
+            if isinstance(raw, trimesh.Trimesh) and len(raw.vertices):
+                finite(raw.vertices)
+            # OBJ: trimesh's own processing on load (it keeps vertices split by their texture coordinates); the
+            # other formats give the same arrays processed after loading
+            mesh = (trimesh.load(path, force="mesh", process=True) if Path(path).suffix.lower() == ".obj"
+                    or not isinstance(raw, trimesh.Trimesh) else trimesh.Trimesh(raw.vertices, raw.faces, process=True))
+    except GeometryError:
+        raise
     except Exception as exc:  # noqa: BLE001 - trimesh and VTK raise many types; all mean "not readable"
         raise GeometryError(f"{path}: mesh not readable ({type(exc).__name__}: {exc}); {expected}") from exc
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0 or len(mesh.vertices) < 4:
@@ -53,7 +70,7 @@ def read_mesh_arrays(path) -> tuple[np.ndarray, np.ndarray]:
     p = Path(path)
     if not p.is_file():
         raise GeometryError(f"{p}: mesh file missing (expected a triangle mesh file)")
-    arr = diskcache.load_or_parse(str(p), "mesh", f"trimesh {trimesh.__version__} process",
+    arr = diskcache.load_or_parse(str(p), "mesh", f"trimesh {trimesh.__version__} process, finite checked",
                                   lambda: _parse_mesh(str(p)))
     return arr["vertices"], arr["faces"]
 

@@ -40,6 +40,13 @@ SYMMETRY_ITERATIONS = 25
 ENDPLATE_BAND_M = 0.005
 ENDPLATE_RADIUS_M = 0.012
 CSA_OFFSET_M = 0.002
+#: is it a vertebra (:func:`check_vertebra_shape`; design limits, far from both sides): the volume over its convex
+#: hull's (0.38-0.50 for the Visible Human L1-S1, the morphable mean L2-L5 and TotalSegmentator's example meshed
+#: here; 1 for an ellipsoid or any convex blob) and, per lumbar vertebra, the end slab of the vertebral body against
+#: that of the spinous process (the anterior rule's widths: 3.4-6.6 times on the same sets; about 1 for an
+#: ellipsoid, which has no posterior arch or processes)
+MAX_SOLIDITY = 0.75
+MIN_BODY_TO_PROCESS_WIDTH = 1.5
 
 
 def declared_matrix(axes: str, where: str = "") -> np.ndarray | None:
@@ -74,6 +81,38 @@ def check_winding(mesh, name: str, source: str = "") -> float:
                             "as after a mirroring (one axis flipped on export without re-ordering the faces); "
                             "expected outward-wound faces of an unmirrored surface")
     return vol
+
+
+def solidity(mesh) -> float:
+    """Enclosed volume over the volume of the convex hull of ``mesh`` (a vertebra with its arch and processes is
+    far from convex)."""
+    hull = float(mesh.convex_hull.volume)
+    return float(mesh.volume) / hull if hull > 0 else float("nan")
+
+
+def check_vertebra_shape(name: str, mesh, widths=None, source: str = "") -> dict:
+    """Refuse a surface that is not a vertebra (:class:`GeometryError` naming it): a vertebra with its posterior
+    arch and processes fills less than ``MAX_SOLIDITY`` of its convex hull, and (lumbar, ``widths`` = [body end,
+    process end] end-slab widths of the anterior rule) its body end is at least ``MIN_BODY_TO_PROCESS_WIDTH`` times
+    as wide as its process end. Returns the measures (transform.json)."""
+    where = f"{name} mesh{f' ({source})' if source else ''}"
+    sol = solidity(mesh)
+    out = {"solidity": round(sol, 3)}
+    if not sol <= MAX_SOLIDITY:
+        raise GeometryError(f"{where}: fills {sol:.0%} of its convex hull; expected a vertebra (body, arch and "
+                            f"processes fill 38-50 % of theirs; at most {MAX_SOLIDITY:.0%} accepted): a convex shape "
+                            "(an ellipsoid, a vertebral body alone, a filled or wrapped surface) is not a vertebra")
+    if widths is not None:
+        body, proc = (float(w) for w in widths)
+        ratio = body / proc if proc > 0 else np.inf
+        out["body_to_process_width"] = round(ratio, 2)
+        if not ratio >= MIN_BODY_TO_PROCESS_WIDTH:
+            raise GeometryError(f"{where}: its two ends across the column are {body * 1e3:.1f} and {proc * 1e3:.1f} mm "
+                                f"wide (12 mm end slabs); expected a vertebral body at one end at least "
+                                f"{MIN_BODY_TO_PROCESS_WIDTH:g} times as wide as the spinous process at the other "
+                                "(3.4-6.6 times on the shipped and the example CT vertebrae): no posterior arch and "
+                                "processes")
+    return out
 
 
 def _samples(mesh) -> np.ndarray:
@@ -163,9 +202,16 @@ def _superior(names, pts, D, sources):
     return D.T @ np.array([0.0, 0.0, 1.0]), "declared axes (one vertebra)"
 
 
-def align_to_project(meshes: dict, axes: str = "LPS", sources: dict | None = None) -> Alignment:
-    """Rigid transform of a specimen (``{token: Trimesh}`` in metres, input axes) to the project frame (module doc)."""
+def align_to_project(meshes: dict, axes: str = "LPS", sources: dict | None = None, turned=()) -> Alignment:
+    """Rigid transform of a specimen (``{token: Trimesh}`` in metres, input axes) to the project frame (module doc).
+
+    ``turned``: the vertebrae whose surfaces were wound inside-out and turned outwards by the reader
+    (:func:`lumbar.geometry.specimen_io.close_surface`): each lumbar one must have its own vertebral body towards the
+    anterior found for the specimen (and, with declared axes, the declared anterior), else its file is mirrored
+    (about an axis other than the left-right one) and refused. Every vertebra must have a vertebra's shape
+    (:func:`check_vertebra_shape`)."""
     sources = dict(sources or {})
+    turned = [v for v in turned if v in meshes]
     names = _order(meshes)
     if not names:
         raise GeometryError("no vertebra meshes given; expected some of L1-L5, S1")
@@ -196,11 +242,30 @@ def align_to_project(meshes: dict, axes: str = "LPS", sources: dict | None = Non
         # widths: [the vertebra's own body end, its process end]
         normals[v], offsets[v], signs[v], widths[v], rms[v] = n, p0, sg * a, wid if sg > 0 else wid[::-1], r
     # one left-right axis: the mean of the per-vertebra symmetry normals (signs made consistent)
+    shape = {}
+    for v in names:
+        try:
+            shape[v] = check_vertebra_shape(v, meshes[v], widths.get(v) if v != "S1" else None, sources.get(v, ""))
+        except GeometryError as exc:
+            if v not in turned:
+                raise
+            raise GeometryError(f"{exc}; its surface was wound inside-out: a file mirrored about a plane across "
+                                "the vertebra?") from None
     ref = normals[lumbar[0]]
     nbar = sum(normals[v] * np.sign(normals[v] @ ref) for v in lumbar)
     nbar = _perp(nbar, s)
     votes = [np.sign(signs[v] @ np.cross(nbar, s)) for v in lumbar]
-    x = np.cross(nbar, s) * (1.0 if sum(votes) >= 0 else -1.0)
+    x = np.cross(nbar, s)
+    # the majority of the vertebrae decides; a tie (two vertebrae disagreeing) by the declared anterior, if any
+    tie = 1.0 if D is None or float((D @ x)[0]) >= 0 else -1.0
+    x = x * (1.0 if sum(votes) > 0 else -1.0 if sum(votes) < 0 else tie)
+    # an inside-out file whose own body lies against the specimen's anterior: that file alone mirrored
+    against = [v for v in turned if v in signs and float(signs[v] @ x) < 0]
+    if against:
+        what = ", ".join(f"{v}: {sources.get(v) or 'mesh'}" for v in against)
+        raise GeometryError(f"{what}: the surface was wound inside-out and its vertebral body lies towards the "
+                            "spinous processes of the other vertebrae: a mirrored file (an axis other than "
+                            "left-right flipped); expected unmirrored coordinates")
     z = s
     y = np.cross(z, x)
     R = np.vstack([x, y, z])
@@ -213,22 +278,26 @@ def align_to_project(meshes: dict, axes: str = "LPS", sources: dict | None = Non
     detected = dict(superior_rule=s_rule, superior_input=s.tolist(), anterior_input=x.tolist(), left_input=y.tolist(),
                     anterior_votes={v: int(np.sign(signs[v] @ x)) for v in lumbar},
                     end_slab_widths_mm={v: [round(w * 1e3, 2) for w in widths[v]] for v in lumbar},
-                    symmetry_rms_mm={v: round(rms[v] * 1e3, 3) for v in lumbar})
+                    symmetry_rms_mm={v: round(rms[v] * 1e3, 3) for v in lumbar}, shape=shape,
+                    inside_out_turned=list(turned))
     if D is not None:
         ant, sup = float((D @ x)[0]), float((D @ s)[2])
         ang = float(np.degrees(np.arccos(np.clip((np.trace(R @ D.T) - 1) / 2, -1, 1))))
         detected.update(declared_axes=axes, angle_to_declared_deg=round(ang, 2),
                         anterior_dot_declared=round(ant, 4), superior_dot_declared=round(sup, 4))
         what = ", ".join(f"{v}: {sources.get(v) or 'mesh'}" for v in names)
+        mirror = (f"; the surfaces of {', '.join(turned)} were wound inside-out, the signature of a mirrored export "
+                  "(one axis flipped without re-ordering the faces)" if turned else "")
         if ant < 0:
             raise GeometryError(f"{what}: anterior/posterior swapped relative to the declared axes {axes!r}: the "
                                 f"vertebral bodies lie towards the declared posterior (anterior . declared anterior = "
-                                f"{ant:.2f}; end-slab widths body/process {detected['end_slab_widths_mm']} mm); "
-                                "check the axes code (LPS for Slicer/DICOM, RAS for NIfTI world)")
+                                f"{ant:.2f}; end-slab widths body/process {detected['end_slab_widths_mm']} mm){mirror}; "
+                                "check the axes code (LPS for Slicer/DICOM, RAS for NIfTI world)"
+                                + (" and export without mirroring" if turned else ""))
         if sup < 0:
             raise GeometryError(f"{what}: the declared axes {axes!r} contradict the anatomy: the column runs "
-                                f"{s_rule} towards the declared inferior (superior . declared superior = {sup:.2f}); "
-                                "check the axes code and the vertebra names of the files")
+                                f"{s_rule} towards the declared inferior (superior . declared superior = {sup:.2f})"
+                                f"{mirror}; check the axes code and the vertebra names of the files")
     return Alignment(transform=T, axes=str(axes), detected=detected)
 
 

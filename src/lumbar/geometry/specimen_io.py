@@ -14,10 +14,16 @@ Output
 
 Checks (each a :class:`SpecimenError`, a :class:`~lumbar.geometry.core.GeometryError`, naming the file and what is
 wrong, before any long computation): an unknown unit or axes name; no surface found; two files for one level; a
-level missing between the highest and the lowest present (or one of ``require``); an empty or unreadable file; a
-vertebra whose size does not fit the declared units (factor 1000); a surface that is not closed (holes up to
-``MAX_HOLE_PERIMETER_M`` around are filled and listed in ``SpecimenMeshes.repairs``, larger ones refused);
+level missing between the highest and the lowest present (or one of ``require``); an empty or unreadable file, or
+one with non-finite coordinates; more than one body in a file (:func:`single_body`: a second large component or
+many fragments refused, a few tiny islands dropped); a vertebra whose size does not fit the declared units; a
+surface that is not closed (holes up to ``MAX_HOLE_PERIMETER_M`` around are filled, larger ones refused);
 neighbouring vertebrae overlapping, more than ``MAX_NEIGHBOUR_GAP_M`` apart, or not stacked along +z.
+
+Repairs (each a :class:`Repair` in ``SpecimenMeshes.repairs``, with its ``kind``): vertices merged, repeated or
+degenerate triangles removed, tiny islands dropped, holes filled, triangles turned to one orientation, a surface
+wound inside-out turned outwards (:func:`close_surface`: the anatomy is checked against the declared axes later,
+:func:`lumbar.geometry.specimen.align_to_project`), a dense surface decimated (:func:`working_density`).
 """
 from __future__ import annotations
 
@@ -52,6 +58,15 @@ MAX_OVERLAP_M = 0.004
 # checks, registration, closest points) grows with the count; the shipped surfaces have 8,000-34,000 (Visible Human
 # lumbar 8,052-9,262, its sacrum 26,550; the morphable mean 31,780-33,822), so they are read unchanged
 MAX_WORKING_FACES = 40_000
+# one body per file (:func:`single_body`; design limits): the components of a surface other than the largest are
+# islands (segmentation noise, a loose voxel, a detached spur) that are dropped, unless one of them has at least
+# SECOND_BODY_AREA_FRACTION of the largest one's area (a second vertebra or bone in the file: refused) or there are
+# more than MAX_ISLANDS of them or together more than MAX_ISLANDS_AREA_FRACTION of its area (a noisy surface whose
+# largest part may not be the whole bone: refused). The shipped surfaces (Visible Human, the morphable mean) and the
+# label-volume meshes are one component each
+SECOND_BODY_AREA_FRACTION = 0.10
+MAX_ISLANDS = 20
+MAX_ISLANDS_AREA_FRACTION = 0.05
 
 _TOKEN = {f"l{i}": f"L{i}" for i in range(1, 6)} | {"s1": "S1", "sacrum": "S1"}
 
@@ -60,14 +75,23 @@ class SpecimenError(GeometryError):
     """Specimen geometry that cannot be used; the message names the file (or folder) and what is wrong."""
 
 
+#: the kinds of :class:`Repair`
+REPAIR_KINDS = ("merged_vertices", "degenerate_triangles", "islands_dropped", "holes_filled", "orientation",
+                "inside_out", "decimation")
+
+
 @dataclass
 class Repair:
     level: str
     file: Path
     what: str
+    kind: str = ""          # one of REPAIR_KINDS ("" for a note that changed nothing)
 
     def __str__(self):
         return f"{self.level} ({self.file}): {self.what}"
+
+    def record(self) -> dict:
+        return {"kind": self.kind, "what": self.what}
 
 
 @dataclass
@@ -77,11 +101,23 @@ class SpecimenMeshes:
     units: str
     axes: str
     repairs: list = field(default_factory=list)     # list[Repair]: what was changed to close a surface
-    ignored: list = field(default_factory=list)     # list[(Path, reason)]: mesh files that name no single level
+    ignored: list = field(default_factory=list)     # list[(Path, reason)]: every file of the folder not read
 
     @property
     def levels(self) -> list[str]:
         return [v for v in VERTEBRA_NAMES if v in self.meshes]
+
+    @property
+    def turned(self) -> list[str]:
+        """The vertebrae whose surface was wound inside-out and turned outwards (their anatomy is checked against
+        the declared axes when the frame is found)."""
+        return [v for v in self.levels if any(r.level == v and r.kind == "inside_out" for r in self.repairs)]
+
+    def log(self) -> dict:
+        """Per vertebra its file and repairs, and the files not read with the reason (transform.json)."""
+        return {"files": {v: {"file": str(self.files[v]),
+                              "repairs": [r.record() for r in self.repairs if r.level == v]} for v in self.levels},
+                "ignored_files": [{"file": str(p), "reason": why} for p, why in self.ignored]}
 
 
 def level_of(name: str) -> list[str]:
@@ -117,16 +153,57 @@ def _is_volume(p: Path) -> bool:
     return p.is_file() and p.name.lower().endswith((".nii.gz", ".nii"))
 
 
-def input_kind(path) -> str:
-    """"label_volume" for a NIfTI file or a folder of NIfTI masks without surface files, else "meshes"."""
+def input_kind(path, pattern: str | None = None) -> str:
+    """"label_volume" for a NIfTI file or a folder whose vertebrae are NIfTI masks, else "meshes". A folder whose
+    file names give vertebrae both as masks and as surfaces is a :class:`SpecimenError` naming both (which of them
+    the user means is not guessed); surface files that name no vertebra beside the masks (a preview) are not read
+    and listed as such (:func:`unread_files`)."""
     p = Path(path)
     if p.is_file():
         return "label_volume" if _is_volume(p) else "meshes"
     if p.is_dir():
-        files = list(p.iterdir())
-        if any(_is_volume(f) for f in files) and not any(_is_mesh(f) for f in files):
+        vols, _ = _scan(p, pattern, keep=_is_volume)
+        surfs, _ = _scan(p, pattern, keep=_is_mesh)
+        if vols and surfs:
+            def names(found):
+                return ", ".join(f.name for lv in VERTEBRA_NAMES for f in found.get(lv, []))
+            raise SpecimenError(f"{p}: the folder holds vertebrae both as label masks ({names(vols)}) and as surfaces "
+                                f"({names(surfs)}); expected one kind: move the other files out (or give the folder "
+                                "of one kind)")
+        if vols or (any(_is_volume(f) for f in p.iterdir()) and not any(_is_mesh(f) for f in p.iterdir())):
             return "label_volume"
     return "meshes"
+
+
+def unread_files(path, used, kind: str = "meshes", pattern: str | None = None) -> list[tuple[Path, str]]:
+    """Every entry of the folder ``path`` that is not in ``used`` (the files read), with the reason it was not read:
+    a file name naming no level or several, not matching ``pattern``, a file of the other kind (a surface among
+    label masks, a mask among surfaces), another file type, a sub-folder. Empty when ``path`` is not a folder."""
+    folder = Path(path)
+    if not folder.is_dir():
+        return []
+    used = {Path(u) for u in used}
+    keep = _is_mesh if kind == "meshes" else _is_volume
+    _, named = _scan(folder, pattern, keep)
+    reasons = {q: r for q, r in named}
+    what = (f"a surface file ({', '.join(MESH_SUFFIXES)})" if kind == "meshes"
+            else "a NIfTI mask (.nii, .nii.gz)")
+    out = []
+    for q in sorted(folder.iterdir()):
+        if q in used:
+            continue
+        if q in reasons:
+            why = reasons[q]
+        elif q.is_dir():
+            why = "a folder (sub-folders are not searched)"
+        elif kind == "meshes" and _is_volume(q):
+            why = "a label volume (NIfTI); this folder is read as vertebra surfaces"
+        elif kind != "meshes" and _is_mesh(q):
+            why = "a surface file; this folder is read as label masks"
+        else:
+            why = f"not {what}"
+        out.append((q, why))
+    return out
 
 
 def _scan(path, pattern: str | None, keep=_is_mesh) -> tuple[dict[str, list[Path]], list[tuple[Path, str]]]:
@@ -144,7 +221,9 @@ def _scan(path, pattern: str | None, keep=_is_mesh) -> tuple[dict[str, list[Path
             if len(lv) == 1:
                 found.setdefault(lv[0], []).append(p)
             else:
-                ignored.append((p, "names no level" if not lv else f"names several levels {lv}"))
+                ignored.append((p, "the name gives no level (expected L1..L5, S1 or sacrum as a word of its own, "
+                                   "e.g. spec12_L4.stl; or pass pattern)" if not lv
+                                else f"the name gives several levels {lv}"))
         return found, ignored
     if pattern.count("{level}") != 1 or re.search(r"\{(?!level\})", pattern) or "/" in pattern:
         raise SpecimenError(f"pattern {pattern!r}: expected a file-name glob with {{level}} once, "
@@ -183,12 +262,23 @@ def find_level_files(path, pattern: str | None = None) -> dict[str, Path]:
     return {lv: found[lv][0] for lv in VERTEBRA_NAMES if lv in found}
 
 
+#: the largest extent of a lumbar vertebra or the sacrum, about (m): the size the units hint compares with
+TYPICAL_EXTENT_M = 0.08
+
+
 def _units_hint(extent_m: float, units: str) -> str:
+    """Which declared unit the file's numbers fit; else the power of ten they are off by (e.g. centimetres given
+    as millimetres: 10 times too small)."""
     raw = extent_m / UNITS[units]            # the size in the file's numbers
     fits = [u for u, f in UNITS.items() if MIN_EXTENT_M <= raw * f <= MAX_EXTENT_M]
     if fits:
         return f"the numbers fit units={fits[0]!r}"
-    return f"the numbers fit neither {list(UNITS)} (scaled by {'1000' if raw * 1e-3 > MAX_EXTENT_M else '0.001'}?)"
+    if not np.isfinite(raw) or raw <= 0:
+        return f"the numbers fit neither {list(UNITS)}"
+    k = 10.0 ** round(float(np.log10(TYPICAL_EXTENT_M / extent_m)))      # what brings it to a vertebra's size
+    guess = {10.0: " (centimetres?)", 0.1: " (tenths of a millimetre?)", 1e-3: " (micrometres?)"}.get(k, "")
+    return (f"the numbers fit neither {list(UNITS)}: they are about {1 / k:g} times a vertebra's size in "
+            f"{units}{guess}; multiply the coordinates by {k:g}")
 
 
 def _boundary_loops(faces: np.ndarray) -> list[list[int]] | None:
@@ -222,25 +312,66 @@ def _boundary_loops(faces: np.ndarray) -> list[list[int]] | None:
     return loops
 
 
+def single_body(mesh, level: str, file: Path):
+    """The largest connected part of ``mesh`` (triangles joined by shared edges, by area) and the repairs: the other
+    parts (islands) dropped when they are few and tiny; a :class:`SpecimenError` naming ``file`` when one of them has
+    at least ``SECOND_BODY_AREA_FRACTION`` of the largest one's area (two bodies in one file) or when there are more
+    than ``MAX_ISLANDS`` or together more than ``MAX_ISLANDS_AREA_FRACTION`` of its area (a noisy surface). Returns
+    (mesh, list[Repair])."""
+    import trimesh  # noqa: PLC0415 - mesh library where meshes are built (docs/design.md)
+    faces = np.asarray(mesh.faces)
+    if len(faces) == 0:
+        return mesh, []
+    labels = trimesh.graph.connected_component_labels(mesh.face_adjacency, node_count=len(faces))
+    area = np.bincount(labels, weights=np.asarray(mesh.area_faces))
+    if len(area) == 1:
+        return mesh, []
+    order = np.argsort(-area, kind="stable")
+    main, rest = area[order[0]], area[order[1:]]
+    if main <= 0:
+        return mesh, []
+    if rest[0] >= SECOND_BODY_AREA_FRACTION * main:
+        raise SpecimenError(f"{file}: {level} surface holds {len(area)} separate parts, the second "
+                            f"{rest[0] / main:.0%} of the largest one's area: a second body (another vertebra or "
+                            "bone, or an inner surface); expected one vertebra per file, its largest part at least "
+                            f"{1 / SECOND_BODY_AREA_FRACTION:.0f} times the area of any other")
+    if len(rest) > MAX_ISLANDS or rest.sum() > MAX_ISLANDS_AREA_FRACTION * main:
+        raise SpecimenError(f"{file}: {level} surface holds {len(rest)} fragments beside its largest part, together "
+                            f"{rest.sum() / main:.1%} of its area: a noisy surface; expected one closed vertebra "
+                            f"surface (at most {MAX_ISLANDS} tiny islands, together at most "
+                            f"{MAX_ISLANDS_AREA_FRACTION:.0%} of its area, are dropped): keep the segmentation's "
+                            "largest connected part before exporting")
+    keep = labels == order[0]
+    out = trimesh.Trimesh(np.asarray(mesh.vertices), faces[keep], process=True)
+    return out, [Repair(level, file, f"dropped {len(rest)} island(s) not connected to the vertebra (largest "
+                                     f"{rest[0] / main:.2%}, together {rest.sum() / main:.2%} of its area)",
+                        "islands_dropped")]
+
+
 def close_surface(mesh, level: str, file: Path, max_hole_m: float = MAX_HOLE_PERIMETER_M,
-                  turn_inside_out: bool = False):
+                  turn_inside_out: bool = False, axes: str = "LPS"):
     """The mesh closed and oriented: repeated and degenerate triangles removed, holes whose boundary is at most
     ``max_hole_m`` long filled (a fan from the hole's centre), inconsistently oriented triangles turned (trimesh);
     returns (mesh, list[Repair]) naming each change. A larger hole, an edge shared by three faces, or a surface
     still open or inconsistent afterwards is a :class:`SpecimenError` naming ``file``.
 
-    A surface whose triangles all wind one way and enclose a negative volume (inside-out) is the signature of a
-    mirrored export (one axis flipped without re-ordering the faces; left and right exchanged, which the nearly
-    symmetric anatomy cannot show): a :class:`SpecimenError` unless ``turn_inside_out`` (the user states that the
-    coordinates are not mirrored and the writing tool winds its faces inwards); then the faces are turned and the
-    repair says so. A surface that needed its orientation made consistent and then enclosed a negative volume
-    is turned either way (mixed orientation is not a mirror's signature)."""
+    A surface whose triangles all wind inwards (negative enclosed volume) is turned outwards and the repair says so
+    (kind ``inside_out``). Tools that mesh label maps whose voxel axes run against the patient axes write such
+    surfaces on correct coordinates; so does a mirrored export (one axis flipped without re-ordering the faces).
+    The two differ in the anatomy: a mirror about the antero-posterior or the superior-inferior axis puts the
+    vertebral bodies posterior or the column upside down against the declared axes, which
+    :func:`lumbar.geometry.specimen.align_to_project` and :func:`check_neighbours` refuse; a mirror about the
+    left-right axis alone cannot be told (a vertebra is nearly its own mirror image), as with outward faces. With
+    ``axes="any"`` no declared axis can show a mirror: the surface is refused unless ``turn_inside_out`` (the user
+    states that the coordinates are not mirrored). A surface that needed its orientation made consistent and then
+    enclosed a negative volume is turned either way (kind ``orientation``)."""
     import trimesh  # noqa: PLC0415 - mesh library where meshes are built (docs/design.md)
     repairs: list[Repair] = []
     keep = mesh.unique_faces() & mesh.nondegenerate_faces()
     if not keep.all():
         mesh = trimesh.Trimesh(mesh.vertices, mesh.faces[keep], process=True)
-        repairs.append(Repair(level, file, f"removed {int((~keep).sum())} repeated or degenerate triangle(s)"))
+        repairs.append(Repair(level, file, f"removed {int((~keep).sum())} repeated or degenerate triangle(s)",
+                              "degenerate_triangles"))
     if not mesh.is_watertight:
         loops = _boundary_loops(np.asarray(mesh.faces))
         if loops is None:
@@ -262,7 +393,8 @@ def close_surface(mesh, level: str, file: Path, max_hole_m: float = MAX_HOLE_PER
             new_f.append(np.array([[b, a, n] for a, b in zip(lp, np.roll(lp, -1))]))
             n += 1
         mesh = trimesh.Trimesh(np.concatenate(new_v), np.concatenate(new_f), process=True)
-        repairs.append(Repair(level, file, f"filled {len(loops)} hole(s), boundary up to {max(per) * 1e3:.1f} mm"))
+        repairs.append(Repair(level, file, f"filled {len(loops)} hole(s), boundary up to {max(per) * 1e3:.1f} mm",
+                              "holes_filled"))
         if not mesh.is_watertight:
             raise SpecimenError(f"{file}: {level} surface is not closed after filling its holes; expected one "
                                 "closed surface per vertebra")
@@ -270,22 +402,31 @@ def close_surface(mesh, level: str, file: Path, max_hole_m: float = MAX_HOLE_PER
     if mixed:
         trimesh.repair.fix_winding(mesh)
         if mesh.is_winding_consistent:
-            repairs.append(Repair(level, file, "triangles turned to one consistent orientation"))
+            repairs.append(Repair(level, file, "triangles turned to one consistent orientation", "orientation"))
     if not mesh.is_winding_consistent:
         raise SpecimenError(f"{file}: {level} surface has inconsistent triangle orientation (some faces inside-out); "
                             "expected a consistently oriented closed surface")
     if mesh.volume < 0:
-        if not (mixed or turn_inside_out):
+        vol = mesh.volume * 1e6
+        if mixed:
+            mesh.invert()
+            repairs.append(Repair(level, file, "surface inside-out after its orientation was made consistent "
+                                               f"(enclosed volume {vol:.3g} cm^3): turned outwards", "orientation"))
+            return mesh, repairs
+        if str(axes).lower() == "any" and not turn_inside_out:
             raise SpecimenError(
-                f"{file}: {level} surface is inside-out (every triangle winds inwards, enclosed volume "
-                f"{mesh.volume * 1e6:.3g} cm^3): the signature of a mirrored export (one axis flipped without "
-                "re-ordering the faces), which would exchange left and right; expected outward-wound faces. Export "
-                "without mirroring, or, if the coordinates are not mirrored and the tool writes inward faces, pass "
-                "--turn-inside-out (geometry.turn_inside_out: true)")
+                f"{file}: {level} surface is inside-out (every triangle winds inwards, enclosed volume {vol:.3g} "
+                "cm^3) and the axes are 'any': without declared axes the anatomy cannot tell a mirrored export (one "
+                "axis flipped without re-ordering the faces: left and right exchanged) from a tool that writes "
+                "inward faces on correct coordinates. Declare the axes (LPS, RAS or project: the anatomy is then "
+                "checked against them), or pass --turn-inside-out (geometry.turn_inside_out: true) if the "
+                "coordinates are not mirrored")
         mesh.invert()
-        why = ("after its orientation was made consistent" if mixed
-               else "the user stated the coordinates are not mirrored (turn_inside_out)")
-        repairs.append(Repair(level, file, f"surface was inside-out (negative volume): normals turned ({why})"))
+        why = ("turn_inside_out: the user states the coordinates are not mirrored" if str(axes).lower() == "any"
+               else f"the anatomy is checked against the declared axes {axes}; a mirror about the left-right axis "
+                    "alone cannot be told")
+        repairs.append(Repair(level, file, f"every triangle wound inwards (enclosed volume {vol:.3g} cm^3): turned "
+                                           f"outwards ({why})", "inside_out"))
     return mesh, repairs
 
 
@@ -341,42 +482,55 @@ def working_density(mesh, level: str, file: Path, max_faces: int = MAX_WORKING_F
     dec.apply_scale(1e-3)
     if not (dec.is_watertight and dec.is_winding_consistent and dec.volume > 0):
         return mesh, [Repair(level, file, f"not decimated: decimating {n0} to {max_faces} triangles opened the "
-                                          "surface; the landmarks take longer on the full surface")]
+                                          "surface; the landmarks take longer on the full surface")]   # a note
     v = np.asarray(mesh.vertices)[:: max(1, len(mesh.vertices) // 5000)]
     d = dec.nearest.on_surface(v)[1]
     return dec, [Repair(level, file, f"decimated {n0} -> {len(dec.faces)} triangles for the landmarks (the input's "
                                      f"vertices lie within {np.max(d) * 1e3:.2f} mm of the decimated surface, 99 % "
-                                     f"within {np.quantile(d, 0.99) * 1e3:.2f} mm)")]
+                                     f"within {np.quantile(d, 0.99) * 1e3:.2f} mm)", "decimation")]
 
 
 def read_specimen(path, units: str = "mm", axes: str = "LPS", pattern: str | None = None,
                   require=None, max_hole_m: float = MAX_HOLE_PERIMETER_M,
                   turn_inside_out: bool = False, max_faces: int = MAX_WORKING_FACES) -> SpecimenMeshes:
     """Read and check a folder of vertebra surfaces (see the module doc); ``require``: vertebrae (``"L4"``) or
-    units (``"L4-L5"``) that must be present; ``turn_inside_out``: see :func:`close_surface` (an inside-out
-    surface is an error otherwise); ``max_faces``: see :func:`working_density`. Returns the meshes in metres, in the
-    input's axes, with the repair log."""
+    units (``"L4-L5"``) that must be present; ``turn_inside_out``: see :func:`close_surface` (with ``axes="any"``
+    an inside-out surface is an error otherwise); ``max_faces``: see :func:`working_density`. Returns the meshes in
+    metres, in the input's axes, with the repair log and the files of the folder not read (``ignored``)."""
     import trimesh  # noqa: PLC0415 - mesh library where meshes are built (docs/design.md)
     check_units_axes(units, axes)
     files = find_level_files(path, pattern)
-    _, ignored = _scan(path, pattern)
+    ignored = unread_files(path, files.values(), "meshes", pattern)
     check_levels(files, require, path)
     scale = UNITS[units]
     meshes, repairs = {}, []
     for lv, f in files.items():
         vertices, faces = read_mesh_arrays(f)
         if not np.all(np.isfinite(vertices)):
-            raise SpecimenError(f"{f}: {lv} mesh has non-finite vertex coordinates")
+            raise SpecimenError(f"{f}: {lv} mesh has {int(np.sum(~np.all(np.isfinite(vertices), axis=1)))} vertices "
+                                "with non-finite coordinates (NaN or infinite); expected finite numbers")
         mesh = trimesh.Trimesh(vertices * scale, faces, process=True)
+        # a vertex repeated per face (STL; OBJ vertices split by their texture coordinates) is the format's, not a
+        # repair; distinct vertices merged (within trimesh's 10 nm in metres) or unused ones dropped are
+        distinct = len(np.unique(vertices, axis=0))
+        if len(mesh.vertices) < distinct:
+            repairs.append(Repair(lv, f, f"{distinct - len(mesh.vertices)} distinct vertices merged (within 10 nm) or "
+                                         "dropped (used by no triangle)", "merged_vertices"))
+        mesh, rep = single_body(mesh, lv, f)
+        repairs += rep
         if len(mesh.faces) < 4:
             raise SpecimenError(f"{f}: {lv} mesh has {len(mesh.faces)} triangle(s); expected a closed vertebra surface")
         check_size(mesh, lv, f, units)
-        mesh, rep = close_surface(mesh, lv, f, max_hole_m, turn_inside_out=turn_inside_out)
+        mesh, rep = close_surface(mesh, lv, f, max_hole_m, turn_inside_out=turn_inside_out, axes=axes)
         repairs += rep
         mesh, rep = working_density(mesh, lv, f, max_faces)
         repairs += rep
         meshes[lv] = mesh
-    check_neighbours(meshes, files, axes)
+    inside_out = [r.level for r in repairs if r.kind == "inside_out"]
+    hint = ABOVE_HINT_SURFACES if not inside_out else (
+        f"The surfaces of {', '.join(inside_out)} were wound inside-out: with the column upside down, the signature "
+        "of an export mirrored about the superior-inferior axis. " + ABOVE_HINT_SURFACES)
+    check_neighbours(meshes, files, axes, hint=hint)
     return SpecimenMeshes(meshes=meshes, files=files, units=units, axes=axes, repairs=repairs, ignored=ignored)
 
 
@@ -391,18 +545,27 @@ def _dense_points(mesh) -> np.ndarray:
     return np.concatenate([np.asarray(mesh.vertices), np.asarray(mesh.triangles_center)])
 
 
-def check_neighbours(meshes: dict, files: dict, axes: str = "LPS") -> None:
+#: what a "not above" error suggests, per input kind: surfaces may be declared ``any``; a label volume is always in
+#: its NIfTI world (RAS), so there the masks' names or the label table are what to check
+ABOVE_HINT_SURFACES = ("A specimen scanned at another angle (an in-vitro specimen lying in the scanner): axes 'any' "
+                       "takes the orientation from the anatomy alone")
+ABOVE_HINT_LABELS = ("A label volume is in its NIfTI world (RAS, z superior): check that each mask's file name (or "
+                     "each value of the label table) names its own vertebra")
+
+
+def check_neighbours(meshes: dict, files: dict, axes: str = "LPS", hint: str = ABOVE_HINT_SURFACES) -> None:
     """Neighbouring vertebrae (L4 and L5, ...) not overlapping (:func:`overlap_radius` above ``MAX_OVERLAP_M``),
     not apart (nearest points more than ``MAX_NEIGHBOUR_GAP_M``) and, with declared axes (not ``"any"``), stacked
-    along their +z; ``files``: level -> what the message names (a file)."""
+    along their +z; ``files``: level -> what the message names (a file); ``hint``: what a "not above" error
+    suggests."""
     from scipy.spatial import cKDTree  # noqa: PLC0415 - scipy.spatial where geometry is computed (docs/design.md)
     order = [v for v in VERTEBRA_NAMES if v in meshes]
     for up, lo in zip(order, order[1:]):
         A, B = meshes[up], meshes[lo]
         where = f"{up} ({files[up]}) and {lo} ({files[lo]})"
         pa, pb = _dense_points(A), _dense_points(B)
-        lo, hi = pb.min(0) - MAX_NEIGHBOUR_GAP_M, pb.max(0) + MAX_NEIGHBOUR_GAP_M
-        near = pa[np.all((pa >= lo) & (pa <= hi), axis=1)]     # the rest are farther than the threshold anyway
+        box_lo, box_hi = pb.min(0) - MAX_NEIGHBOUR_GAP_M, pb.max(0) + MAX_NEIGHBOUR_GAP_M
+        near = pa[np.all((pa >= box_lo) & (pa <= box_hi), axis=1)]   # the rest are farther than the threshold anyway
         gap = float(cKDTree(pb).query(near, distance_upper_bound=2 * MAX_NEIGHBOUR_GAP_M)[0].min()) if len(near) \
             else np.inf
         if not np.isfinite(gap):                                # beyond the bound: the exact gap for the message
@@ -420,8 +583,7 @@ def check_neighbours(meshes: dict, files: dict, axes: str = "LPS") -> None:
         if axes != "any" and not ca[2] > cb[2]:
             raise SpecimenError(f"{where}: {up} is not above {lo} along +z (volume centroids z = {ca[2]:.4f} m and "
                                 f"{cb[2]:.4f} m); expected +z superior (LPS, RAS and the project frame all have it). "
-                                "A specimen scanned at another angle (an in-vitro specimen lying in the scanner): "
-                                "axes 'any' takes the orientation from the anatomy alone")
+                                f"{hint}")
 
 
 def _inside_distance(mesh, pts):
@@ -571,8 +733,9 @@ def _read_nifti(path: Path):
 
 
 def _mask_to_mesh(mask: np.ndarray, affine: np.ndarray, smooth_iterations: int, max_faces: int):
-    """Closed surface (world millimetres) of the largest connected part of ``mask``; (mesh, voxels dropped, what
-    the decimation did: a decimation that opens the surface is not kept)."""
+    """Closed surface (world millimetres) of the largest connected part of ``mask``, its enclosed cavities filled
+    (a gap in a bone's segmentation, whose inner surface is not the bone's); (mesh, voxels dropped, voxels filled,
+    what the decimation did: a decimation that opens the surface is not kept)."""
     import trimesh  # noqa: PLC0415 - mesh library where meshes are built (docs/design.md)
     from scipy import ndimage  # noqa: PLC0415 - connected parts of the mask, only for label volumes
     from skimage.measure import marching_cubes  # noqa: PLC0415 - scikit-image (1 s import), only for label volumes
@@ -583,6 +746,9 @@ def _mask_to_mesh(mask: np.ndarray, affine: np.ndarray, smooth_iterations: int, 
         keep = int(np.argmax(sizes)) + 1
         dropped = int(sizes.sum() - sizes[keep - 1])
         mask = lab == keep
+    full = ndimage.binary_fill_holes(mask)
+    filled = int(full.sum() - mask.sum())
+    mask = full
     idx = np.argwhere(mask)
     lo, hi = idx.min(axis=0), idx.max(axis=0) + 1
     crop = np.pad(mask[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]], 1).astype(np.float32)   # closed at the border
@@ -602,7 +768,7 @@ def _mask_to_mesh(mask: np.ndarray, affine: np.ndarray, smooth_iterations: int, 
             mesh = dec
         else:
             note = f"skipped: decimating {len(mesh.faces)} to {max_faces} triangles opened the surface"
-    return mesh, dropped, note
+    return mesh, dropped, filled, note
 
 
 def _volume_inputs(path: Path, label_table, pattern=None) -> list[tuple[str, Path, int | None]]:
@@ -672,13 +838,14 @@ def label_volume_to_meshes(path, out_dir, label_table=None, *, pattern: str | No
     ``vertebrae_L5.nii.gz``, ``sacrum.nii.gz``) or one multi-label NIfTI file with ``label_table`` (CSV
     ``label,value``); ``pattern`` picks one mask per level where a folder holds several (TotalSegmentator 2 writes
     ``sacrum.nii.gz`` and ``vertebrae_S1.nii.gz``: ``pattern="vertebrae_{level}.nii.gz"`` takes the latter).
-    Marching cubes (scikit-image) on each mask's largest connected part at the header's affine
+    Marching cubes (scikit-image) on each mask's largest connected part, its enclosed cavities filled, at the
+    header's affine
     (voxel spacing, orientation), Taubin smoothing (``smooth_iterations``; keeps the volume, unlike plain Laplacian
     smoothing), quadric decimation to at most ``max_faces`` triangles (kept only where the result stays closed).
     Before anything is written, the meshes pass the reader's checks (:func:`check_levels` with ``require``, size,
     closed, neighbours), each error naming the NIfTI file (and the label value).
     Also writes ``out_dir/meshing_report.csv`` (per vertebra: source, voxel size, voxels, voxels of smaller parts
-    dropped, what the decimation did, triangles) and ``out_dir/resolution_limits.csv`` (:func:`resolution_limits`: what the voxel size cannot
+    dropped, voxels of enclosed cavities filled, what the decimation did, triangles) and ``out_dir/resolution_limits.csv`` (:func:`resolution_limits`: what the voxel size cannot
     support). Returns level -> STL path.
     """
     import pandas as pd  # noqa: PLC0415 - only the meshing report writes tables
@@ -717,7 +884,7 @@ def label_volume_to_meshes(path, out_dir, label_table=None, *, pattern: str | No
     built, rows, sources = {}, [], {}
     for lv, f, val, mask, aff in masks:
         spacing = np.linalg.norm(aff[:3, :3], axis=0)
-        mesh, dropped, decimation = _mask_to_mesh(mask, aff, smooth_iterations, max_faces)
+        mesh, dropped, filled, decimation = _mask_to_mesh(mask, aff, smooth_iterations, max_faces)
         where = f if val is None else f"{f} (value {val})"
         metres = mesh.copy()
         metres.apply_scale(1e-3)
@@ -728,9 +895,10 @@ def label_volume_to_meshes(path, out_dir, label_table=None, *, pattern: str | No
         built[lv], sources[lv] = (mesh, metres), where
         rows.append({"level": lv, "source": f.name, "label_value": "" if val is None else val,
                      "voxel_mm": "x".join(f"{s:g}" for s in spacing), "n_voxels": int(mask.sum()),
-                     "voxels_dropped": dropped, "decimation": decimation, "n_faces": len(mesh.faces),
+                     "voxels_dropped": dropped, "voxels_filled": filled, "decimation": decimation,
+                     "n_faces": len(mesh.faces),
                      "units": "mm", "axes": "RAS"})
-    check_neighbours({lv: m for lv, (_, m) in built.items()}, sources)
+    check_neighbours({lv: m for lv, (_, m) in built.items()}, sources, hint=ABOVE_HINT_LABELS)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     written = {}

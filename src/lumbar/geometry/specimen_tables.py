@@ -8,7 +8,8 @@ back into a geometry.
 * ``levels.csv``: per level the disc centre, normal, height and cross-section, and per facet joint the contact rule,
   the bone gap and the Eq. 4 surface fit coefficients (mean, superior and inferior fits, their frame);
 * ``transform.json``: the 4x4 input -> project transform (metres), the input units and axes, what the alignment
-  detected.
+  detected, per vertebra its file and every repair the reader made (``inputs``), and the files of the input folder
+  not read with the reason (``ignored_files``).
 
 :func:`read_landmark_table` validates an edited copy (every error names the file, the 1-based data row and the
 column) and :func:`geometry_from_table` rebuilds the geometry from it.
@@ -128,7 +129,9 @@ def transform_record(sp) -> dict:
                 input_axes=sp.alignment.axes,
                 how="p_project_m = T[:3,:3] @ (p_input * input_scale_to_m) + T[:3,3]; project frame: x anterior, "
                     "y left, z superior (docs/specimen.md)",
-                detected=sp.alignment.detected)
+                detected=sp.alignment.detected,
+                inputs=getattr(sp, "input_log", {}).get("files", {}),
+                ignored_files=getattr(sp, "input_log", {}).get("ignored_files", []))
 
 
 def write_tables(sp, out_dir) -> dict:
