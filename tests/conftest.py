@@ -226,10 +226,12 @@ SECOND_RUN_TARGETS = [
 ]
 
 
-# CPU priority (nice) of the background runs; their jobs inherit it. The session's critical path is the tests, then
-# the tests that read the first run; the first run takes the CPU the tests leave, the second (read by one test, the
-# last) what the first leaves. The tests that read the runs come last (``pytest_collection_modifyitems``).
-DAG_NICE = {"first": 5, "second": 15}
+# CPU priority (nice) of the background runs; their jobs inherit it. With two xdist workers the library tests fill
+# both cores in small units whatever the order, while the first run has long serial chains (surrogate, calibration,
+# posterior draws, bands) that many tests wait for: it runs at the tests' priority, so that it ends while the library
+# tests still run. The second (read by one test, the last) takes what the others leave. The tests that read the runs
+# come last (``pytest_collection_modifyitems``).
+DAG_NICE = {"first": 0, "second": 5}
 
 
 def is_xdist_worker(config) -> bool:
