@@ -7,8 +7,10 @@ never starts Snakemake.
 """
 import atexit
 import dataclasses
+import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -18,15 +20,23 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from filelock import FileLock
 
 from lumbar.experiments.l2s1 import scenario_grid as l2s1_scenario_grid
 from lumbar.inputs.characteristics import load_characteristic_set
 
 # parsed geometry files are cached by content across processes (lumbar.geometry.diskcache): one cache per test
-# session, shared by its Snakemake runs, never the user's own
-_GEOMETRY_CACHE = tempfile.mkdtemp(prefix="lumbar_test_cache_")
+# session, shared by its xdist workers and its Snakemake runs, never the user's own. The process that makes it (the
+# xdist controller, or the single process) names it in _SESSION_CACHE_ENV for the workers it starts, and removes it
+# at its exit; entries are written atomically, so processes may fill it at the same time.
+_SESSION_CACHE_ENV = "LUMBAR_TEST_SESSION_CACHE"
+if os.environ.get(_SESSION_CACHE_ENV) and os.environ.get("PYTEST_XDIST_WORKER"):
+    _GEOMETRY_CACHE = os.environ[_SESSION_CACHE_ENV]
+else:
+    _GEOMETRY_CACHE = tempfile.mkdtemp(prefix="lumbar_test_cache_")
+    os.environ[_SESSION_CACHE_ENV] = _GEOMETRY_CACHE
+    atexit.register(shutil.rmtree, _GEOMETRY_CACHE, ignore_errors=True)
 os.environ["LUMBAR_CACHE_DIR"] = _GEOMETRY_CACHE
-atexit.register(shutil.rmtree, _GEOMETRY_CACHE, ignore_errors=True)
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared"
@@ -56,6 +66,26 @@ SLOW_ELSEWHERE = {
 }
 
 
+# Session fixtures that are expensive and not shared between xdist workers: the tests that use one run on one worker
+# (an xdist group of that name), so that it is built once.
+SESSION_GROUPS = {"model": "muscle_model"}
+
+
+def _xdist_group(item, stage: int) -> str | None:
+    """The xdist group of a test (``--dist loadgroup``): the tests that share an expensive session fixture share its
+    group; the tests of a module that use one of its module-scoped (or class-scoped) fixtures form one group per
+    module (and per stage, see below), so that the fixture is built once; every other test is a unit of its own."""
+    used = set(getattr(item, "fixturenames", ()))
+    for name, group in SESSION_GROUPS.items():
+        if name in used:
+            return group
+    defs = getattr(getattr(item, "_fixtureinfo", None), "name2fixturedefs", {})
+    if any(fd.scope in ("module", "class") for name in used for fd in defs.get(name) or ()):
+        return f"{item.path.stem}:{stage}"
+    return None
+
+
+@pytest.hookimpl(tryfirst=True)         # before xdist's own hook, which reads the groups
 def pytest_collection_modifyitems(config, items):
     for item in items:
         fixtures = set(getattr(item, "fixturenames", ()))
@@ -70,6 +100,11 @@ def pytest_collection_modifyitems(config, items):
         used = set(getattr(item, "fixturenames", ()))
         return 2 if "dag_second_workdir" in used else 1 if DAG_FIXTURES & used else 0
     items[:] = sorted(items, key=stage)
+    if getattr(config.option, "loadgroup", False):            # an xdist worker with --dist loadgroup
+        for item in items:
+            group = _xdist_group(item, stage(item))
+            if group and not item.get_closest_marker("xdist_group"):
+                item.add_marker(pytest.mark.xdist_group(group))
 
 
 def make_charset(name="calibrated", torque=None, ligaments=True, facet_stiffness=None, overrides=None,
@@ -165,9 +200,14 @@ def run_dag(workdir: Path, *extra) -> subprocess.CompletedProcess:
 
 
 # The session's DAG runs start in the background as soon as collection is finished (pytest_collection_finish),
-# not when the first DAG test asks for them: the library tests then run on the pytest process beside the two
-# Snakemake runs, which fill both cores (the DAG has long serial chains), instead of leaving a core idle.
-_DAG_RUNS = {}      # "first" / "second" -> dict(path, proc, log, t0, rc)
+# not when the first DAG test asks for them: the library tests then run beside the two Snakemake runs, which fill
+# the cores the tests leave (the DAG has long serial chains), instead of leaving a core idle.
+#
+# Under pytest-xdist (``-n 2`` in pyproject.toml) every worker collects the same tests and needs the same runs: the
+# first worker to finish its collection starts them (a file lock in the folder the workers share, the xdist docs'
+# ``getbasetemp().parent`` pattern), each in a runner process of its own session that writes the run's exit code
+# to a file when Snakemake ends; every worker waits for that file. No two Snakemake runs ever share a directory.
+# The controller (or the single process without xdist) ends runs that are still going when the session ends.
 
 
 # The second run (reproducibility) builds the model chain's tables and figures in a fresh copy: geometry, calibration,
@@ -186,107 +226,208 @@ SECOND_RUN_TARGETS = [
 ]
 
 
-# CPU priority (nice) of the background runs; their jobs inherit it. The session's critical path is this pytest
-# process, one test after another, then the tests that read the first run; the first run takes the CPU the tests
-# leave, the second (read by one test, the last) what the first leaves. The tests that read the runs come last
-# (``pytest_collection_modifyitems``).
-DAG_NICE = {"first": 5, "second": 15}
+# CPU priority (nice) of the background runs; their jobs inherit it. With two xdist workers the library tests fill
+# both cores in small units whatever the order, while the first run has long serial chains (surrogate, calibration,
+# posterior draws, bands) that many tests wait for: it runs at the tests' priority, so that it ends while the library
+# tests still run. The second (read by one test, the last) takes what the others leave. The tests that read the runs
+# come last (``pytest_collection_modifyitems``).
+DAG_NICE = {"first": 0, "second": 5}
 
 
-def _start_dag(name: str, dest: Path, targets=()):
-    copy_repo(dest)
-    log = open(dest / "dag_run.out", "w")
-    proc = subprocess.Popen([sys.executable, "-m", "snakemake", *targets, "--cores", "2", "--configfile",
-                             TEST_CONFIG], cwd=dest, stdout=log, stderr=subprocess.STDOUT, text=True,
-                            preexec_fn=lambda: os.nice(DAG_NICE[name]))
-    _DAG_RUNS[name] = dict(path=dest, proc=proc, log=log, t0=time.perf_counter(), rc=None)
+def is_xdist_worker(config) -> bool:
+    return hasattr(config, "workerinput")
 
 
-# The solver's numba kernels are compiled (or loaded from their on-disk cache) in a process of their own that starts
+def shared_dir(config) -> Path:
+    """A folder of this session that the xdist controller and all its workers see (the controller's base temporary
+    folder; a worker's is a subfolder of it), or the single process's base temporary folder."""
+    base = config._tmp_path_factory.getbasetemp()
+    return base.parent if is_xdist_worker(config) else base
+
+
+# A background job (the kernel warm-up, a Snakemake run): a process of its own session (so that the whole run, its
+# jobs included, can be ended at once) that waits for a file to exist (the warm-up's end) if given, runs the command
+# in its working directory with the output in ``out`` (first line: the wall time), then writes its exit code to
+# ``rc`` (atomically: a reader never sees half of it). The first line of ``out`` gives the command's wall time and its
+# CPU time (user + system of the command and every process it waited for: Snakemake's jobs).
+_RUNNER = r"""
+import os, resource, subprocess, sys, time
+wait_for, out, rc_file, nice = sys.argv[1:5]
+os.nice(int(nice))
+t_end = time.time() + 1200
+while wait_for and not os.path.exists(wait_for) and time.time() < t_end:
+    time.sleep(0.3)
+t0 = time.perf_counter()
+with open(out + ".part", "w") as log:
+    rc = subprocess.call(sys.argv[5:], stdout=log, stderr=subprocess.STDOUT)
+text = open(out + ".part").read()
+ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+with open(out, "w") as f:
+    f.write(f"# {time.perf_counter() - t0:.1f} s wall, {ru.ru_utime + ru.ru_stime:.1f} s CPU\n" + text)
+os.remove(out + ".part")
+with open(rc_file + ".tmp", "w") as f:
+    f.write(str(rc))
+os.replace(rc_file + ".tmp", rc_file)
+"""
+
+
+_BACKGROUND = {}        # pid -> Popen of the background jobs this process started
+
+
+def _start_background(cwd: Path, cmd, out: Path, rc: Path, nice=0, wait_for: Path | None = None) -> int:
+    proc = subprocess.Popen([sys.executable, "-c", _RUNNER, str(wait_for or ""), str(out), str(rc), str(nice), *cmd],
+                            cwd=cwd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    _BACKGROUND[proc.pid] = proc
+    return proc.pid
+
+
+def _alive(pid: int) -> bool:
+    if pid in _BACKGROUND:                  # this process's child (a finished one is a zombie until polled)
+        return _BACKGROUND[pid].poll() is None
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        pass
+    return True
+
+
+def _end_background(pid: int):
+    """End a background job's whole process group (the runner, Snakemake and its jobs)."""
+    try:
+        os.killpg(pid, signal.SIGTERM)
+    except ProcessLookupError:
+        return
+    for _ in range(120):
+        if not _alive(pid):
+            return
+        time.sleep(0.5)
+    try:
+        os.killpg(pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+
+
+# The solver's numba kernels are compiled (or loaded from their on-disk cache) in a process of its own that starts
 # with the session, so that the compilation (about 20 s on an empty cache, as on a fresh clone) runs beside the
-# collection; the Snakemake runs start once it is done, so that their jobs load the cache instead of each compiling
-# at the same time.
-_WARM_UP = {}
+# collection; the Snakemake runs wait for it, so that their jobs load the cache instead of each compiling at the same
+# time. Started by the controller under xdist (the workers then share it) or by the single process.
+WARM_UP = ["-c", "from lumbar.mechanics import kernel; kernel.warm_up()"]
+
+
+def _warm_up_files(config):
+    d = shared_dir(config)
+    return d / "warm_up.out", d / "warm_up.rc"
 
 
 def pytest_sessionstart(session):
-    if session.config.option.collectonly:
+    config = session.config
+    if config.option.collectonly or is_xdist_worker(config):
         return
-    _WARM_UP["proc"] = subprocess.Popen(
-        [sys.executable, "-c", "from lumbar.mechanics import kernel; kernel.warm_up()"],
-        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    out, rc = _warm_up_files(config)
+    pid = _start_background(Path.cwd(), [sys.executable, *WARM_UP], out, rc)
+    (shared_dir(config) / "warm_up.pid").write_text(str(pid))
 
 
-def _wait_warm_up(timeout=None):
-    proc = _WARM_UP.pop("proc", None)
-    if proc is None:
-        return
-    try:
-        _, err = proc.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:       # only at the session's end (see pytest_sessionfinish)
-        proc.kill()
-        proc.communicate()
-        return
-    if proc.returncode != 0:    # the tests that use the kernel will show the error; Snakemake jobs compile alone
-        sys.stderr.write(f"conftest: kernel warm-up failed (exit {proc.returncode}):\n{err[-3000:]}\n")
+def _dag_needed(items) -> set[str]:
+    if not any(DAG_FIXTURES & set(getattr(i, "fixturenames", ())) for i in items):
+        return set()
+    return {"first"} | ({"second"} if any(i.name == "test_dag_reproducible_byte_identical" for i in items) else set())
 
 
 def pytest_collection_finish(session):
-    items = session.items
-    if session.config.option.collectonly or not any(DAG_FIXTURES & set(getattr(i, "fixturenames", ()))
-                                                    for i in items):
+    config = session.config
+    if config.option.collectonly:
         return
-    _wait_warm_up()
-    factory = session.config._tmp_path_factory
-    _start_dag("first", factory.mktemp("dag") / "repo")
-    if any(i.name == "test_dag_reproducible_byte_identical" for i in items):
-        _start_dag("second", factory.mktemp("dag2") / "repo", SECOND_RUN_TARGETS)
+    needed = _dag_needed(session.items)
+    if not needed:
+        return
+    d = shared_dir(config)
+    _, warm_rc = _warm_up_files(config)
+    with FileLock(str(d / "dag_runs.lock")):
+        for name in sorted(needed):
+            info = d / f"dag_{name}.json"
+            if info.exists():                 # another worker started it
+                continue
+            dest = copy_repo(d / f"dag_{name}" / "repo")
+            targets = SECOND_RUN_TARGETS if name == "second" else []
+            cmd = [sys.executable, "-m", "snakemake", *targets, "--cores", "2", "--configfile", TEST_CONFIG]
+            pid = _start_background(dest, cmd, dest / "dag_run.out", d / f"dag_{name}.rc", DAG_NICE[name],
+                                    wait_for=warm_rc)
+            tmp = info.with_suffix(".tmp")
+            tmp.write_text(json.dumps(dict(path=str(dest), pid=pid)))
+            os.replace(tmp, info)
 
 
 def pytest_sessionfinish(session, exitstatus):
-    _wait_warm_up(timeout=5)      # a short session (one test file) ends before the compilation: not waited for
-    for run in _DAG_RUNS.values():     # e.g. -x stopped the session: do not leave a Snakemake run behind
-        if run["proc"].poll() is None:
-            run["proc"].terminate()
-            run["proc"].wait(timeout=60)
-        if not run["log"].closed:
-            run["log"].close()
+    config = session.config
+    if is_xdist_worker(config) or config.option.collectonly:
+        return
+    d = shared_dir(config)
+    out, rc = _warm_up_files(config)
+    pid_file = d / "warm_up.pid"
+    if pid_file.exists():
+        pid = int(pid_file.read_text())
+        for _ in range(10):          # a short session (one test file) ends before the compilation: not waited for
+            if rc.exists() or not _alive(pid):
+                break
+            time.sleep(0.5)
+        if not rc.exists():
+            _end_background(pid)
+        elif rc.read_text().strip() != "0":  # the tests that use the kernel show the error; Snakemake jobs compile
+            sys.stderr.write(f"conftest: kernel warm-up failed (exit {rc.read_text()}):\n"
+                             f"{out.read_text()[-3000:] if out.exists() else ''}\n")
+    for info in sorted(d.glob("dag_*.json")):     # e.g. -x stopped the session: leave no Snakemake run behind
+        run = json.loads(info.read_text())
+        if not (d / f"{info.stem}.rc").exists():
+            _end_background(run["pid"])
 
 
-def _wait_dag(name: str) -> Path:
+def _wait_dag(config, name: str) -> Path:
     """Wait for the background run ``name``; fail the test with Snakemake's output and the logs if it failed."""
-    run = _DAG_RUNS[name]
-    if run["rc"] is None:
-        run["rc"] = run["proc"].wait(timeout=1500)
-        run["log"].close()
-        out = (run["path"] / "dag_run.out").read_text()
-        (run["path"] / "dag_run.out").write_text(f"# <= {time.perf_counter() - run['t0']:.1f} s\n" + out)
-    if run["rc"] != 0:
-        _dag_failed(run["path"], run["rc"], (run["path"] / "dag_run.out").read_text())
-    return run["path"]
+    d = shared_dir(config)
+    run = json.loads((d / f"dag_{name}.json").read_text())
+    path, rc_file = Path(run["path"]), d / f"dag_{name}.rc"
+    t_end = time.time() + 1500
+    while not rc_file.exists():
+        if not _alive(run["pid"]) and not rc_file.exists():
+            pytest.fail(f"the background Snakemake run {name} in {path} ended without an exit code", pytrace=False)
+        if time.time() > t_end:
+            pytest.fail(f"the background Snakemake run {name} in {path} did not end in 1500 s", pytrace=False)
+        time.sleep(1.0)
+    rc = int(rc_file.read_text())
+    if rc != 0:
+        _dag_failed(path, rc, (path / "dag_run.out").read_text())
+    return path
+
+
+def _dag_started(config, name: str) -> bool:
+    return (shared_dir(config) / f"dag_{name}.json").exists()
 
 
 @pytest.fixture(scope="session")
-def dag_workdir(tmp_path_factory) -> Path:
+def dag_workdir(request, tmp_path_factory) -> Path:
     """Path of a copy of the repository in which ``snakemake --cores 2 --configfile config/test/config.yaml``
     (the whole default target ``all``) has run successfully. Read-only for tests: copy what you modify.
     Started in the background right after collection (see ``pytest_collection_finish``)."""
-    if "first" not in _DAG_RUNS:          # not started at collection (should not happen): run it now
+    if not _dag_started(request.config, "first"):     # not started at collection (should not happen): run it now
         work = copy_repo(tmp_path_factory.mktemp("dag") / "repo")
         run_dag(work)
         return work
-    return _wait_dag("first")
+    return _wait_dag(request.config, "first")
 
 
 @pytest.fixture(scope="session")
-def dag_second_workdir(dag_workdir, tmp_path_factory) -> Path:
+def dag_second_workdir(request, dag_workdir, tmp_path_factory) -> Path:
     """A second, independent run of the model chain's targets (``SECOND_RUN_TARGETS``) in another fresh copy (for
     the reproducibility test), started at the same time as the first."""
-    if "second" not in _DAG_RUNS:
+    if not _dag_started(request.config, "second"):
         second = copy_repo(tmp_path_factory.mktemp("dag2") / "repo")
         run_dag(second, *SECOND_RUN_TARGETS)
         return second
-    return _wait_dag("second")
+    return _wait_dag(request.config, "second")
 
 
 @pytest.fixture(scope="module")
