@@ -321,6 +321,16 @@ def _assemble(Q, J, jac, a, b, f, ra, rb, K, body_relative):
 
 
 @_inner
+def _rot3(R, body, v0, v1, v2):
+    """R[body] v as three scalars (v itself for ground; _rot without arrays)."""
+    if body < 0:
+        return v0, v1, v2
+    return (R[body, 0, 0] * v0 + R[body, 0, 1] * v1 + R[body, 0, 2] * v2,
+            R[body, 1, 0] * v0 + R[body, 1, 1] * v1 + R[body, 1, 2] * v2,
+            R[body, 2, 0] * v0 + R[body, 2, 1] * v1 + R[body, 2, 2] * v2)
+
+
+@_inner
 def _screen_map(x, R, c, a, b, orig, ax):
     """Affine map (G, t) from a point's reference coordinates S - c_a on body ``a`` (S on ground) to its coordinates
     (u, v, w) in the frame (origin ``orig``, rows ``ax``) of a surface fixed in body ``b``: the composition of _point,
@@ -495,7 +505,7 @@ def _fibres(x, R, Q, J, jac, c, f_a, f_b, f_sa, f_sb, f_extra, f_law, f_par, f_s
 @_inner
 def _contacts(x, R, Q, J, jac, c, k_a, k_b, k_s, k_surf, k_stiff, ceps, s_orig, s_axes, s_coef, cm, w3, w33):
     """Facet contact: the penalty on the gap of each contact point to the lower body's cubic surface."""
-    ra, rb, f, tmp, v0, v1, v2 = w3[2], w3[3], w3[5], w3[6], w3[7], w3[8], w3[9]
+    ra, rb, f, v0, v1, v2 = w3[2], w3[3], w3[5], w3[7], w3[8], w3[9]
     K = w33[0]
     # screen: the surface coordinates (u, v, w) of a point are one affine map of its reference coordinates, G (S - c_a)
     # + t, built once per (surface, upper body, lower body); a point whose screened penetration is below -SCREEN_M
@@ -540,23 +550,45 @@ def _contacts(x, R, Q, J, jac, c, k_a, k_b, k_s, k_surf, k_stiff, ceps, s_orig, 
         dFm = dFm * cm[n]
         if Fm == 0.0 and dFm == 0.0:
             continue
-        ax, cf = s_axes[sid], s_coef[sid]
-        ra[0], ra[1], ra[2], rb[0], rb[1], rb[2] = q0, q1, q2, e0, e1, e2
-        fu = 3 * cf[0] * u2 + 2 * cf[2] * u
-        fv = 3 * cf[1] * v2_ + 2 * cf[3] * v
-        fuu = 6 * cf[0] * u + 2 * cf[2]
-        fvv = 6 * cf[1] * v + 2 * cf[3]
-        for i in range(3):
-            tmp[i] = -fu * ax[0, i] - fv * ax[1, i] + ax[2, i]
-        _rot(R, b, tmp, v0)
+        cf0, cf1, cf2, cf3 = s_coef[sid, 0], s_coef[sid, 1], s_coef[sid, 2], s_coef[sid, 3]
+        fu = 3 * cf0 * u2 + 2 * cf2 * u
+        fv = 3 * cf1 * v2_ + 2 * cf3 * v
+        # the surface normal (not unit) tmp = -fu e_u - fv e_w + e_w in the lower body, v0 = R_b tmp in the world
+        t0 = -fu * s_axes[sid, 0, 0] - fv * s_axes[sid, 1, 0] + s_axes[sid, 2, 0]
+        t1 = -fu * s_axes[sid, 0, 1] - fv * s_axes[sid, 1, 1] + s_axes[sid, 2, 1]
+        t2 = -fu * s_axes[sid, 0, 2] - fv * s_axes[sid, 1, 2] + s_axes[sid, 2, 2]
+        v00, v01, v02 = _rot3(R, b, t0, t1, t2)
+        f0, f1, f2 = Fm * v00, Fm * v01, Fm * v02
+        # the force on a (lever q about a) and -f on b (lever e about b), as _add_force
+        if a >= 0:
+            Q[a, 0] += f0
+            Q[a, 1] += f1
+            Q[a, 2] += f2
+            Q[a, 3] += q1 * f2 - q2 * f1
+            Q[a, 4] += q2 * f0 - q0 * f2
+            Q[a, 5] += q0 * f1 - q1 * f0
+        if b >= 0:
+            Q[b, 0] += -1.0 * f0
+            Q[b, 1] += -1.0 * f1
+            Q[b, 2] += -1.0 * f2
+            Q[b, 3] += -1.0 * (e1 * f2 - e2 * f1)
+            Q[b, 4] += -1.0 * (e2 * f0 - e0 * f2)
+            Q[b, 5] += -1.0 * (e0 * f1 - e1 * f0)
+        if not jac:
+            continue
+        fuu = 6 * cf0 * u + 2 * cf2
+        fvv = 6 * cf1 * v + 2 * cf3
+        ax = s_axes[sid]
+        v0[0], v0[1], v0[2] = v00, v01, v02
         _rot(R, b, ax[0], v1)
         _rot(R, b, ax[1], v2)
         w0, w1, w2 = -dFm, -Fm * fuu, -Fm * fvv
         for i in range(3):
-            f[i] = Fm * v0[i]
             for j in range(3):
                 K[i, j] = w0 * v0[i] * v0[j] + w1 * v1[i] * v1[j] + w2 * v2[i] * v2[j]
-        _assemble(Q, J, jac, a, b, f, ra, rb, K, True)
+        ra[0], ra[1], ra[2], rb[0], rb[1], rb[2] = q0, q1, q2, e0, e1, e2
+        f[0], f[1], f[2] = f0, f1, f2
+        _assemble_j(J, a, b, f, ra, rb, K, True)
 
 
 @_inner
