@@ -46,6 +46,7 @@ from .jit import inner_jit as _inner
 from .jit import jit as _jit
 from .jit import leaf_jit as _leaf
 from .kernel_residual import (
+    ACC,
     SCREEN_M,  # noqa: F401 - the contact screen's margin (kernel.SCREEN_M, as before the residual had a module)
     copy2,
     copy3,
@@ -70,7 +71,7 @@ inner_jit = _inner
 #: every kernel; when it does not (kernel_residual.py edited), newton_batch compiles without the cache in that
 #: process, and tests/test_kernel.py fails until the digest here is updated, the edit of this file that retires the
 #: cache entry.
-RESIDUAL_SHA256 = "f13104dbe191d24ab6cf8877f4aec0b54a3e23927a1a5c2626612db7710b1b83"
+RESIDUAL_SHA256 = "ac599ea1cebf20b54ca9fa040e6009d3cc39557ccaa4332e6caf128da5805a8d"
 
 
 def residual_pinned(digest: str = RESIDUAL_SHA256) -> bool:
@@ -385,7 +386,7 @@ def newton_batch(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max
     rhs, d = np.empty(n), np.empty((nb, 6))
     xt, Rt, E = np.empty((nb, 3)), np.empty((nb, 3, 3)), np.empty((3, 3))
     wv = np.empty(3)
-    w3, w33 = np.empty((16, 4)), np.empty((8, 3, 3))
+    w3, w33, acc = np.empty((16, 4)), np.empty((8, 3, 3)), np.empty((nb, ACC))
     # the Jacobian at the start state (it does not depend on the loads): shared by consecutive scenarios that start
     # from the same state with the same element data (a batch of loads from one equilibrium), whose residuals are
     # then evaluated without it (the same arithmetic as with it: the results are bit-identical to unshared solves)
@@ -406,10 +407,10 @@ def newton_batch(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max
                           and same_row(cm, s, s0) and same_row(l0, s, s0) and same_row(kt, s, s0)
                           and same_row(off, s, s0)):
             zero_array(J0)
-            eval_one(xs, Rs, Q, J0, want_j, md, fms, cms, l0s, kts, offs, w3, w33)
+            eval_one(xs, Rs, Q, J0, want_j, md, fms, cms, l0s, kts, offs, w3, w33, acc)
             s0 = s
         else:
-            eval_one(xs, Rs, Q, J0, no_j, md, fms, cms, l0s, kts, offs, w3, w33)
+            eval_one(xs, Rs, Q, J0, no_j, md, fms, cms, l0s, kts, offs, w3, w33, acc)
         copy_array(J, J0)
         conv[s] = False
         iters[s] = 0
@@ -460,17 +461,17 @@ def newton_batch(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max
                             Rt[k, i, j] = E[i, 0] * Rs[k, 0, j] + E[i, 1] * Rs[k, 1, j] + E[i, 2] * Rs[k, 2, j]
                 copy2(Qt, Ls)
                 if lazy:
-                    eval_one(xt, Rt, Qt, Jt, no_j, md, fms, cms, l0s, kts, offs, w3, w33)
+                    eval_one(xt, Rt, Qt, Jt, no_j, md, fms, cms, l0s, kts, offs, w3, w33, acc)
                 else:
                     zero4(Jt)
-                    eval_one(xt, Rt, Qt, Jt, want_j, md, fms, cms, l0s, kts, offs, w3, w33)
+                    eval_one(xt, Rt, Qt, Jt, want_j, md, fms, cms, l0s, kts, offs, w3, w33, acc)
                 if _merit(Qt, lscale) < m0 * (1.0 - 1e-4 * alpha) or ls == 9:
                     if lazy and it + 1 < max_iter:
                         rft, rmt = _norms(Qt)
                         if not (rft < tol_f and rmt < tol_m):
                             copy2(Qt, Ls)
                             zero4(Jt)
-                            eval_one(xt, Rt, Qt, Jt, want_j, md, fms, cms, l0s, kts, offs, w3, w33)
+                            eval_one(xt, Rt, Qt, Jt, want_j, md, fms, cms, l0s, kts, offs, w3, w33, acc)
                     break
                 alpha = 1.0 if ls == 8 else alpha * 0.5
             copy2(xs, xt)

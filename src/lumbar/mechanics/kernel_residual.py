@@ -411,11 +411,95 @@ def _torque_angle(phi, p):
 
 # The residual and Jacobian of one scenario, in three named steps (fibres, facet contact, discs); each step is one
 # compiled function, called once per scenario (their loops run inside: the cost of the calls is nothing beside them).
+#: accumulators of one body's diagonal Jacobian block from its fibre ends (_acc_end): sum beta g g^T (21, upper triangle
+#: by rows), sum alpha (1), sum alpha r (3), sum alpha r r^T (6: xx, xy, xz, yy, yz, zz), sum s r f^T (9, by rows)
+ACC = 40
+
+
 @_inner
-def _fibres(x, R, Q, J, jac, c, f_a, f_b, f_sa, f_sb, f_extra, f_law, f_par, f_scale, width, fm, l0):
+def _acc_end(acc, k, beta, alpha, u0, u1, u2, r0, r1, r2, s, f0, f1, f2):
+    """Add one fibre end on body k (lever r, fibre stiffness K = beta u u^T + alpha I, force f on the fibre's body a,
+    the end's sign s: +1 at a, -1 at b) to body k's accumulators: its block G K G^T with G = [I; [r]x] is
+    beta g g^T (g = (u, r x u)) + alpha [[I, -[r]x], [[r]x, (r.r) I - r r^T]], and its geometric stiffness
+    s (r f^T - (f.r) I) (_fibre_block with p = q = r)."""
+    g = (u0, u1, u2, r1 * u2 - r2 * u1, r2 * u0 - r0 * u2, r0 * u1 - r1 * u0)
+    m = 0
+    for i in range(6):
+        bi = beta * g[i]
+        for j in range(i, 6):
+            acc[k, m] += bi * g[j]
+            m += 1
+    acc[k, 21] += alpha
+    ar0, ar1, ar2 = alpha * r0, alpha * r1, alpha * r2
+    acc[k, 22] += ar0
+    acc[k, 23] += ar1
+    acc[k, 24] += ar2
+    acc[k, 25] += ar0 * r0
+    acc[k, 26] += ar0 * r1
+    acc[k, 27] += ar0 * r2
+    acc[k, 28] += ar1 * r1
+    acc[k, 29] += ar1 * r2
+    acc[k, 30] += ar2 * r2
+    sr0, sr1, sr2 = s * r0, s * r1, s * r2
+    acc[k, 31] += sr0 * f0
+    acc[k, 32] += sr0 * f1
+    acc[k, 33] += sr0 * f2
+    acc[k, 34] += sr1 * f0
+    acc[k, 35] += sr1 * f1
+    acc[k, 36] += sr1 * f2
+    acc[k, 37] += sr2 * f0
+    acc[k, 38] += sr2 * f1
+    acc[k, 39] += sr2 * f2
+
+
+@_inner
+def _acc_to_j(J, acc, k):
+    """J[k, :, k, :] += body k's fibre block from its accumulators (_acc_end)."""
+    a = acc[k]
+    m = 0
+    for i in range(6):
+        for j in range(i, 6):
+            J[k, i, k, j] += a[m]
+            if j != i:
+                J[k, j, k, i] += a[m]
+            m += 1
+    sa, p0, p1, p2 = a[21], a[22], a[23], a[24]
+    tr_rr = a[25] + a[28] + a[30]
+    tr_h = a[31] + a[35] + a[39]
+    for i in range(3):
+        J[k, i, k, i] += sa
+        J[k, 3 + i, k, 3 + i] += tr_rr - tr_h
+    # alpha parts: -[p]x upper right, [p]x lower left (p = sum alpha r)
+    J[k, 0, k, 4] += p2
+    J[k, 0, k, 5] -= p1
+    J[k, 1, k, 3] -= p2
+    J[k, 1, k, 5] += p0
+    J[k, 2, k, 3] += p1
+    J[k, 2, k, 4] -= p0
+    J[k, 3, k, 1] -= p2
+    J[k, 3, k, 2] += p1
+    J[k, 4, k, 0] += p2
+    J[k, 4, k, 2] -= p0
+    J[k, 5, k, 0] -= p1
+    J[k, 5, k, 1] += p0
+    # lower right: - sum alpha r r^T + sum s r f^T
+    rr = ((a[25], a[26], a[27]), (a[26], a[28], a[29]), (a[27], a[29], a[30]))
+    for i in range(3):
+        for j in range(3):
+            J[k, 3 + i, k, 3 + j] += a[31 + 3 * i + j] - rr[i][j]
+
+
+@_inner
+def _fibres(x, R, Q, J, jac, c, f_a, f_b, f_sa, f_sb, f_extra, f_law, f_par, f_scale, width, fm, l0, acc):
     """Ligament fibres: forces into Q and, with ``jac``, the stiffness K = dT u u^T + T/|d| (I - u u^T) (with the
-    sign of a pulling element) into J. The attachment points (_point) and the law (_tension) are written out here,
-    with the same arithmetic: a call per fibre cost more than the fibre's arithmetic."""
+    sign of a pulling element) into J. The attachment points (_point) and the law (_tension) are written out here:
+    a call per fibre cost more than the fibre's arithmetic. A fibre's diagonal blocks of J (body a with itself, body b
+    with itself) are summed in ``acc`` (nb, ACC) by :func:`_acc_end` and written once by :func:`_acc_to_j`; the blocks
+    between two free bodies go to J directly (_fibre_block)."""
+    if jac:
+        for k in range(acc.shape[0]):
+            for i in range(ACC):
+                acc[k, i] = 0.0
     for n in range(f_a.shape[0]):
         a, b = f_a[n], f_b[n]
         if a < 0:
@@ -471,7 +555,8 @@ def _fibres(x, R, Q, J, jac, c, f_a, f_b, f_sa, f_sb, f_extra, f_law, f_par, f_s
         dT = dT * f_scale[n] * fm[n]
         if T == 0.0 and dT == 0.0:
             continue
-        u0, u1, u2 = d0 / dn, d1 / dn, d2 / dn
+        inv = 1.0 / dn
+        u0, u1, u2 = d0 * inv, d1 * inv, d2 * inv
         f0, f1, f2 = -T * u0, -T * u1, -T * u2
         if a >= 0:
             Q[a, 0] += f0
@@ -489,17 +574,20 @@ def _fibres(x, R, Q, J, jac, c, f_a, f_b, f_sa, f_sb, f_extra, f_law, f_par, f_s
             Q[b, 5] -= rb0 * f1 - rb1 * f0
         if not jac:
             continue
-        alpha = -T / dn
-        beta = T / dn - dT
-        ut, ft = (u0, u1, u2), (f0, f1, f2)
-        rat, rbt = (ra0, ra1, ra2), (rb0, rb1, rb2)
+        alpha = -T * inv
+        beta = T * inv - dT
         if a >= 0:
-            _fibre_block(J, a, a, 1.0, beta, alpha, ut, rat, rat, 1.0, ft)
+            _acc_end(acc, a, beta, alpha, u0, u1, u2, ra0, ra1, ra2, 1.0, f0, f1, f2)
         if b >= 0:
-            _fibre_block(J, b, b, 1.0, beta, alpha, ut, rbt, rbt, -1.0, ft)
+            _acc_end(acc, b, beta, alpha, u0, u1, u2, rb0, rb1, rb2, -1.0, f0, f1, f2)
         if a >= 0 and b >= 0:
+            ut, ft = (u0, u1, u2), (f0, f1, f2)
+            rat, rbt = (ra0, ra1, ra2), (rb0, rb1, rb2)
             _fibre_block(J, a, b, -1.0, beta, alpha, ut, rat, rbt, 0.0, ft)
             _fibre_block(J, b, a, -1.0, beta, alpha, ut, rbt, rat, 0.0, ft)
+    if jac:
+        for k in range(acc.shape[0]):
+            _acc_to_j(J, acc, k)
 
 
 @_inner
@@ -553,11 +641,11 @@ def _contacts(x, R, Q, J, jac, c, k_a, k_b, k_s, k_surf, k_stiff, ceps, s_orig, 
         cf0, cf1, cf2, cf3 = s_coef[sid, 0], s_coef[sid, 1], s_coef[sid, 2], s_coef[sid, 3]
         fu = 3 * cf0 * u2 + 2 * cf2 * u
         fv = 3 * cf1 * v2_ + 2 * cf3 * v
-        # the surface normal (not unit) tmp = -fu e_u - fv e_w + e_w in the lower body, v0 = R_b tmp in the world
-        t0 = -fu * s_axes[sid, 0, 0] - fv * s_axes[sid, 1, 0] + s_axes[sid, 2, 0]
-        t1 = -fu * s_axes[sid, 0, 1] - fv * s_axes[sid, 1, 1] + s_axes[sid, 2, 1]
-        t2 = -fu * s_axes[sid, 0, 2] - fv * s_axes[sid, 1, 2] + s_axes[sid, 2, 2]
-        v00, v01, v02 = _rot3(R, b, t0, t1, t2)
+        # the surface normal (not unit) nm = -fu e_u - fv e_v + e_w in the lower body, v0 = R_b nm in the world
+        nm0 = -fu * s_axes[sid, 0, 0] - fv * s_axes[sid, 1, 0] + s_axes[sid, 2, 0]
+        nm1 = -fu * s_axes[sid, 0, 1] - fv * s_axes[sid, 1, 1] + s_axes[sid, 2, 1]
+        nm2 = -fu * s_axes[sid, 0, 2] - fv * s_axes[sid, 1, 2] + s_axes[sid, 2, 2]
+        v00, v01, v02 = _rot3(R, b, nm0, nm1, nm2)
         f0, f1, f2 = Fm * v00, Fm * v01, Fm * v02
         # the force on a (lever q about a) and -f on b (lever e about b), as _add_force
         if a >= 0:
@@ -666,13 +754,13 @@ def _discs(x, R, Q, J, jac, c, d_up, d_lo, d_centre, d_frame, d_k, d_torque, kt,
 
 
 @_inner
-def eval_one(x, R, Q, J, jac, md, fm, cm, l0, kt, off, w3, w33):
+def eval_one(x, R, Q, J, jac, md, fm, cm, l0, kt, off, w3, w33, acc):
     """Residual Q (nb, 6) (pre-filled with the loads) and Jacobian J (nb, 6, nb, 6) (zeroed) of one scenario;
-    w3 (16, 4) and w33 (8, 3, 3) are work space."""
+    w3 (16, 4), w33 (8, 3, 3) and acc (nb, ACC) are work space."""
     (c, f_a, f_b, f_sa, f_sb, f_extra, f_law, f_par, f_scale, width,
      k_a, k_b, k_s, k_surf, k_stiff, ceps, s_orig, s_axes, s_coef,
      d_up, d_lo, d_centre, d_frame, d_k, d_torque) = md
-    _fibres(x, R, Q, J, jac, c, f_a, f_b, f_sa, f_sb, f_extra, f_law, f_par, f_scale, width, fm, l0)
+    _fibres(x, R, Q, J, jac, c, f_a, f_b, f_sa, f_sb, f_extra, f_law, f_par, f_scale, width, fm, l0, acc)
     _contacts(x, R, Q, J, jac, c, k_a, k_b, k_s, k_surf, k_stiff, ceps, s_orig, s_axes, s_coef, cm, w3, w33)
     _discs(x, R, Q, J, jac, c, d_up, d_lo, d_centre, d_frame, d_k, d_torque, kt, off, w3, w33)
 
@@ -741,11 +829,11 @@ def same_row(a, s, s0):
 @_jit
 def evaluate_batch(x, R, L, fm, cm, l0, kt, off, jac, md, Q, J):
     """Q (B, nb, 6) and, with ``jac``, J (B, nb, 6, nb, 6) (both written here) of a batch."""
-    w3, w33 = np.empty((16, 4)), np.empty((8, 3, 3))
+    w3, w33, acc = np.empty((16, 4)), np.empty((8, 3, 3)), np.empty((x.shape[1], ACC))
     for s in range(x.shape[0]):
         copy_array(Q[s], L[s if L.shape[0] > 1 else 0])
         if jac:
             zero_array(J[s])
         eval_one(x[s], R[s], Q[s], J[s] if jac else J[0], jac, md, fm[s if fm.shape[0] > 1 else 0],
                   cm[s if cm.shape[0] > 1 else 0], l0[s if l0.shape[0] > 1 else 0],
-                  kt[s if kt.shape[0] > 1 else 0], off[s if off.shape[0] > 1 else 0], w3, w33)
+                  kt[s if kt.shape[0] > 1 else 0], off[s if off.shape[0] > 1 else 0], w3, w33, acc)
