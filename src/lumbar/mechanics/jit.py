@@ -20,7 +20,17 @@ _jit = njit(cache=True, error_model="numpy")
 # the core's compile time, measured in alternating pairs with and without)
 _inner = njit(cache=True, error_model="numpy", no_cpython_wrapper=True, no_cfunc_wrapper=True) if HAVE_NUMBA \
     else _jit
+# helpers that allocate nothing (no np.empty, no numpy function that returns a new array): compiled without numba's
+# reference counting (NRT). With it, every array argument of a call is incref'd on entry and decref'd on exit (two
+# atomic operations each) and so is every array a tuple unpacking or an index view (``a[k]``) produces: in the
+# residual, called per fibre and per contact point, that was about a third of an evaluation's time (perf). A view
+# made inside such a helper borrows its parent's memory, which the caller keeps alive for the call.
+_leaf = njit(cache=True, error_model="numpy", no_cpython_wrapper=True, no_cfunc_wrapper=True, _nrt=False) \
+    if HAVE_NUMBA else _jit
 #: the decorators of every compiled module of the package: one cache rule, one error model, one switch
-#: (lumbar.mechanics.kernel.active); ``inner_jit`` for functions called only from compiled code
+#: (lumbar.mechanics.kernel.active); ``inner_jit`` for functions called only from compiled code, ``leaf_jit`` for
+#: such functions that allocate no array (compiled without reference counting; a numpy call that allocates does not
+#: compile there)
 jit = _jit
 inner_jit = _inner
+leaf_jit = _leaf

@@ -44,14 +44,19 @@ from .elements.ligament import LAW_CABLE, LAW_RUPP, LAW_SOFTPLUS  # noqa: F401 -
 from .jit import HAVE_NUMBA, njit
 from .jit import inner_jit as _inner
 from .jit import jit as _jit
+from .jit import leaf_jit as _leaf
 from .kernel_residual import (
+    ACC,
     SCREEN_M,  # noqa: F401 - the contact screen's margin (kernel.SCREEN_M, as before the residual had a module)
+    copy2,
+    copy3,
     copy_array,
     eval_one,
     evaluate_batch,
     rotation_exp,
     same_array,
     same_row,
+    zero4,
     zero_array,
 )
 
@@ -66,7 +71,7 @@ inner_jit = _inner
 #: every kernel; when it does not (kernel_residual.py edited), newton_batch compiles without the cache in that
 #: process, and tests/test_kernel.py fails until the digest here is updated, the edit of this file that retires the
 #: cache entry.
-RESIDUAL_SHA256 = "eddbdcbd023a8a7a9f5fbb483d84667f37620251fb7408e336cf2aa30745bdee"
+RESIDUAL_SHA256 = "ac599ea1cebf20b54ca9fa040e6009d3cc39557ccaa4332e6caf128da5805a8d"
 
 
 def residual_pinned(digest: str = RESIDUAL_SHA256) -> bool:
@@ -251,7 +256,7 @@ def evaluate(model, x, R, loads=None, fmask=1.0, cmask=1.0, jacobian=True, param
 
 
 # ---------------------------------------------------------------------------------------------------- Newton
-@_inner
+@_leaf
 def _cholesky_ok(A, shift, W):
     """True if A - shift*I is positive definite (Cholesky without pivoting; W is work space)."""
     n = A.shape[0]
@@ -269,7 +274,7 @@ def _cholesky_ok(A, shift, W):
     return True
 
 
-@_inner
+@_leaf
 def _lu_solve(A, bvec, out):
     """Solve A out = bvec by LU with partial pivoting (A and bvec are overwritten)."""
     n = A.shape[0]
@@ -297,7 +302,7 @@ def _lu_solve(A, bvec, out):
         out[i] = s / A[i, i]
 
 
-@_inner
+@_leaf
 def _merit(Q, lscale):
     m1 = 0.0
     m2 = 0.0
@@ -308,7 +313,7 @@ def _merit(Q, lscale):
     return m1 + m2
 
 
-@_inner
+@_leaf
 def _norms(Q):
     rf = 0.0
     rm = 0.0
@@ -325,40 +330,48 @@ def _norms(Q):
     return rf, rm
 
 
-@_inner
-def _step(J, Q, reg, S, A, sym, W, rhs, d):
-    """Modified Newton step (lumbar.mechanics.solve._modified_newton_step): solve (-J + diag(reg)) d = Q in
-    scaled variables, shifting the scaled symmetric part to positive definite where it is not."""
+@_leaf
+def _step_matrix(J, reg, S, A, sym, W):
+    """First half of the modified Newton step (lumbar.mechanics.solve._modified_newton_step): A = (-J + diag(reg))
+    in scaled variables and its symmetric part sym; returns (0, scale) where sym is positive definite (no shift),
+    (1, scale) where it is not finite, (2, scale) where its lowest eigenvalue decides the shift (numpy's eigvalsh
+    allocates: the caller computes it, see _step_solve)."""
     n = reg.shape[0]
-    J2, q = J.reshape(n, n), Q.reshape(n)
-    for i in range(n):
-        for j in range(n):
-            A[i, j] = (-J2[i, j] + (reg[i] if i == j else 0.0)) * S[i] * S[j]
+    nb = J.shape[0]
+    for bi in range(nb):
+        for k in range(6):
+            i = 6 * bi + k
+            for bj in range(nb):
+                for m in range(6):
+                    j = 6 * bj + m
+                    A[i, j] = (-J[bi, k, bj, m] + (reg[i] if i == j else 0.0)) * S[i] * S[j]
     scale = 0.0
     for i in range(n):
         for j in range(n):
             sym[i, j] = 0.5 * (A[i, j] + A[j, i])
         if abs(sym[i, i]) > scale:
             scale = abs(sym[i, i])
-    finite = True
     for i in range(n):
         for j in range(n):
             if not np.isfinite(sym[i, j]):
-                finite = False
-    mu = 0.0
-    if not finite:
-        mu = np.nan
-    elif not _cholesky_ok(sym, 1e-8 * scale, W):
-        lam = np.linalg.eigvalsh(sym)[0]
-        if lam < 1e-8 * scale:
-            mu = -lam + 1e-6 * scale
-    for i in range(n):
-        A[i, i] += mu
-        rhs[i] = S[i] * q[i]
+                return 1, scale
+    if _cholesky_ok(sym, 1e-8 * scale, W):
+        return 0, scale
+    return 2, scale
+
+
+@_leaf
+def _step_solve(Q, S, A, W, rhs, d, mu):
+    """Second half of the modified Newton step: solve (A + mu I) d = S Q and unscale d."""
+    for k in range(Q.shape[0]):
+        for m in range(6):
+            i = 6 * k + m
+            A[i, i] += mu
+            rhs[i] = S[i] * Q[k, m]
     _lu_solve(A, rhs, W[0])
-    dv = d.reshape(n)
-    for i in range(n):
-        dv[i] = W[0, i] * S[i]
+    for k in range(d.shape[0]):
+        for m in range(6):
+            d[k, m] = W[0, 6 * k + m] * S[6 * k + m]
 
 
 @_newton_jit
@@ -373,7 +386,7 @@ def newton_batch(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max
     rhs, d = np.empty(n), np.empty((nb, 6))
     xt, Rt, E = np.empty((nb, 3)), np.empty((nb, 3, 3)), np.empty((3, 3))
     wv = np.empty(3)
-    w3, w33 = np.empty((16, 4)), np.empty((8, 3, 3))
+    w3, w33, acc = np.empty((16, 4)), np.empty((8, 3, 3)), np.empty((nb, ACC))
     # the Jacobian at the start state (it does not depend on the loads): shared by consecutive scenarios that start
     # from the same state with the same element data (a batch of loads from one equilibrium), whose residuals are
     # then evaluated without it (the same arithmetic as with it: the results are bit-identical to unshared solves)
@@ -394,10 +407,10 @@ def newton_batch(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max
                           and same_row(cm, s, s0) and same_row(l0, s, s0) and same_row(kt, s, s0)
                           and same_row(off, s, s0)):
             zero_array(J0)
-            eval_one(xs, Rs, Q, J0, want_j, md, fms, cms, l0s, kts, offs, w3, w33)
+            eval_one(xs, Rs, Q, J0, want_j, md, fms, cms, l0s, kts, offs, w3, w33, acc)
             s0 = s
         else:
-            eval_one(xs, Rs, Q, J0, no_j, md, fms, cms, l0s, kts, offs, w3, w33)
+            eval_one(xs, Rs, Q, J0, no_j, md, fms, cms, l0s, kts, offs, w3, w33, acc)
         copy_array(J, J0)
         conv[s] = False
         iters[s] = 0
@@ -411,7 +424,15 @@ def newton_batch(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max
                 break
             if it == max_iter:
                 break
-            _step(J, Q, reg, S, A, sym, W, rhs, d)
+            shift, scale = _step_matrix(J, reg, S, A, sym, W)
+            mu = 0.0
+            if shift == 1:
+                mu = np.nan
+            elif shift == 2:
+                lam = np.linalg.eigvalsh(sym)[0]
+                if lam < 1e-8 * scale:
+                    mu = -lam + 1e-6 * scale
+            _step_solve(Q, S, A, W, rhs, d, mu)
             st = 0.0
             sr = 0.0
             for k in range(nb):
@@ -438,23 +459,23 @@ def newton_batch(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max
                     for i in range(3):
                         for j in range(3):
                             Rt[k, i, j] = E[i, 0] * Rs[k, 0, j] + E[i, 1] * Rs[k, 1, j] + E[i, 2] * Rs[k, 2, j]
-                copy_array(Qt, Ls)
+                copy2(Qt, Ls)
                 if lazy:
-                    eval_one(xt, Rt, Qt, Jt, no_j, md, fms, cms, l0s, kts, offs, w3, w33)
+                    eval_one(xt, Rt, Qt, Jt, no_j, md, fms, cms, l0s, kts, offs, w3, w33, acc)
                 else:
-                    zero_array(Jt)
-                    eval_one(xt, Rt, Qt, Jt, want_j, md, fms, cms, l0s, kts, offs, w3, w33)
+                    zero4(Jt)
+                    eval_one(xt, Rt, Qt, Jt, want_j, md, fms, cms, l0s, kts, offs, w3, w33, acc)
                 if _merit(Qt, lscale) < m0 * (1.0 - 1e-4 * alpha) or ls == 9:
                     if lazy and it + 1 < max_iter:
                         rft, rmt = _norms(Qt)
                         if not (rft < tol_f and rmt < tol_m):
-                            copy_array(Qt, Ls)
-                            zero_array(Jt)
-                            eval_one(xt, Rt, Qt, Jt, want_j, md, fms, cms, l0s, kts, offs, w3, w33)
+                            copy2(Qt, Ls)
+                            zero4(Jt)
+                            eval_one(xt, Rt, Qt, Jt, want_j, md, fms, cms, l0s, kts, offs, w3, w33, acc)
                     break
                 alpha = 1.0 if ls == 8 else alpha * 0.5
-            copy_array(xs, xt)
-            copy_array(Rs, Rt)
+            copy2(xs, xt)
+            copy3(Rs, Rt)
             Q, Qt = Qt, Q
             J, Jt = Jt, J
             iters[s] += 1

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from .elements.ligament import LAW_CABLE, LAW_RUPP, LAW_SOFTPLUS  # noqa: F401 - compile-time constants
-from .jit import inner_jit as _inner
+from .jit import leaf_jit as _inner
 from .jit import jit as _jit
 
 #: a contact point whose screened gap (the affine map of _screen_map; it differs from the exact one by round-off,
@@ -247,44 +247,43 @@ def _add_hat(J, bi, bj, f, sign, o1, o2):
 
 
 @_inner
-def _fibre_block(J, bi, bj, sign, beta, alpha, u, p, q):
+def _fibre_block(J, bi, bj, sign, beta, alpha, u, p, q, hsign, f):
     """J[bi, :, bj, :] += sign * G1 K G2^T for a fibre's K = beta u u^T + alpha I (G = [I; [r]x], r1 = p of body
     bi, r2 = q of body bj): beta g1 g2^T with g = (u, r x u), plus alpha [[I, -[q]x], [[p]x, (p.q) I - q p^T]]
-    (the same block as _add_gkg, from scalars)."""
+    (the same block as _add_gkg, from scalars); then, where ``hsign`` is not 0 (a diagonal block, p = q = r), the
+    fibre's geometric stiffness J[bi, 3:, bi, 3:] += hsign * [f]x [r]x = hsign * (r f^T - (f.r) I). Each entry is
+    read and written once, its terms added in this order."""
     g1 = (u[0], u[1], u[2], p[1] * u[2] - p[2] * u[1], p[2] * u[0] - p[0] * u[2], p[0] * u[1] - p[1] * u[0])
     g2 = (u[0], u[1], u[2], q[1] * u[2] - q[2] * u[1], q[2] * u[0] - q[0] * u[2], q[0] * u[1] - q[1] * u[0])
     sb, sa = sign * beta, sign * alpha
-    for k in range(6):
-        for m in range(6):
-            J[bi, k, bj, m] += sb * g1[k] * g2[m]
     pq = p[0] * q[0] + p[1] * q[1] + p[2] * q[2]
+    fr = f[0] * q[0] + f[1] * q[1] + f[2] * q[2]
+    # -[q]x and [p]x by rows
+    mq = ((0.0, q[2], -q[1]), (-q[2], 0.0, q[0]), (q[1], -q[0], 0.0))
+    hp = ((0.0, -p[2], p[1]), (p[2], 0.0, -p[0]), (-p[1], p[0], 0.0))
     for k in range(3):
-        J[bi, k, bj, k] += sa
-        J[bi, 3 + k, bj, 3 + k] += sa * pq
         for m in range(3):
-            J[bi, 3 + k, bj, 3 + m] -= sa * q[k] * p[m]
-    J[bi, 0, bj, 4] += sa * q[2]
-    J[bi, 0, bj, 5] -= sa * q[1]
-    J[bi, 1, bj, 3] -= sa * q[2]
-    J[bi, 1, bj, 5] += sa * q[0]
-    J[bi, 2, bj, 3] += sa * q[1]
-    J[bi, 2, bj, 4] -= sa * q[0]
-    J[bi, 3, bj, 1] -= sa * p[2]
-    J[bi, 3, bj, 2] += sa * p[1]
-    J[bi, 4, bj, 0] += sa * p[2]
-    J[bi, 4, bj, 2] -= sa * p[0]
-    J[bi, 5, bj, 0] -= sa * p[1]
-    J[bi, 5, bj, 1] += sa * p[0]
-
-
-@_inner
-def _fibre_hatprod(J, body, sign, f, r):
-    """J[body, 3:, body, 3:] += sign * [f]x [r]x = sign * (r f^T - (f.r) I) (the fibre's geometric stiffness)."""
-    fr = f[0] * r[0] + f[1] * r[1] + f[2] * r[2]
-    for k in range(3):
-        J[body, 3 + k, body, 3 + k] -= sign * fr
-        for m in range(3):
-            J[body, 3 + k, body, 3 + m] += sign * r[k] * f[m]
+            v = J[bi, k, bj, m] + sb * g1[k] * g2[m]
+            if k == m:
+                v += sa
+            J[bi, k, bj, m] = v
+            v = J[bi, k, bj, 3 + m] + sb * g1[k] * g2[3 + m]
+            if k != m:
+                v += sa * mq[k][m]
+            J[bi, k, bj, 3 + m] = v
+            v = J[bi, 3 + k, bj, m] + sb * g1[3 + k] * g2[m]
+            if k != m:
+                v += sa * hp[k][m]
+            J[bi, 3 + k, bj, m] = v
+            v = J[bi, 3 + k, bj, 3 + m] + sb * g1[3 + k] * g2[3 + m]
+            if k == m:
+                v += sa * pq
+            v -= sa * q[k] * p[m]
+            if hsign != 0.0:
+                if k == m:
+                    v -= hsign * fr
+                v += hsign * q[k] * f[m]
+            J[bi, 3 + k, bj, 3 + m] = v
 
 
 @_inner
@@ -319,6 +318,16 @@ def _assemble(Q, J, jac, a, b, f, ra, rb, K, body_relative):
     _add_force(Q, b, f, rb, -1.0)
     if jac:
         _assemble_j(J, a, b, f, ra, rb, K, body_relative)
+
+
+@_inner
+def _rot3(R, body, v0, v1, v2):
+    """R[body] v as three scalars (v itself for ground; _rot without arrays)."""
+    if body < 0:
+        return v0, v1, v2
+    return (R[body, 0, 0] * v0 + R[body, 0, 1] * v1 + R[body, 0, 2] * v2,
+            R[body, 1, 0] * v0 + R[body, 1, 1] * v1 + R[body, 1, 2] * v2,
+            R[body, 2, 0] * v0 + R[body, 2, 1] * v1 + R[body, 2, 2] * v2)
 
 
 @_inner
@@ -402,25 +411,152 @@ def _torque_angle(phi, p):
 
 # The residual and Jacobian of one scenario, in three named steps (fibres, facet contact, discs); each step is one
 # compiled function, called once per scenario (their loops run inside: the cost of the calls is nothing beside them).
+#: accumulators of one body's diagonal Jacobian block from its fibre ends (_acc_end): sum beta g g^T (21, upper triangle
+#: by rows), sum alpha (1), sum alpha r (3), sum alpha r r^T (6: xx, xy, xz, yy, yz, zz), sum s r f^T (9, by rows)
+ACC = 40
+
+
 @_inner
-def _fibres(x, R, Q, J, jac, md, fm, l0):
+def _acc_end(acc, k, beta, alpha, u0, u1, u2, r0, r1, r2, s, f0, f1, f2):
+    """Add one fibre end on body k (lever r, fibre stiffness K = beta u u^T + alpha I, force f on the fibre's body a,
+    the end's sign s: +1 at a, -1 at b) to body k's accumulators: its block G K G^T with G = [I; [r]x] is
+    beta g g^T (g = (u, r x u)) + alpha [[I, -[r]x], [[r]x, (r.r) I - r r^T]], and its geometric stiffness
+    s (r f^T - (f.r) I) (_fibre_block with p = q = r)."""
+    g = (u0, u1, u2, r1 * u2 - r2 * u1, r2 * u0 - r0 * u2, r0 * u1 - r1 * u0)
+    m = 0
+    for i in range(6):
+        bi = beta * g[i]
+        for j in range(i, 6):
+            acc[k, m] += bi * g[j]
+            m += 1
+    acc[k, 21] += alpha
+    ar0, ar1, ar2 = alpha * r0, alpha * r1, alpha * r2
+    acc[k, 22] += ar0
+    acc[k, 23] += ar1
+    acc[k, 24] += ar2
+    acc[k, 25] += ar0 * r0
+    acc[k, 26] += ar0 * r1
+    acc[k, 27] += ar0 * r2
+    acc[k, 28] += ar1 * r1
+    acc[k, 29] += ar1 * r2
+    acc[k, 30] += ar2 * r2
+    sr0, sr1, sr2 = s * r0, s * r1, s * r2
+    acc[k, 31] += sr0 * f0
+    acc[k, 32] += sr0 * f1
+    acc[k, 33] += sr0 * f2
+    acc[k, 34] += sr1 * f0
+    acc[k, 35] += sr1 * f1
+    acc[k, 36] += sr1 * f2
+    acc[k, 37] += sr2 * f0
+    acc[k, 38] += sr2 * f1
+    acc[k, 39] += sr2 * f2
+
+
+@_inner
+def _acc_to_j(J, acc, k):
+    """J[k, :, k, :] += body k's fibre block from its accumulators (_acc_end)."""
+    a = acc[k]
+    m = 0
+    for i in range(6):
+        for j in range(i, 6):
+            J[k, i, k, j] += a[m]
+            if j != i:
+                J[k, j, k, i] += a[m]
+            m += 1
+    sa, p0, p1, p2 = a[21], a[22], a[23], a[24]
+    tr_rr = a[25] + a[28] + a[30]
+    tr_h = a[31] + a[35] + a[39]
+    for i in range(3):
+        J[k, i, k, i] += sa
+        J[k, 3 + i, k, 3 + i] += tr_rr - tr_h
+    # alpha parts: -[p]x upper right, [p]x lower left (p = sum alpha r)
+    J[k, 0, k, 4] += p2
+    J[k, 0, k, 5] -= p1
+    J[k, 1, k, 3] -= p2
+    J[k, 1, k, 5] += p0
+    J[k, 2, k, 3] += p1
+    J[k, 2, k, 4] -= p0
+    J[k, 3, k, 1] -= p2
+    J[k, 3, k, 2] += p1
+    J[k, 4, k, 0] += p2
+    J[k, 4, k, 2] -= p0
+    J[k, 5, k, 0] -= p1
+    J[k, 5, k, 1] += p0
+    # lower right: - sum alpha r r^T + sum s r f^T
+    rr = ((a[25], a[26], a[27]), (a[26], a[28], a[29]), (a[27], a[29], a[30]))
+    for i in range(3):
+        for j in range(3):
+            J[k, 3 + i, k, 3 + j] += a[31 + 3 * i + j] - rr[i][j]
+
+
+@_inner
+def _fibres(x, R, Q, J, jac, c, f_a, f_b, f_sa, f_sb, f_extra, f_law, f_par, f_scale, width, fm, l0, acc):
     """Ligament fibres: forces into Q and, with ``jac``, the stiffness K = dT u u^T + T/|d| (I - u u^T) (with the
-    sign of a pulling element) into J."""
-    (c, f_a, f_b, f_sa, f_sb, f_extra, f_law, f_par, f_scale, width,
-     k_a, k_b, k_s, k_surf, k_stiff, ceps, s_orig, s_axes, s_coef,
-     d_up, d_lo, d_centre, d_frame, d_k, d_torque) = md
+    sign of a pulling element) into J. The attachment points (_point) and the law (_tension) are written out here:
+    a call per fibre cost more than the fibre's arithmetic. A fibre's diagonal blocks of J (body a with itself, body b
+    with itself) are summed in ``acc`` (nb, ACC) by :func:`_acc_end` and written once by :func:`_acc_to_j`; the blocks
+    between two free bodies go to J directly (_fibre_block)."""
+    if jac:
+        for k in range(acc.shape[0]):
+            for i in range(ACC):
+                acc[k, i] = 0.0
     for n in range(f_a.shape[0]):
         a, b = f_a[n], f_b[n]
-        pa0, pa1, pa2, ra0, ra1, ra2 = _point(x, R, c, a, f_sa, n)
-        pb0, pb1, pb2, rb0, rb1, rb2 = _point(x, R, c, b, f_sb, n)
+        if a < 0:
+            ra0, ra1, ra2 = f_sa[n, 0], f_sa[n, 1], f_sa[n, 2]
+            pa0, pa1, pa2 = ra0, ra1, ra2
+        else:
+            s0, s1, s2 = f_sa[n, 0] - c[a, 0], f_sa[n, 1] - c[a, 1], f_sa[n, 2] - c[a, 2]
+            ra0 = R[a, 0, 0] * s0 + R[a, 0, 1] * s1 + R[a, 0, 2] * s2
+            ra1 = R[a, 1, 0] * s0 + R[a, 1, 1] * s1 + R[a, 1, 2] * s2
+            ra2 = R[a, 2, 0] * s0 + R[a, 2, 1] * s1 + R[a, 2, 2] * s2
+            pa0, pa1, pa2 = x[a, 0] + ra0, x[a, 1] + ra1, x[a, 2] + ra2
+        if b < 0:
+            rb0, rb1, rb2 = f_sb[n, 0], f_sb[n, 1], f_sb[n, 2]
+            pb0, pb1, pb2 = rb0, rb1, rb2
+        else:
+            s0, s1, s2 = f_sb[n, 0] - c[b, 0], f_sb[n, 1] - c[b, 1], f_sb[n, 2] - c[b, 2]
+            rb0 = R[b, 0, 0] * s0 + R[b, 0, 1] * s1 + R[b, 0, 2] * s2
+            rb1 = R[b, 1, 0] * s0 + R[b, 1, 1] * s1 + R[b, 1, 2] * s2
+            rb2 = R[b, 2, 0] * s0 + R[b, 2, 1] * s1 + R[b, 2, 2] * s2
+            pb0, pb1, pb2 = x[b, 0] + rb0, x[b, 1] + rb1, x[b, 2] + rb2
         d0, d1, d2 = pa0 - pb0, pa1 - pb1, pa2 - pb2
         dn = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        T, dT = _tension(f_law[n], dn + f_extra[n], l0[n], f_par, n, width)
+        # the law (_tension), before the fibre's scale
+        length, l0n, law = dn + f_extra[n], l0[n], f_law[n]
+        if law == LAW_SOFTPLUS:
+            eps = (length / l0n - 1.0) * 100.0
+            if eps <= 0.0:
+                continue
+            z = (eps + f_par[n, 1]) / f_par[n, 3]
+            e = np.exp(-abs(z))
+            F = f_par[n, 0] * (max(z, 0.0) + np.log1p(e)) + f_par[n, 2]
+            dF = f_par[n, 0] / f_par[n, 3] * (1.0 / (1.0 + e) if z >= 0.0 else e / (1.0 + e))
+            if not F > 0.0:
+                F, dF = 0.0, 0.0
+            if width <= 0.0:
+                sm, dsm = 1.0, 0.0
+            else:
+                t = min(eps / width, 1.0)
+                sm = t * t * (3.0 - 2.0 * t)
+                dsm = 6.0 * t * (1.0 - t) / width if eps < width else 0.0
+            T, dT = sm * F, (dsm * F + sm * dF) * 100.0 / l0n
+        elif law == LAW_RUPP:
+            dl = length - l0n
+            if dl > 0.0 and dl < f_par[n, 0]:
+                T, dT = f_par[n, 3] * dl ** f_par[n, 2], f_par[n, 2] * f_par[n, 3] * dl ** (f_par[n, 2] - 1.0)
+            elif dl >= f_par[n, 0]:
+                T, dT = f_par[n, 1] + f_par[n, 4] * (dl - f_par[n, 0]), f_par[n, 4]
+            else:
+                continue
+        else:
+            T, dT = f_par[n, 0], 0.0
         T = T * f_scale[n] * fm[n]
         dT = dT * f_scale[n] * fm[n]
         if T == 0.0 and dT == 0.0:
             continue
-        u0, u1, u2 = d0 / dn, d1 / dn, d2 / dn
+        inv = 1.0 / dn
+        u0, u1, u2 = d0 * inv, d1 * inv, d2 * inv
         f0, f1, f2 = -T * u0, -T * u1, -T * u2
         if a >= 0:
             Q[a, 0] += f0
@@ -438,28 +574,26 @@ def _fibres(x, R, Q, J, jac, md, fm, l0):
             Q[b, 5] -= rb0 * f1 - rb1 * f0
         if not jac:
             continue
-        alpha = -T / dn
-        beta = T / dn - dT
-        ut, ft = (u0, u1, u2), (f0, f1, f2)
-        rat, rbt = (ra0, ra1, ra2), (rb0, rb1, rb2)
+        alpha = -T * inv
+        beta = T * inv - dT
         if a >= 0:
-            _fibre_block(J, a, a, 1.0, beta, alpha, ut, rat, rat)
-            _fibre_hatprod(J, a, 1.0, ft, rat)
+            _acc_end(acc, a, beta, alpha, u0, u1, u2, ra0, ra1, ra2, 1.0, f0, f1, f2)
         if b >= 0:
-            _fibre_block(J, b, b, 1.0, beta, alpha, ut, rbt, rbt)
-            _fibre_hatprod(J, b, -1.0, ft, rbt)
+            _acc_end(acc, b, beta, alpha, u0, u1, u2, rb0, rb1, rb2, -1.0, f0, f1, f2)
         if a >= 0 and b >= 0:
-            _fibre_block(J, a, b, -1.0, beta, alpha, ut, rat, rbt)
-            _fibre_block(J, b, a, -1.0, beta, alpha, ut, rbt, rat)
+            ut, ft = (u0, u1, u2), (f0, f1, f2)
+            rat, rbt = (ra0, ra1, ra2), (rb0, rb1, rb2)
+            _fibre_block(J, a, b, -1.0, beta, alpha, ut, rat, rbt, 0.0, ft)
+            _fibre_block(J, b, a, -1.0, beta, alpha, ut, rbt, rat, 0.0, ft)
+    if jac:
+        for k in range(acc.shape[0]):
+            _acc_to_j(J, acc, k)
 
 
 @_inner
-def _contacts(x, R, Q, J, jac, md, cm, w3, w33):
+def _contacts(x, R, Q, J, jac, c, k_a, k_b, k_s, k_surf, k_stiff, ceps, s_orig, s_axes, s_coef, cm, w3, w33):
     """Facet contact: the penalty on the gap of each contact point to the lower body's cubic surface."""
-    (c, f_a, f_b, f_sa, f_sb, f_extra, f_law, f_par, f_scale, width,
-     k_a, k_b, k_s, k_surf, k_stiff, ceps, s_orig, s_axes, s_coef,
-     d_up, d_lo, d_centre, d_frame, d_k, d_torque) = md
-    ra, rb, f, tmp, v0, v1, v2 = w3[2], w3[3], w3[5], w3[6], w3[7], w3[8], w3[9]
+    ra, rb, f, v0, v1, v2 = w3[2], w3[3], w3[5], w3[7], w3[8], w3[9]
     K = w33[0]
     # screen: the surface coordinates (u, v, w) of a point are one affine map of its reference coordinates, G (S - c_a)
     # + t, built once per (surface, upper body, lower body); a point whose screened penetration is below -SCREEN_M
@@ -504,31 +638,50 @@ def _contacts(x, R, Q, J, jac, md, cm, w3, w33):
         dFm = dFm * cm[n]
         if Fm == 0.0 and dFm == 0.0:
             continue
-        ax, cf = s_axes[sid], s_coef[sid]
-        ra[0], ra[1], ra[2], rb[0], rb[1], rb[2] = q0, q1, q2, e0, e1, e2
-        fu = 3 * cf[0] * u2 + 2 * cf[2] * u
-        fv = 3 * cf[1] * v2_ + 2 * cf[3] * v
-        fuu = 6 * cf[0] * u + 2 * cf[2]
-        fvv = 6 * cf[1] * v + 2 * cf[3]
-        for i in range(3):
-            tmp[i] = -fu * ax[0, i] - fv * ax[1, i] + ax[2, i]
-        _rot(R, b, tmp, v0)
+        cf0, cf1, cf2, cf3 = s_coef[sid, 0], s_coef[sid, 1], s_coef[sid, 2], s_coef[sid, 3]
+        fu = 3 * cf0 * u2 + 2 * cf2 * u
+        fv = 3 * cf1 * v2_ + 2 * cf3 * v
+        # the surface normal (not unit) nm = -fu e_u - fv e_v + e_w in the lower body, v0 = R_b nm in the world
+        nm0 = -fu * s_axes[sid, 0, 0] - fv * s_axes[sid, 1, 0] + s_axes[sid, 2, 0]
+        nm1 = -fu * s_axes[sid, 0, 1] - fv * s_axes[sid, 1, 1] + s_axes[sid, 2, 1]
+        nm2 = -fu * s_axes[sid, 0, 2] - fv * s_axes[sid, 1, 2] + s_axes[sid, 2, 2]
+        v00, v01, v02 = _rot3(R, b, nm0, nm1, nm2)
+        f0, f1, f2 = Fm * v00, Fm * v01, Fm * v02
+        # the force on a (lever q about a) and -f on b (lever e about b), as _add_force
+        if a >= 0:
+            Q[a, 0] += f0
+            Q[a, 1] += f1
+            Q[a, 2] += f2
+            Q[a, 3] += q1 * f2 - q2 * f1
+            Q[a, 4] += q2 * f0 - q0 * f2
+            Q[a, 5] += q0 * f1 - q1 * f0
+        if b >= 0:
+            Q[b, 0] += -1.0 * f0
+            Q[b, 1] += -1.0 * f1
+            Q[b, 2] += -1.0 * f2
+            Q[b, 3] += -1.0 * (e1 * f2 - e2 * f1)
+            Q[b, 4] += -1.0 * (e2 * f0 - e0 * f2)
+            Q[b, 5] += -1.0 * (e0 * f1 - e1 * f0)
+        if not jac:
+            continue
+        fuu = 6 * cf0 * u + 2 * cf2
+        fvv = 6 * cf1 * v + 2 * cf3
+        ax = s_axes[sid]
+        v0[0], v0[1], v0[2] = v00, v01, v02
         _rot(R, b, ax[0], v1)
         _rot(R, b, ax[1], v2)
         w0, w1, w2 = -dFm, -Fm * fuu, -Fm * fvv
         for i in range(3):
-            f[i] = Fm * v0[i]
             for j in range(3):
                 K[i, j] = w0 * v0[i] * v0[j] + w1 * v1[i] * v1[j] + w2 * v2[i] * v2[j]
-        _assemble(Q, J, jac, a, b, f, ra, rb, K, True)
+        ra[0], ra[1], ra[2], rb[0], rb[1], rb[2] = q0, q1, q2, e0, e1, e2
+        f[0], f[1], f[2] = f0, f1, f2
+        _assemble_j(J, a, b, f, ra, rb, K, True)
 
 
 @_inner
-def _discs(x, R, Q, J, jac, md, kt, off, w3, w33):
+def _discs(x, R, Q, J, jac, c, d_up, d_lo, d_centre, d_frame, d_k, d_torque, kt, off, w3, w33):
     """Discs: the translational spring in the disc frame and the Eq. 3 torque per project axis."""
-    (c, f_a, f_b, f_sa, f_sb, f_extra, f_law, f_par, f_scale, width,
-     k_a, k_b, k_s, k_surf, k_stiff, ceps, s_orig, s_axes, s_coef,
-     d_up, d_lo, d_centre, d_frame, d_k, d_torque) = md
     pa, ra, rb, P, f, v0, v1, v2 = w3[0], w3[2], w3[3], w3[4], w3[5], w3[7], w3[8], w3[9]
     K = w33[0]
     Ra, RB, Rrel, M, Ji = w33[1], w33[2], w33[3], w33[4], w33[5]
@@ -601,12 +754,15 @@ def _discs(x, R, Q, J, jac, md, kt, off, w3, w33):
 
 
 @_inner
-def eval_one(x, R, Q, J, jac, md, fm, cm, l0, kt, off, w3, w33):
+def eval_one(x, R, Q, J, jac, md, fm, cm, l0, kt, off, w3, w33, acc):
     """Residual Q (nb, 6) (pre-filled with the loads) and Jacobian J (nb, 6, nb, 6) (zeroed) of one scenario;
-    w3 (16, 4) and w33 (8, 3, 3) are work space."""
-    _fibres(x, R, Q, J, jac, md, fm, l0)
-    _contacts(x, R, Q, J, jac, md, cm, w3, w33)
-    _discs(x, R, Q, J, jac, md, kt, off, w3, w33)
+    w3 (16, 4), w33 (8, 3, 3) and acc (nb, ACC) are work space."""
+    (c, f_a, f_b, f_sa, f_sb, f_extra, f_law, f_par, f_scale, width,
+     k_a, k_b, k_s, k_surf, k_stiff, ceps, s_orig, s_axes, s_coef,
+     d_up, d_lo, d_centre, d_frame, d_k, d_torque) = md
+    _fibres(x, R, Q, J, jac, c, f_a, f_b, f_sa, f_sb, f_extra, f_law, f_par, f_scale, width, fm, l0, acc)
+    _contacts(x, R, Q, J, jac, c, k_a, k_b, k_s, k_surf, k_stiff, ceps, s_orig, s_axes, s_coef, cm, w3, w33)
+    _discs(x, R, Q, J, jac, c, d_up, d_lo, d_centre, d_frame, d_k, d_torque, kt, off, w3, w33)
 
 
 @_inner
@@ -624,6 +780,34 @@ def zero_array(a):
     f = a.reshape(a.size)
     for i in range(f.size):
         f[i] = 0.0
+
+
+@_inner
+def copy2(dst, src):
+    """dst[...] = src for 2-d arrays of the same shape (loops over the indices: no reshape, which numba does through
+    a C call, in the Newton iteration's per-trial copies)."""
+    for i in range(dst.shape[0]):
+        for j in range(dst.shape[1]):
+            dst[i, j] = src[i, j]
+
+
+@_inner
+def copy3(dst, src):
+    """dst[...] = src for 3-d arrays of the same shape (see :func:`copy2`)."""
+    for i in range(dst.shape[0]):
+        for j in range(dst.shape[1]):
+            for k in range(dst.shape[2]):
+                dst[i, j, k] = src[i, j, k]
+
+
+@_inner
+def zero4(a):
+    """a[...] = 0 for a 4-d array (a Jacobian; see :func:`copy2`)."""
+    for i in range(a.shape[0]):
+        for j in range(a.shape[1]):
+            for k in range(a.shape[2]):
+                for m in range(a.shape[3]):
+                    a[i, j, k, m] = 0.0
 
 
 @_inner
@@ -645,11 +829,11 @@ def same_row(a, s, s0):
 @_jit
 def evaluate_batch(x, R, L, fm, cm, l0, kt, off, jac, md, Q, J):
     """Q (B, nb, 6) and, with ``jac``, J (B, nb, 6, nb, 6) (both written here) of a batch."""
-    w3, w33 = np.empty((16, 4)), np.empty((8, 3, 3))
+    w3, w33, acc = np.empty((16, 4)), np.empty((8, 3, 3)), np.empty((x.shape[1], ACC))
     for s in range(x.shape[0]):
         copy_array(Q[s], L[s if L.shape[0] > 1 else 0])
         if jac:
             zero_array(J[s])
         eval_one(x[s], R[s], Q[s], J[s] if jac else J[0], jac, md, fm[s if fm.shape[0] > 1 else 0],
                   cm[s if cm.shape[0] > 1 else 0], l0[s if l0.shape[0] > 1 else 0],
-                  kt[s if kt.shape[0] > 1 else 0], off[s if off.shape[0] > 1 else 0], w3, w33)
+                  kt[s if kt.shape[0] > 1 else 0], off[s if off.shape[0] > 1 else 0], w3, w33, acc)
