@@ -232,6 +232,43 @@ class _Reader:
                                                        unit="activities",
                                                        note="in-vivo activities reached with a certified optimum"))
 
+    # -- paper 2 claim by claim: reproduced claims per variant and class, the chains' fit to the muscle geometry
+    def paper2(self):
+        rel = self.out("muscle_model", "reproduction_counts")
+        classes = ("all", "validation", "table1", "flexion_relaxation", "sensitivity_headline", "sensitivity_bound")
+        variants = ("reproduction", "calibrated_chain")
+        names = [(f"paper2.{v}.{c}.reproduced", HIGHER, ("abs", 0), "claims") for v in variants for c in classes]
+        if not self.exists(rel):
+            self.missing(names, rel)
+        else:
+            c = pd.read_csv(rel)
+            for v in variants:
+                for cls in classes:
+                    r = c[(c["variant"] == v) & (c["claim_class"] == cls)]
+                    name = f"paper2.{v}.{cls}.reproduced"
+                    if r.empty:
+                        self.put(name, absent(HIGHER, rel, f"no {v} rows of class {cls} in this run", ("abs", 0),
+                                              "claims"))
+                        continue
+                    r = r.iloc[0]
+                    self.put(name, figure(r["reproduced"], HIGHER, rel, ("abs", 0), of=r["comparable"],
+                                          unit="claims", note=f"paper 2's {cls} claims reproduced (within x1.5 or "
+                                          f"the stated bound) of the comparable ones, {v}"))
+        rel = self.out("muscle_model", "chain_admissibility")
+        names = [(f"paper2.{v}.levels_admissible", HIGHER, ("abs", 0), "levels") for v in variants]
+        if not self.exists(rel):
+            self.missing(names, rel)
+            return
+        a = pd.read_csv(rel)
+        for v in variants:
+            d = a[a["variant"] == v]
+            name = f"paper2.{v}.levels_admissible"
+            if d.empty:
+                self.put(name, absent(HIGHER, rel, f"variant {v} not in this run", ("abs", 0), "levels"))
+            else:
+                self.put(name, figure(int(d["admissible"].sum()), HIGHER, rel, ("abs", 0), of=len(d), unit="levels",
+                                      note="levels without facet overlap at rest that flex in 36 deg flexion"))
+
     # -- physical admissibility of the calibrated set
     def admissibility(self):
         rel = self.out("admissibility", "table")
@@ -304,6 +341,7 @@ def collect(root: str | Path = manifests.RESULTS_DIR, job_times: bool = True) ->
     r.outliers()
     r.discovery()
     r.muscle()
+    r.paper2()
     r.admissibility()
     r.landmarks()
     r.first_page()
