@@ -1,7 +1,8 @@
 """Muscle-driven model (paper 2), rule muscle_validation_calibrated: the same activities on the calibrated passive
 chain (the workflow's calibrated disc, facets and ligaments at every level of the muscle model's geometry;
 lumbar.muscles.muscle_validation.validation_study, variant calibrated_chain), its tables under names of their own
-for the claims table. A baseline posture whose optimum IPOPT cannot certify stops the job with an error naming it.
+for the claims table. A posture whose optimum IPOPT cannot certify is flagged (certified False, one WARNING naming
+it): not comparable in the claims table.
 
 By hand: python workflow/scripts/muscle_validation_calibrated.py muscle_validation_calibrated --configfile config/test/config.yaml
 """
