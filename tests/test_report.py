@@ -368,7 +368,7 @@ def test_first_page_abstract_counts_distinct_comparisons(fake_full):
     html_path, _, _ = _build(*fake_full)
     text = parse_report(html_path).text
     # 9 rows, 7 distinct comparisons: 4 independent (1 within... 2 within), 3 calibration targets (all met)
-    assert "in 7 distinct comparisons" in text
+    assert "7 distinct comparisons with measurements" in text
     assert "Independent checks: 2 of 4 within" in text and "Calibration targets (a fit quality, not a validation): " \
         "3 of 3 met" in text
     assert "misses: L4-L5 ROM (paper's Table 3 set as published) 0 of 1; L4-L5 IDP in vivo 1 of 2." in text
@@ -435,7 +435,7 @@ def test_first_page_links_the_findings_it_leaves_to_their_sections(fake_full):
     for anchor in ("validation", "flags"):
         assert f'<a href="#{anchor}">' in first and f'id="{anchor}"' in html, anchor
     assert "](#" not in parse_report(html_path).text                     # no link markup left as text
-    assert pdf_path.read_bytes().count(b"/Subtype /Link") >= 3 and b"/Dest [" in pdf_path.read_bytes()   # PDF links
+    assert pdf_path.read_bytes().count(b"/Subtype /Link") >= 2 and b"/Dest [" in pdf_path.read_bytes()   # PDF links
 
 
 def test_dag_report_first_page_is_one_page(dag_workdir):
@@ -631,6 +631,24 @@ def test_first_page_says_in_words_which_trivial_model_the_model_does_not_beat():
     assert "3 of 5 within against 2 (the mean)" in s and s.count("does not beat") == 1      # control
     assert "which it does not beat" in null_models_sentence(t.iloc[2:].assign(model_beats_null=False))
     assert null_models_sentence(t.iloc[:0]) == ""
+
+
+def test_first_page_puts_the_trivial_models_counts_beside_the_models():
+    """The first page's short form of the null-model table: the trivial models' counts beside the model's own count
+    of the quantity, and how many of them the model beats (control: a quantity without a trivial model gets none)."""
+    import pandas as pd
+
+    from lumbar.report.sections import null_models_brief, trivial_counts
+
+    t = pd.DataFrame({"quantity": ["ROM, other levels", "ROM, other levels", "L4-L5 IDP in vivo"],
+                      "null_model": ["a", "b", "c"], "description": ["copy A", "copy B", "the mean"],
+                      "n_rows": [16, 16, 5], "model_within": [12, 12, 3], "null_within": [9, 13, 2],
+                      "model_beats_null": [True, False, True]})
+    assert trivial_counts(t, "ROM, other levels") == " (trivial models: 9, 13)"
+    assert trivial_counts(t, "L4-L5 IDP in vivo") == " (trivial model: 2)"
+    assert trivial_counts(t, "facet joint space width") == "" and trivial_counts(None, "x") == ""
+    assert null_models_brief(t) == "It beats 2 of 3 trivial models on the same rows."
+    assert null_models_brief(t.iloc[:0]) == ""
 
 
 def test_contact_sentence_reads_the_joints_once_and_apart_at_the_lumbosacral_level():

@@ -244,19 +244,24 @@ def null_models_sentence(t: pd.DataFrame) -> str:
     return ("Beside trivial models on the same rows: " + "; ".join(parts) + ".") if parts else ""
 
 
+def trivial_counts(t: pd.DataFrame | None, quantity: str) -> str:
+    """The trivial models' counts on the model's rows of one scoreboard quantity, as the first page puts them beside
+    the model's (" (trivial models: 9, 13)"); empty without such a model."""
+    if t is None or t.empty:
+        return ""
+    g = t[t["quantity"] == quantity]
+    if g.empty:
+        return ""
+    return f" (trivial model{'s' if len(g) > 1 else ''}: {', '.join(str(int(v)) for v in g['null_within'])})"
+
+
 def null_models_brief(t: pd.DataFrame) -> str:
-    """The null-model table (role validation.null_models) as the first page says it: what each trivial model scores on
-    the model's own independent rows, per quantity, and how many of them the model beats."""
+    """How many of the trivial models (role validation.null_models) the model beats on the same rows, as the first
+    page says it after their counts (:func:`trivial_counts`)."""
     if t.empty:
         return ""
-    parts = []
-    for q, g in t.groupby("quantity", sort=False):
-        parts.append(f"{V.condition_label(q)} " + " and ".join(f"{int(r.null_within)} ({r.null_model})"
-                                                               for r in g.itertuples(index=False)))
     beats = int(t["model_beats_null"].astype(bool).sum())
-    verdict = ("the model beats none of them" if beats == 0 else "the model beats all of them" if beats == len(t)
-               else f"the model beats {beats} of {len(t)}")
-    return "Trivial models on the same rows score: " + "; ".join(parts) + f"; {verdict}."
+    return f"It beats {beats} of {len(t)} trivial models on the same rows."
 
 
 class ReportBuilder:
@@ -528,28 +533,31 @@ class ReportBuilder:
             out.append("Calibration targets: none in this configuration.")
         else:
             counts = V.role_counts(d)
-            out.append(f"The models against measurements they did not generate, in {len(d)} distinct comparisons "
-                       "(Fig. R; [Validation on real data](#validation)).")
+            out.append(f"{len(d)} distinct comparisons with measurements the models did not generate (Fig. R; "
+                       "[Validation on real data](#validation)).")
             w, n = counts.get(V.INDEPENDENT, (0, 0))
             ind = d[d["role"] == V.INDEPENDENT]
+            rel = self.out("validation", "null_models")
+            nulls = read_csv(self.path(rel)) if self.has(rel) else None
             agree, miss = [], []
             for (q, sets), g in ind.groupby(["quantity", "sets"], sort=False):
                 # the model's own comparisons (calibrated unit, muscle model, geometry) name no set; another set's
-                # (the paper's Table 3 set as published) does
-                name = V.condition_label(q) + ("" if sets in OWN_SETS else f" ({V.sets_label(sets)})")
+                # (the paper's Table 3 set as published) does; the model's own beside the trivial models' counts
+                own = sets in OWN_SETS
+                name = V.condition_label(q) + ("" if own else f" ({V.sets_label(sets)})")
+                beside = trivial_counts(nulls, q) if own else ""
                 if g["within"].all():
-                    agree.append(name)
+                    agree.append(name + beside)
                 else:
-                    miss.append(f"{name} {int(g['within'].sum())} of {len(g)}")
-            text = f"Independent checks: {w} of {n} within their acceptance interval"
+                    miss.append(f"{name} {int(g['within'].sum())} of {len(g)}{beside}")
+            text = f"Independent checks: {w} of {n} within"
             if agree:
                 text += "; agrees: " + ", ".join(agree)
             if miss:
                 text += "; misses: " + "; ".join(miss)
             out.append(text + ".")
-            rel = self.out("validation", "null_models")
-            if self.has(rel):
-                out.append(null_models_brief(read_csv(self.path(rel))))
+            if nulls is not None:
+                out.append(null_models_brief(nulls))
             w, n = counts.get(V.INTERNAL, (0, 0))
             paras.append(" ".join(x for x in out if x))
             out = []
@@ -557,9 +565,9 @@ class ReportBuilder:
                 g = d[d["role"] == V.INTERNAL]
                 miss = [f"{V.condition_label(r.condition)}" for r in g.itertuples() if not r.within]
                 wc, nc = counts.get(V.CONSTRAINT, (0, 0))
-                out.append(f"Internal loads of the calibrated unit (judged, never fitted): {w} of {n} within"
+                out.append(f"Internal loads (judged, never fitted): {w} of {n} within"
                            + (f" (outside: {', '.join(miss)})" if miss else "")
-                           + (f"; held by the fit as constraints: {wc} of {nc}" if nc else "")
+                           + (f"; held as fit constraints: {wc} of {nc}" if nc else "")
                            + " (Tables R3, R4; where they come from: [What the data told us](#posterior)).")
             if out:
                 paras.append(" ".join(out))
@@ -568,14 +576,14 @@ class ReportBuilder:
             out.append(f"Calibration targets (a fit quality, not a validation): {w} of {n} met." if n else
                        "Calibration targets: none in this configuration.")
         out.append(self._muscle_abstract())
-        sur = [name for name, flag in (("Table 4", self.sr_surrogate), ("Table 5", self.idp_surrogate)) if flag]
+        sur = [name for name, flag in (("4", self.sr_surrogate), ("5", self.idp_surrogate)) if flag]
         warn = self.warnings()
         tail = (f"{len(warn)} warning(s) need the user's attention ([Flags](#flags))." if warn is not None
                 else "The workflow logs were not given to the report.")
         if sur:
-            out.append(f"{' and '.join(sur)} count{'s' if len(sur) == 1 else ''} outliers against SURROGATE data "
-                       "(virtual specimens of this model): "
-                       f"a method check, not the paper's reproduction. {tail}")
+            tables = "Tables 4 and 5 count" if len(sur) == 2 else f"Table {sur[0]} counts"
+            out.append(f"{tables} outliers against SURROGATE data (this model's virtual specimens): a method check, "
+                       f"not the paper's reproduction. {tail}")
         else:
             out.append(f"Tables 4 and 5 compare with the configured measured tables. {tail}")
         return [p for p in paras + [" ".join(out)] if p]
