@@ -194,6 +194,52 @@ def test_same_equilibria_on_the_l2s1_model_with_cables():
 
 
 @needs_numba
+def test_lowest_eigenvalue_of_the_newton_shift_equals_numpys():
+    """The compiled Newton step's shift uses the lowest eigenvalue of the scaled symmetric tangent (numpy's eigvalsh
+    on the reference path; Jacobi rotations in the compiled core, which runs without allocating): the same to
+    round-off on indefinite, definite and degenerate matrices of one and four bodies. Control: the lowest diagonal
+    entry, what a test of the diagonal alone would give, is not the answer."""
+    rng = np.random.default_rng(7)
+    for n in (6, 24):
+        for kind in ("indefinite", "definite", "repeated"):
+            A = rng.normal(size=(n, n)) * np.logspace(0, 4, n)[None]
+            A = A @ A.T if kind == "definite" else 0.5 * (A + A.T)
+            if kind == "repeated":
+                Qm = np.linalg.qr(rng.normal(size=(n, n)))[0]
+                A = Qm @ np.diag(np.r_[[-3.0] * 3, np.linspace(1, 5, n - 3)]) @ Qm.T
+            lam = np.linalg.eigvalsh(A)[0]
+            got = kernel.lowest_eigenvalue(A)
+            assert abs(got - lam) <= 1e-12 * np.abs(A).max(), (n, kind, got, lam)
+            assert abs(np.diag(A).min() - lam) > 1e-6 * np.abs(A).max()      # control
+
+
+@needs_numba
+def test_the_newton_shift_where_the_tangent_is_indefinite_matches_the_reference():
+    """From a saddle (the disc-only stage's reference state: the disc's flexion law has a negative stiffness about
+    zero, docs/validity.md) the modified Newton step shifts the tangent by its lowest eigenvalue: the compiled core
+    (Jacobi rotations) and the reference path (numpy) give the same equilibria and iterations. Control: the start
+    state is indefinite, so the shift is used."""
+    from lumbar.experiments.fsu import moment_loads
+    from lumbar.inputs.characteristics import load_characteristic_set
+    from lumbar.mechanics.solve import stable_rest_states
+    fsu = build_fsu(load_geometry("visible_human", levels=["L4-L5"]), load_characteristic_set("calibrated"))
+    m = fsu.model
+    fm, cm = fsu.masks(["wo_all"])
+    x, R = m.reference_state(1)
+    assert not stable_rest_states(m, x, R, fm, cm)[0]                           # control: a saddle
+    dirs = ["flexion", "extension", "lateral_bending", "axial_rotation"] * 2
+    loads = moment_loads(dirs, [1.0] * 4 + [5.0] * 4, m.nb)
+    out = {}
+    for mode in kernel.MODES:
+        with kernel.use(mode):
+            out[mode] = solve(m, loads, x0=np.repeat(x, 8, 0), R0=np.repeat(R, 8, 0), fmask=fm, cmask=cm)
+    c, r = out["compiled"], out["reference"]
+    assert c.converged.all() and (c.iterations == r.iterations).all()
+    assert_same(c.x, r.x)
+    assert_same(so3.log(c.R), so3.log(r.R))
+
+
+@needs_numba
 def test_a_start_state_shared_by_a_batch_gives_what_each_scenario_gives_alone(charset):
     """Consecutive scenarios from the same start state with the same element data share the start's internal forces
     and Jacobian; a batch must give, bit for bit, what each scenario gives solved alone, also where the start

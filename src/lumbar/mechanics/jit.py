@@ -27,10 +27,17 @@ _inner = njit(cache=True, error_model="numpy", no_cpython_wrapper=True, no_cfunc
 # made inside such a helper borrows its parent's memory, which the caller keeps alive for the call.
 _leaf = njit(cache=True, error_model="numpy", no_cpython_wrapper=True, no_cfunc_wrapper=True, _nrt=False) \
     if HAVE_NUMBA else _jit
+# a leaf helper whose body numba copies into each caller (numba's IR inlining, before type inference): for a function
+# whose arguments cost more to pass than its body costs to run (the residual of one scenario takes the model's 25
+# arrays, each passed as its 7-11 machine words: copying them at every Newton trial took about a tenth of a solve).
+# Only for small bodies called from few places: numba compiles the body once per call site.
+_inline_leaf = njit(cache=True, error_model="numpy", no_cpython_wrapper=True, no_cfunc_wrapper=True, _nrt=False,
+                    inline="always") if HAVE_NUMBA else _jit
 #: the decorators of every compiled module of the package: one cache rule, one error model, one switch
 #: (lumbar.mechanics.kernel.active); ``inner_jit`` for functions called only from compiled code, ``leaf_jit`` for
 #: such functions that allocate no array (compiled without reference counting; a numpy call that allocates does not
-#: compile there)
+#: compile there), ``inline_leaf_jit`` for such a function whose body is copied into its callers
 jit = _jit
 inner_jit = _inner
 leaf_jit = _leaf
+inline_leaf_jit = _inline_leaf

@@ -71,7 +71,7 @@ inner_jit = _inner
 #: every kernel; when it does not (kernel_residual.py edited), newton_batch compiles without the cache in that
 #: process, and tests/test_kernel.py fails until the digest here is updated, the edit of this file that retires the
 #: cache entry.
-RESIDUAL_SHA256 = "ac599ea1cebf20b54ca9fa040e6009d3cc39557ccaa4332e6caf128da5805a8d"
+RESIDUAL_SHA256 = "735a3976034aa1d37489317b002471d49d0aeeda1f0f929a2d011b3b1b3fe36d"
 
 
 def residual_pinned(digest: str = RESIDUAL_SHA256) -> bool:
@@ -83,6 +83,8 @@ def residual_pinned(digest: str = RESIDUAL_SHA256) -> bool:
 
 
 _newton_jit = _jit if residual_pinned() else njit(cache=False, error_model="numpy")
+_newton_leaf = _leaf if residual_pinned() else njit(cache=False, error_model="numpy", no_cpython_wrapper=True,
+                                                      no_cfunc_wrapper=True, _nrt=False)
 
 #: Newton trials from residuals below LAZY x the tolerances are evaluated without the Jacobian first (newton_batch);
 #: on the default unit's benchmark scenarios 1e3, 1e4, 1e5, 1e6 and 1e7 cost 83.9, 83.1, 82.8, 85.3 and 88.2 us of
@@ -331,6 +333,58 @@ def _norms(Q):
 
 
 @_leaf
+def _lowest_eigenvalue(sym, a):
+    """The lowest eigenvalue of the symmetric matrix sym, by cyclic Jacobi rotations on the work array a (n, n),
+    to round-off (numpy's eigvalsh, the reference path's, allocates: the Newton iteration runs without reference
+    counting). Called only where the Cholesky test of the modified Newton step fails."""
+    n = sym.shape[0]
+    total = 0.0
+    for i in range(n):
+        for j in range(n):
+            a[i, j] = sym[i, j]
+            total += sym[i, j] * sym[i, j]
+    for _sweep in range(60):
+        off = 0.0
+        for i in range(n):
+            for j in range(i + 1, n):
+                off += a[i, j] * a[i, j]
+        if not off > 1e-32 * total:
+            break
+        for p in range(n - 1):
+            for q in range(p + 1, n):
+                apq = a[p, q]
+                if apq == 0.0:
+                    continue
+                theta = (a[q, q] - a[p, p]) / (2.0 * apq)
+                if abs(theta) > 1e150:
+                    t = 0.5 / theta
+                else:
+                    t = 1.0 / (abs(theta) + np.sqrt(theta * theta + 1.0))
+                    if theta < 0.0:
+                        t = -t
+                c = 1.0 / np.sqrt(t * t + 1.0)
+                sn = t * c
+                for k in range(n):
+                    akp, akq = a[k, p], a[k, q]
+                    a[k, p] = c * akp - sn * akq
+                    a[k, q] = sn * akp + c * akq
+                for k in range(n):
+                    apk, aqk = a[p, k], a[q, k]
+                    a[p, k] = c * apk - sn * aqk
+                    a[q, k] = sn * apk + c * aqk
+    lam = a[0, 0]
+    for i in range(1, n):
+        lam = min(lam, a[i, i])
+    return lam
+
+
+@_jit
+def lowest_eigenvalue(sym):
+    """Python entry of :func:`_lowest_eigenvalue` (for tests)."""
+    return _lowest_eigenvalue(np.ascontiguousarray(sym), np.empty_like(sym))
+
+
+@_leaf
 def _step_matrix(J, reg, S, A, sym, W):
     """First half of the modified Newton step (lumbar.mechanics.solve._modified_newton_step): A = (-J + diag(reg))
     in scaled variables and its symmetric part sym; returns (0, scale) where sym is positive definite (no shift),
@@ -378,7 +432,7 @@ def _step_solve(Q, S, A, W, rhs, d, mu):
 def newton_batch(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max_st, max_sr, reg, S, lscale,
                  x, R, conv, res_f, res_m, iters):
     """Damped modified Newton, scenario by scenario (lumbar.mechanics.solve.newton_reference, same steps)."""
-    B, nb = x0.shape[0], x0.shape[1]
+    nb = x0.shape[1]
     n = 6 * nb
     Q, Qt = np.empty((nb, 6)), np.empty((nb, 6))
     J, Jt = np.empty((nb, 6, nb, 6)), np.empty((nb, 6, nb, 6))
@@ -391,6 +445,16 @@ def newton_batch(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max
     # from the same state with the same element data (a batch of loads from one equilibrium), whose residuals are
     # then evaluated without it (the same arithmetic as with it: the results are bit-identical to unshared solves)
     J0 = np.empty((nb, 6, nb, 6))
+    _newton_scenarios(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max_st, max_sr, reg, S, lscale,
+                      x, R, conv, res_f, res_m, iters, Q, Qt, J, Jt, J0, A, sym, W, rhs, d, xt, Rt, E, wv, w3, w33, acc)
+
+
+@_newton_leaf
+def _newton_scenarios(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max_st, max_sr, reg, S, lscale,
+                      x, R, conv, res_f, res_m, iters, Q, Qt, J, Jt, J0, A, sym, W, rhs, d, xt, Rt, E, wv, w3, w33, acc):
+    """The iteration of newton_batch on its work arrays, compiled without reference counting (the residual's
+    arguments, inlined here, are then plain values: no reference count to raise and lower at every trial)."""
+    B, nb = x0.shape[0], x0.shape[1]
     s0 = -1
     # run-time bools: a literal would type (and compile) eval_one a second time
     want_j = max_iter >= 0
@@ -429,7 +493,7 @@ def newton_batch(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max
             if shift == 1:
                 mu = np.nan
             elif shift == 2:
-                lam = np.linalg.eigvalsh(sym)[0]
+                lam = _lowest_eigenvalue(sym, W)
                 if lam < 1e-8 * scale:
                     mu = -lam + 1e-6 * scale
             _step_solve(Q, S, A, W, rhs, d, mu)

@@ -14,6 +14,7 @@ import numpy as np
 
 from .elements.ligament import LAW_CABLE, LAW_RUPP, LAW_SOFTPLUS  # noqa: F401 - compile-time constants
 from .jit import leaf_jit as _inner
+from .jit import inline_leaf_jit as _inline
 from .jit import jit as _jit
 
 #: a contact point whose screened gap (the affine map of _screen_map; it differs from the exact one by round-off,
@@ -753,7 +754,7 @@ def _discs(x, R, Q, J, jac, c, d_up, d_lo, d_centre, d_frame, d_k, d_torque, kt,
                 _add_hat(J, a, b, tau, 1.0, 3, 3)
 
 
-@_inner
+@_inline
 def eval_one(x, R, Q, J, jac, md, fm, cm, l0, kt, off, w3, w33, acc):
     """Residual Q (nb, 6) (pre-filled with the loads) and Jacobian J (nb, 6, nb, 6) (zeroed) of one scenario;
     w3 (16, 4), w33 (8, 3, 3) and acc (nb, ACC) are work space."""
