@@ -140,6 +140,7 @@ CLAIM_CLASSES = {"validation": "validation", "table1": "Table 1 loads", "flexion
                  "rotations": "intervertebral rotations"}
 VARIANT_NAMES = {"reproduction": "reproduction model (paper 2's springs)",
                  "calibrated_chain": "calibrated passive chain"}
+SHORT_VARIANT_NAMES = {"reproduction": "paper 2's model", "calibrated_chain": "on the calibrated chain"}
 
 
 def paper2_claims_sentence(b, short=False):
@@ -160,12 +161,15 @@ def paper2_claims_sentence(b, short=False):
         return int(r["reproduced"]), int(r["comparable"])
 
     out = []
-    for v in dict.fromkeys(c["variant"]):
+    for v in sorted(dict.fromkeys(c["variant"]), key=lambda v: (v != "reproduction", v)):   # the paper's model first
         tot = part(v, "all")
         if tot is None:
             continue
-        s = f"{VARIANT_NAMES.get(v, v)}: {tot[0]} of {tot[1]} comparable claims reproduced"
+        s = f"{(SHORT_VARIANT_NAMES if short else VARIANT_NAMES).get(v, v)} {tot[0]} of {tot[1]}"
         bits = []
+        if short and v != "reproduction":
+            out.append(s)
+            continue
         for cls in (("sensitivity_headline", "flexion_relaxation") if short else
                     ("validation", "sensitivity_headline", "flexion_relaxation", "table1", "sensitivity_bound")):
             p = part(v, cls)
@@ -174,7 +178,9 @@ def paper2_claims_sentence(b, short=False):
         if bits:
             s += " (" + ", ".join(bits) + ")"
         out.append(s)
-    return "Paper 2 claim by claim (within x1.5 or the stated bound): " + "; ".join(out) + "."
+    lead = ("Paper 2, claims reproduced of those comparable: " if short else
+            "Paper 2 claim by claim, comparable claims reproduced (within x1.5 or the stated bound): ")
+    return lead + "; ".join(out) + "."
 
 
 
@@ -626,12 +632,11 @@ class ReportBuilder:
         m = json.loads(self.path(rel).read_text())
         n, total = m.get("n"), m.get("n_total", m.get("n"))
         if m.get("r2") is None or m.get("rmse_mpa") is None:
-            s = (f"The muscle-driven model reaches {fmt(n)} of {fmt(total)} in-vivo activities, too few for R2 and "
-                 "RMSE of the L4-L5 intradiscal pressure")
+            s = (f"In-vivo L4-L5 intradiscal pressure: {fmt(n)} of {fmt(total)} activities certified, too few for "
+                 "R2")
         else:
-            s = (f"The muscle-driven model predicts the in-vivo L4-L5 intradiscal pressure with R2 = {fmt(m['r2'])} "
-                 f"and RMSE = {fmt(m['rmse_mpa'])} MPa over the {fmt(n)} of {fmt(total)} activities it reaches with "
-                 "a certified optimum")
+            s = (f"In-vivo L4-L5 intradiscal pressure: R2 = {fmt(m['r2'])}, RMSE = {fmt(m['rmse_mpa'])} MPa over "
+                 f"{fmt(n)} of {fmt(total)} activities with a certified optimum")
         pub = self.published.get("idp_validation_r2")
         paper = pub["value"] if pub is not None else m.get("paper_r2")
         if paper is not None:
