@@ -220,6 +220,9 @@ def evaluate_claim(c, res: _Results) -> dict:
         return done(float((100.0 * d["idp_moment_mpa"] / d["idp_mpa"]).max()))
     if comp == "increase_most":
         got = [_scenario(res, c["parameter"], float(c["value"]), ssl, sc, post) for sc in SCOPES]
+        if all(g[4] for g in got):                # none of the scopes in this run's sweep
+            out["reason"] = got[0][4]
+            return out
         ok = [g for g in got if g[3]]
         if len(ok) < 3:
             out["reason"] = f"{len(ok)} of 4 scopes certified"

@@ -143,6 +143,51 @@ def grid_table5(b, surrogate):
                   note=b.caption(rel, ""), surrogate=surrogate, marks=True, label="Table 5")
 
 
+#: paper 2's claim quantities and sensitivity parameters in words (the claims table's identifiers)
+CLAIM_QUANTITY_WORDS = {
+    "idp_r2": "in-vivo IDP, R2 of the linear fit", "idp_mpa": "L4-L5 IDP", "idp_moment_share_pct": "moment's share of IDP",
+    "idp_moment_share_max_pct": "largest moment share of IDP over the sweep", "mf_sl_um": "multifidus sarcomere length",
+    "extensor_active_n": "extensor active force", "extensor_passive_n": "extensor passive force",
+    "abdominal_active_n": "abdominal active force",
+    "extensor_active_flexion_over_standing": "extensor active force, flexion / standing",
+    "intervertebral_rotation_within_range": "intervertebral rotations within Wong et al.'s range",
+    "idp_change_pct": "IDP change", "idp_abs_change_pct": "|IDP change| at most",
+    "idp_change_between_pct": "IDP change between", "idp_ratio_between_pct": "IDP change between",
+    "reached": "posture reached", "mean_abs_change_flexion_over_standing": "mean |change|, flexion / standing"}
+CLAIM_PARAMETER_WORDS = {"ssl_um": "SSL [um]", "k_n_per_cm2": "K [N/cm2]", "in_situ_sl_um": "in-situ SL [um]",
+                         "spt_n_per_cm2": "SpT [N/cm2]", "pennation_deg": "pennation [deg]"}
+#: reasons that mean "this run did not run it", shown as "not run" (the CSV keeps the reason)
+_NOT_RUN = ("scenario not in this run's sweep", "the sensitivity sweep is not run on this variant",
+            "activity not in this run", "level not in this run's")
+
+
+def _claim_words(r) -> str:
+    q = CLAIM_QUANTITY_WORDS.get(r["quantity"], human_value(r["quantity"]))
+    post = human_value(r["posture"]) if isinstance(r["posture"], str) else ""
+    par = r["parameter"] if isinstance(r["parameter"], str) else ""
+    if r["claim_class"] == "table1":
+        return f"{q} at {r['value']}, {post}"
+    bits = [q, post]
+    if par:
+        bits.append(f"{CLAIM_PARAMETER_WORDS.get(par, par)} {r['value']}")
+    if isinstance(r["ssl_um"], str) and r["ssl_um"]:
+        bits.append(f"with SSL {r['ssl_um']} um")
+    if isinstance(r["scope"], str) and r["scope"]:
+        bits.append(r["scope"])
+    return ", ".join(x for x in bits if x)
+
+
+def _claim_cell(r) -> str:
+    if r is None:
+        return ""
+    reason = r["reason"] if isinstance(r["reason"], str) else ""
+    if r["verdict"] == "not comparable" and any(reason.startswith(x) for x in _NOT_RUN):
+        return "not run"
+    v = r["ours"]
+    txt = "" if pd.isna(v) else fmt(float(v), 3)
+    return f"{txt} ({r['verdict']}{'; ' + reason if reason else ''})".strip()
+
+
 def paper2_claims_tables(b):
     """The claims the paper leads with (validation, flexion-relaxation, headline sensitivity changes, reachability,
     directions) beside ours, per variant; the counts of every class; whether each passive chain fits the muscle
@@ -153,29 +198,23 @@ def paper2_claims_tables(b):
         b.shown.add(norm_path(rel))
         keep = t[t["claim_class"].isin(["validation", "flexion_relaxation", "sensitivity_headline",
                                         "reachability", "sensitivity_direction", "rotations"])]
-        piv = {}
-        for _, r in keep.iterrows():
-            key = r["claim_id"]
-            piv.setdefault(key, {"r": r})[r["variant"]] = r
-        variants = list(dict.fromkeys(t["variant"]))
-
-        def ours(r):
-            if r is None:
-                return ""
-            v = r["ours"]
-            txt = "" if pd.isna(v) else fmt(float(v), 3)
-            return f"{txt} ({r['verdict']}{'; ' + str(r['reason']) if isinstance(r['reason'], str) and r['reason'] else ''})"
-
+        variants = sorted(dict.fromkeys(t["variant"]), key=lambda v: (v != "reproduction", v))
         rows = []
-        for key, d in piv.items():
-            r = d["r"]
-            what = " ".join(str(x) for x in (r["quantity"], r["posture"], r["parameter"], r["value"],
-                                             ("SSL " + str(r["ssl_um"])) if isinstance(r["ssl_um"], str) and r["ssl_um"]
-                                             else "", r["scope"]) if isinstance(x, str) and x and x != "nan")
-            rows.append([human_value(r["claim_class"]), what, f"{fmt(r['paper'])} {r['unit'] if r['unit'] != '-' else ''}"]
-                        + [ours(d.get(v)) for v in variants])
+        for key, d in keep.groupby("claim_id", sort=False):
+            by = {r["variant"]: r for _, r in d.iterrows()}
+            cells = [_claim_cell(by.get(v)) for v in variants]
+            if all(c in ("not run", "") for c in cells):
+                continue
+            r = next(iter(by.values()))
+            paper = r["paper"]
+            try:
+                paper = fmt(float(paper), 3)
+            except (TypeError, ValueError):
+                paper = "" if pd.isna(paper) else str(paper)
+            unit = r["unit"] if isinstance(r["unit"], str) and r["unit"] != "-" else ""
+            rows.append([human_value(r["claim_class"]), _claim_words(r), f"{paper} {unit}".strip()] + cells)
         b.table_block("Paper 2's stated results beside ours (Table 1 and the small-effect bounds: counts below, every "
-                      "row in the CSV)", ["claim class", "claim", "paper"] +
+                      "row with its quote in the CSV)", ["claim class", "claim", "paper"] +
                       [VARIANT_NAMES.get(v, v) for v in variants], rows, source=rel, note=b.caption(rel, ""))
     b.csv_table(b.out("muscle_model", "reproduction_counts"), "Verdict counts of paper 2's claims per variant and "
                 "claim class")

@@ -140,7 +140,7 @@ CLAIM_CLASSES = {"validation": "validation", "table1": "Table 1 loads", "flexion
                  "rotations": "intervertebral rotations"}
 VARIANT_NAMES = {"reproduction": "reproduction model (paper 2's springs)",
                  "calibrated_chain": "calibrated passive chain"}
-SHORT_VARIANT_NAMES = {"reproduction": "paper 2's model", "calibrated_chain": "on the calibrated chain"}
+SHORT_VARIANT_NAMES = {"reproduction": "its model", "calibrated_chain": "on the calibrated chain"}
 
 
 def paper2_claims_sentence(b, short=False):
@@ -178,7 +178,7 @@ def paper2_claims_sentence(b, short=False):
         if bits:
             s += " (" + ", ".join(bits) + ")"
         out.append(s)
-    lead = ("Paper 2, claims reproduced of those comparable: " if short else
+    lead = ("Paper 2 claim by claim, reproduced of comparable: " if short else
             "Paper 2 claim by claim, comparable claims reproduced (within x1.5 or the stated bound): ")
     return lead + "; ".join(out) + "."
 
