@@ -21,9 +21,9 @@ them). The assembled tuple is kept between calls only while it provably shows th
 objects, passed through without copies, and equal disc and surface values.
 
 Scenarios of a batch that start from the same state with the same element data (a batch of loads from one
-equilibrium: the benchmark, the virtual experiments) share the start's Jacobian, which does not depend on the
-loads: their first residual is evaluated without it, bit-identical to each scenario solved alone
-(tests/test_kernel.py).
+equilibrium: the benchmark, the virtual experiments) share the start's internal forces and Jacobian, which do not
+depend on the loads: their first residual is their loads plus the shared internal forces, as for each scenario solved
+alone (bit-identical, tests/test_kernel.py).
 
 Switch: the environment variable ``LUMBAR_KERNEL`` (``compiled``, the default, or ``reference``) at import, or
 :func:`set_mode` / :func:`use` at run time. Without numba the reference path runs (:func:`active` is False) and
@@ -71,7 +71,7 @@ inner_jit = _inner
 #: every kernel; when it does not (kernel_residual.py edited), newton_batch compiles without the cache in that
 #: process, and tests/test_kernel.py fails until the digest here is updated, the edit of this file that retires the
 #: cache entry.
-RESIDUAL_SHA256 = "735a3976034aa1d37489317b002471d49d0aeeda1f0f929a2d011b3b1b3fe36d"
+RESIDUAL_SHA256 = "55f76135de77ef7c6096325a881ecfab422bed69397010228f991203fb062102"
 
 
 def residual_pinned(digest: str = RESIDUAL_SHA256) -> bool:
@@ -441,17 +441,20 @@ def newton_batch(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max
     xt, Rt, E = np.empty((nb, 3)), np.empty((nb, 3, 3)), np.empty((3, 3))
     wv = np.empty(3)
     w3, w33, acc = np.empty((16, 4)), np.empty((8, 3, 3)), np.empty((nb, ACC))
-    # the Jacobian at the start state (it does not depend on the loads): shared by consecutive scenarios that start
-    # from the same state with the same element data (a batch of loads from one equilibrium), whose residuals are
-    # then evaluated without it (the same arithmetic as with it: the results are bit-identical to unshared solves)
-    J0 = np.empty((nb, 6, nb, 6))
+    # the internal forces Q0 and the Jacobian J0 at the start state (neither depends on the loads): shared by
+    # consecutive scenarios that start from the same state with the same element data (a batch of loads from one
+    # equilibrium), whose start residual is then their loads plus Q0, as that of a scenario solved alone (the results
+    # are bit-identical to unshared solves)
+    J0, Q0 = np.empty((nb, 6, nb, 6)), np.empty((nb, 6))
     _newton_scenarios(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max_st, max_sr, reg, S, lscale,
-                      x, R, conv, res_f, res_m, iters, Q, Qt, J, Jt, J0, A, sym, W, rhs, d, xt, Rt, E, wv, w3, w33, acc)
+                      x, R, conv, res_f, res_m, iters, Q, Qt, J, Jt, J0, Q0, A, sym, W, rhs, d, xt, Rt, E, wv, w3, w33,
+                      acc)
 
 
 @_newton_leaf
 def _newton_scenarios(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max_st, max_sr, reg, S, lscale,
-                      x, R, conv, res_f, res_m, iters, Q, Qt, J, Jt, J0, A, sym, W, rhs, d, xt, Rt, E, wv, w3, w33, acc):
+                      x, R, conv, res_f, res_m, iters, Q, Qt, J, Jt, J0, Q0, A, sym, W, rhs, d, xt, Rt, E, wv, w3, w33,
+                      acc):
     """The iteration of newton_batch on its work arrays, compiled without reference counting (the residual's
     arguments, inlined here, are then plain values: no reference count to raise and lower at every trial)."""
     B, nb = x0.shape[0], x0.shape[1]
@@ -466,15 +469,16 @@ def _newton_scenarios(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m
         xs, Rs = x[s], R[s]
         copy_array(xs, x0[s])
         copy_array(Rs, R0[s])
-        copy_array(Q, Ls)
         if s0 < 0 or not (same_array(x0[s], x0[s0]) and same_array(R0[s], R0[s0]) and same_row(fm, s, s0)
                           and same_row(cm, s, s0) and same_row(l0, s, s0) and same_row(kt, s, s0)
                           and same_row(off, s, s0)):
+            zero_array(Q0)
             zero_array(J0)
-            eval_one(xs, Rs, Q, J0, want_j, md, fms, cms, l0s, kts, offs, w3, w33, acc)
+            eval_one(xs, Rs, Q0, J0, want_j, md, fms, cms, l0s, kts, offs, w3, w33, acc)
             s0 = s
-        else:
-            eval_one(xs, Rs, Q, J0, no_j, md, fms, cms, l0s, kts, offs, w3, w33, acc)
+        for k in range(nb):          # the start's residual: its loads plus the internal forces it shares
+            for i in range(6):
+                Q[k, i] = Ls[k, i] + Q0[k, i]
         copy_array(J, J0)
         conv[s] = False
         iters[s] = 0
