@@ -35,7 +35,13 @@ import contextlib
 import hashlib
 import logging
 import os
+import tempfile
 from pathlib import Path
+
+try:  # POSIX; elsewhere the first use is not serialised between processes
+    import fcntl
+except ImportError:  # pragma: no cover
+    fcntl = None
 
 import numpy as np
 
@@ -91,7 +97,7 @@ _newton_leaf = _leaf if residual_pinned() else njit(cache=False, error_model="nu
 #: evaluations per equilibrium (counted evaluations x the measured cost with / without the Jacobian; all: 85.7)
 LAZY = 1e5
 MODES = ("compiled", "reference")
-_state = {"mode": os.environ.get("LUMBAR_KERNEL", "compiled"), "warned": False}
+_state = {"mode": os.environ.get("LUMBAR_KERNEL", "compiled"), "warned": False, "ready": False}
 if _state["mode"] not in MODES:
     raise ValueError(f"environment variable LUMBAR_KERNEL={_state['mode']!r}; expected one of {MODES}")
 
@@ -248,6 +254,7 @@ def scenario_data(model, B, loads, fmask, cmask, params) -> tuple:
 
 def evaluate(model, x, R, loads=None, fmask=1.0, cmask=1.0, jacobian=True, params=None):
     """Compiled ``SpineModel.evaluate`` (same arguments and results as the reference path)."""
+    _first_use()
     x, R = _f64(x), _f64(R)
     B, nb = x.shape[0], model.nb
     L, fm, cm, l0, kt, off = scenario_data(model, B, loads, fmask, cmask, params)
@@ -552,6 +559,7 @@ def _newton_scenarios(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m
 def newton(model, x, R, loads, fmask, cmask, params, max_iter, tol_force, tol_moment, max_step_trans,
            max_step_rot, reg, S, length_scale):
     """Compiled ``lumbar.mechanics.solve.newton`` (same arguments and results as the reference path)."""
+    _first_use()
     x0, R0 = _f64(x), _f64(R)
     B = x0.shape[0]
     L, fm, cm, l0, kt, off = scenario_data(model, B, loads, fmask, cmask, params)
@@ -579,3 +587,36 @@ def warm_up() -> bool:
     newton_batch(x, R, *rows, md, 5, 1e-8, 1e-8, 1e-3, 0.05, np.ones(6), np.ones(6), 0.05, np.empty_like(x),
                  np.empty_like(R), np.zeros(1, bool), np.empty(1), np.empty(1), np.zeros(1, np.int64))
     return True
+
+
+def lock_path() -> Path:
+    """The lock file of :func:`first_use_lock`: one per numba cache of this package (``NUMBA_CACHE_DIR`` or the
+    package's folder), in the system's temporary folder."""
+    where = os.environ.get("NUMBA_CACHE_DIR") or str(Path(__file__).resolve().parent)
+    return Path(tempfile.gettempdir()) / f"lumbar-kernel-{hashlib.sha256(where.encode()).hexdigest()[:16]}.lock"
+
+
+@contextlib.contextmanager
+def first_use_lock():
+    """An exclusive lock (flock) shared by the processes of this machine that use the same numba cache."""
+    if fcntl is None:  # pragma: no cover
+        yield
+        return
+    with open(lock_path(), "a+") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
+def _first_use():
+    """The first use of the compiled core in this process compiles both kernels, or loads them from the on-disk cache
+    (:func:`warm_up`), holding :func:`first_use_lock`: jobs that start together on a fresh clone (an empty cache) do
+    not compile the same machine code side by side, each on a core; the first compiles, the others wait and load it
+    from the cache (a fraction of a second once it is there)."""
+    if _state["ready"]:
+        return
+    with first_use_lock():
+        warm_up()
+    _state["ready"] = True
