@@ -574,7 +574,13 @@ def newton(model, x, R, loads, fmask, cmask, params, max_iter, tol_force, tol_mo
 def warm_up() -> bool:
     """Compile both kernels, or load them from the on-disk cache, on an empty one-body model (a process that is
     about to start others, e.g. a test session before its Snakemake runs, calls this so that they all load the
-    cache instead of compiling at the same time). Returns whether the compiled core is active."""
+    cache instead of compiling at the same time), holding :func:`first_use_lock`. Returns whether the compiled core
+    is active."""
+    with first_use_lock():
+        return _warm_up()
+
+
+def _warm_up() -> bool:
     if not active():
         return False
     f2, f3, i1 = np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros(0, np.int64)
@@ -618,5 +624,5 @@ def _first_use():
     if _state["ready"]:
         return
     with first_use_lock():
-        warm_up()
+        _warm_up()
     _state["ready"] = True
