@@ -10,9 +10,18 @@ reported at rest and at the equilibria). Scenarios: pure moments 0.5-10 N*m in t
 the published set on the same geometry and the published set on myo-sim (the previous headline). The cold start of
 the compiled core (a fresh interpreter: compiling with an empty numba cache, and loading from the cache) is timed in
 subprocesses. Rates are given per wall second and per CPU second of this process (``*_per_cpu_second``: the
-one-core figure when other jobs share the machine; the load average is recorded before and after). Usage::
+one-core figure when other jobs share the machine; the load average is recorded before and after).
+
+The same-run comparison with an earlier commit (``--baseline-commit``, default 80ee759, the solver core before its
+last speed-up): the commit's tree is extracted (``git archive``) into a temporary folder (or ``--baseline-tree``),
+and the default unit's compiled rate is measured in fresh interpreters on that tree's ``src`` and on this tree's,
+alternately (``--rounds`` each; the best of each counts: the machine's load only ever slows a run), by this script's
+``--rate-only`` mode, the same scenarios and the same geometry and characteristic set for both; the ratio of the two
+and the largest difference of their equilibria are recorded (``vs_baseline``). The JSON is printed and written to
+``benchmarks/results/fsu_equilibria.json`` (``--out``). Usage::
 
     python benchmarks/bench_fsu.py [--n 2000] [--n-reference 1000] [--n-baseline 20] [--no-cold-start]
+                                   [--baseline-commit 80ee759 | --baseline-tree DIR | --no-baseline-commit]
 """
 from __future__ import annotations
 
@@ -32,6 +41,8 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.optimize import root  # noqa: E402
 
+import lumbar  # noqa: E402
+
 from lumbar.experiments.fsu import MAIN_DIRECTIONS, build_fsu, moment_loads  # noqa: E402
 from lumbar.geometry import load_geometry  # noqa: E402
 from lumbar.inputs.characteristics import load_characteristic_set, resolve_characteristic_set  # noqa: E402
@@ -41,8 +52,12 @@ from lumbar.mechanics.elements.facet import contact_penalty  # noqa: E402
 from lumbar.mechanics.solve import solve  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-TARGET_EQUILIBRIA_PER_S = 10_000
+TARGET_EQUILIBRIA_PER_S = 30_000
 TARGET_SPEEDUP = 5.0
+#: the commit the compiled core is compared with in the same run, and the speed-up it must show (equilibria per CPU
+#: second of the default unit, best of the rounds of each)
+BASELINE_COMMIT = "80ee759"
+TARGET_SPEEDUP_VS_BASELINE = 2.5
 
 
 def scenarios(n, seed=0):
@@ -160,6 +175,79 @@ def cold_start():
     return out
 
 
+def rate_only(calibrated_dir, n, repeat, save=None):
+    """The default unit's compiled rate in this interpreter (whichever ``lumbar`` it imports): best wall and CPU time
+    of ``repeat`` solves of the ``n`` benchmark scenarios from the 0 N*m equilibrium. Uses only what 80ee759 has
+    (build_fsu, solve, kernel.use, moment_loads), so that the same code measures both trees."""
+    geo, cs, origin = default_unit(calibrated_dir)
+    m = build_fsu(geo, cs).model
+    r0 = solve(m, np.zeros((1, m.nb, 6)))
+    dirs, M = scenarios(n)
+    loads = moment_loads(dirs, M, m.nb)
+    x0, R0 = np.repeat(r0.x, n, 0), np.repeat(r0.R, n, 0)
+    with kernel.use("compiled"):
+        solve(m, loads[:4], x0=x0[:4], R0=R0[:4])
+        t, c, r = best_time(lambda: solve(m, loads, x0=x0, R0=R0), repeat)
+    if save:
+        np.savez(save, x=r.x, R=r.R, iterations=r.iterations, converged=r.converged)
+    ok = int(r.converged.sum())
+    return {"lumbar": str(Path(lumbar.__file__).resolve().parents[1]), "set_from": origin, "n_scenarios": n,
+            "converged": ok, "newton_iterations_mean": round(float(r.iterations.mean()), 3),
+            "seconds": round(t, 4), "cpu_seconds": round(c, 4), "equilibria_per_second": round(ok / t, 1),
+            "equilibria_per_cpu_second": round(ok / c, 1)}
+
+
+def baseline_tree(commit, dest):
+    """Extract ``commit`` of this repository into ``dest`` (git archive); returns dest."""
+    dest = Path(dest)
+    dest.mkdir(parents=True, exist_ok=True)
+    arch = subprocess.run(["git", "-C", str(ROOT), "archive", commit], capture_output=True, check=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(dest)], input=arch, check=True)
+    return dest
+
+
+def vs_baseline(tree, label, calibrated_dir, n, repeat, rounds):
+    """Same-run comparison of this tree's compiled rate with ``tree``'s (fresh interpreters, alternately)."""
+    runs = {"baseline": [], "current": []}
+    src = {"baseline": Path(tree) / "src", "current": ROOT / "src"}
+    with tempfile.TemporaryDirectory() as d:
+        for k in range(rounds):
+            for name in ("baseline", "current"):
+                env = {**os.environ, "PYTHONPATH": str(src[name]), "LUMBAR_KERNEL": "compiled",
+                       "NUMBA_CACHE_DIR": str(Path(d) / f"numba_{name}")}
+                cmd = [sys.executable, str(Path(__file__).resolve()), "--rate-only", "--calibrated-dir",
+                       str(calibrated_dir), "--n", str(n), "--repeat", str(repeat), "--save",
+                       str(Path(d) / f"{name}.npz")]
+                r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=3600)
+                if r.returncode:
+                    return {"error": f"{name}: " + " ".join(r.stderr.strip().splitlines()[-2:])}
+                runs[name].append(json.loads(r.stdout.strip().splitlines()[-1]))
+        eq = {name: np.load(Path(d) / f"{name}.npz") for name in runs}
+        diff_x = float(np.abs(eq["current"]["x"] - eq["baseline"]["x"]).max())
+        diff_r = float(np.abs(so3.log(eq["current"]["R"] @ np.swapaxes(eq["baseline"]["R"], -1, -2))).max())
+        same_it = bool((eq["current"]["iterations"] == eq["baseline"]["iterations"]).all())
+    best = {name: {key: max(v[key] for v in runs[name]) for key in ("equilibria_per_second",
+                                                                        "equilibria_per_cpu_second")}
+            for name in runs}
+    for name in runs:
+        assert Path(runs[name][0]["lumbar"]) == src[name].resolve(), (name, runs[name][0]["lumbar"])
+    speed = best["current"]["equilibria_per_cpu_second"] / best["baseline"]["equilibria_per_cpu_second"]
+    return {
+        "baseline": label, "rounds": rounds, "n_scenarios": n, "repeat": repeat,
+        "baseline_equilibria_per_second": best["baseline"]["equilibria_per_second"],
+        "baseline_equilibria_per_cpu_second": best["baseline"]["equilibria_per_cpu_second"],
+        "current_equilibria_per_second": best["current"]["equilibria_per_second"],
+        "current_equilibria_per_cpu_second": best["current"]["equilibria_per_cpu_second"],
+        "speedup_cpu": round(speed, 2),
+        "speedup_wall": round(best["current"]["equilibria_per_second"] / best["baseline"]["equilibria_per_second"],
+                              2),
+        "target_speedup": TARGET_SPEEDUP_VS_BASELINE, "meets_target": bool(speed >= TARGET_SPEEDUP_VS_BASELINE),
+        "same_iterations": same_it, "max_abs_diff_x_m": float(f"{diff_x:.3g}"),
+        "max_abs_diff_rotation_rad": float(f"{diff_r:.3g}"),
+        "runs": runs,
+    }
+
+
 def default_unit(calibrated_dir):
     """(geometry, characteristic set, origin note) of the workflow's default configuration."""
     cfg = load_config(ROOT / "config" / "config.yaml")
@@ -184,7 +272,18 @@ def main(argv=None):
     p.add_argument("--calibrated-dir", default=str(ROOT / "results" / "calibration" / "characteristics"))
     p.add_argument("--no-cold-start", action="store_true", help="skip the fresh-interpreter timings")
     p.add_argument("--no-extra", action="store_true", help="only the default unit")
+    p.add_argument("--baseline-commit", default=BASELINE_COMMIT, help="commit compared with in the same run")
+    p.add_argument("--baseline-tree", default=None, help="an extracted tree of the baseline (instead of git archive)")
+    p.add_argument("--no-baseline-commit", action="store_true", help="skip the same-run comparison with a commit")
+    p.add_argument("--rounds", type=int, default=3, help="alternating fresh-interpreter runs per tree")
+    p.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "fsu_equilibria.json"))
+    p.add_argument("--rate-only", action="store_true", help=argparse.SUPPRESS)
+    p.add_argument("--save", default=None, help=argparse.SUPPRESS)
     a = p.parse_args(argv)
+    if a.rate_only:                       # one fresh-interpreter measurement (of whichever tree is on PYTHONPATH)
+        out = rate_only(a.calibrated_dir, a.n, a.repeat, a.save)
+        print(json.dumps(out))
+        return out
     if not kernel.active():
         print("note: the compiled core is not active (numba missing or LUMBAR_KERNEL=reference)", file=sys.stderr)
     geo, cs, origin = default_unit(a.calibrated_dir)
@@ -219,8 +318,17 @@ def main(argv=None):
         ]
     if not a.no_cold_start:
         out["cold_start"] = cold_start()
+    if not a.no_baseline_commit:
+        with tempfile.TemporaryDirectory() as d:
+            tree = a.baseline_tree or baseline_tree(a.baseline_commit, Path(d) / "tree")
+            label = a.baseline_tree or a.baseline_commit
+            out["vs_baseline"] = vs_baseline(tree, label, a.calibrated_dir, a.n, a.repeat, a.rounds)
     out["load_average_1_5_15_min_end"] = [round(v, 2) for v in os.getloadavg()]
-    print(json.dumps(out, indent=2))
+    text = json.dumps(out, indent=2)
+    print(text)
+    if a.out:
+        Path(a.out).parent.mkdir(parents=True, exist_ok=True)
+        Path(a.out).write_text(text + "\n")
     return out
 
 

@@ -5,8 +5,9 @@ differences; model arrays changed in place between calls; per-fibre parameters; 
 import os
 import re
 import subprocess
-import tomllib
 import sys
+import tempfile
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -358,6 +359,37 @@ def test_a_fresh_process_loads_the_compiled_kernels_from_the_cache(charset):
                        capture_output=True, text=True, timeout=300, cwd=ROOT)
     assert r.returncode == 0, r.stderr[-3000:]
     assert r.stdout.strip() == "[(1, 0, 1), (1, 0, 1)]", r.stdout     # warm_up has the callers' signature
+
+
+_TRY_LOCK = ("import fcntl, sys\nf = open(sys.argv[1], 'a+')\ntry:\n    fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)\n"
+             "    print('free')\nexcept BlockingIOError:\n    print('busy')")
+
+
+def _lock_state(path):
+    r = subprocess.run([sys.executable, "-c", _TRY_LOCK, str(path)], capture_output=True, text=True, timeout=60)
+    return r.stdout.strip()
+
+
+@needs_numba
+@pytest.mark.skipif(sys.platform == "win32", reason="flock")
+def test_first_use_of_the_compiled_core_holds_a_lock_other_processes_wait_for(charset, tmp_path, monkeypatch):
+    """Jobs that start together on a fresh clone would each compile the same kernels: the first use of the compiled
+    core in a process runs warm_up (compile or load) holding a file lock that the machine's other processes of the
+    same cache wait for; once, not at every call. Control: released after it, another process takes it."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))          # a lock of its own (numba read its cache at import)
+    path = kernel.lock_path()
+    assert str(tmp_path) not in str(path) and path.parent == Path(tempfile.gettempdir())
+    seen = []
+    monkeypatch.setattr(kernel, "_warm_up", lambda: seen.append(_lock_state(path)))
+    monkeypatch.setitem(kernel._state, "ready", False)
+    m = build_fsu(symmetric_fsu(), charset).model
+    with kernel.use("compiled"):
+        m.evaluate(*m.reference_state(1))
+        solve(m, np.zeros((1, 1, 6)))
+    assert seen == ["busy"]                   # warm_up ran once, under the lock
+    assert _lock_state(path) == "free"        # control
+    kernel.warm_up()                          # the public warm-up (a test session's first process) takes it too
+    assert seen == ["busy", "busy"]
 
 
 def test_newton_cache_pins_the_residual_module():

@@ -31,7 +31,6 @@ import math
 
 import numpy as np
 import pandas as pd
-from scipy.optimize import least_squares
 
 from ..inputs.characteristics import SoftplusLaw
 
@@ -72,6 +71,7 @@ def remus_as_softplus(groups, materials: dict, n: int = 241):
     :func:`lumbar.geometry.visible_human.read_uw_materials`. Returns (SoftplusLaw with ``law_length_m`` = the
     fibres' mean Remus slack length and the prestrain that gives the fibres' mean Remus pre-elongation, provenance
     dict with the largest deviation of the Eq. 7 fit [N])."""
+    from scipy.optimize import least_squares  # noqa: PLC0415 - scipy.optimize (about a second) only where a fit runs
     used = [(name, L) for name, L in groups if name in materials]
     if not used:
         raise ValueError(f"no Remus et al. (2021) material for the fibre groups {[g for g, _ in groups]}")

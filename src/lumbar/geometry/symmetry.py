@@ -27,7 +27,6 @@ from __future__ import annotations
 import copy
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 from .core import FacetLandmarks, Level, Ligament, SpineGeometry, Vertebra
 
@@ -39,6 +38,7 @@ def _pairing(A, B):
     """Index j(i) of the point (row) of B closest to the mirror image of row i of A (optimal assignment).
 
     A, B: (n, k) arrays of stacked points (k = 3 per point, 6 for a fibre's two ends)."""
+    from scipy.optimize import linear_sum_assignment  # noqa: PLC0415 - scipy.optimize (about a second) only where a fit runs
     MA = A * np.tile(M, A.shape[1] // 3)
     cost = np.linalg.norm(MA[:, None, :] - B[None, :, :], axis=-1)
     rows, cols = linear_sum_assignment(cost)

@@ -21,9 +21,9 @@ them). The assembled tuple is kept between calls only while it provably shows th
 objects, passed through without copies, and equal disc and surface values.
 
 Scenarios of a batch that start from the same state with the same element data (a batch of loads from one
-equilibrium: the benchmark, the virtual experiments) share the start's Jacobian, which does not depend on the
-loads: their first residual is evaluated without it, bit-identical to each scenario solved alone
-(tests/test_kernel.py).
+equilibrium: the benchmark, the virtual experiments) share the start's internal forces and Jacobian, which do not
+depend on the loads: their first residual is their loads plus the shared internal forces, as for each scenario solved
+alone (bit-identical, tests/test_kernel.py).
 
 Switch: the environment variable ``LUMBAR_KERNEL`` (``compiled``, the default, or ``reference``) at import, or
 :func:`set_mode` / :func:`use` at run time. Without numba the reference path runs (:func:`active` is False) and
@@ -35,7 +35,13 @@ import contextlib
 import hashlib
 import logging
 import os
+import tempfile
 from pathlib import Path
+
+try:  # POSIX; elsewhere the first use is not serialised between processes
+    import fcntl
+except ImportError:  # pragma: no cover
+    fcntl = None
 
 import numpy as np
 
@@ -71,7 +77,7 @@ inner_jit = _inner
 #: every kernel; when it does not (kernel_residual.py edited), newton_batch compiles without the cache in that
 #: process, and tests/test_kernel.py fails until the digest here is updated, the edit of this file that retires the
 #: cache entry.
-RESIDUAL_SHA256 = "735a3976034aa1d37489317b002471d49d0aeeda1f0f929a2d011b3b1b3fe36d"
+RESIDUAL_SHA256 = "55f76135de77ef7c6096325a881ecfab422bed69397010228f991203fb062102"
 
 
 def residual_pinned(digest: str = RESIDUAL_SHA256) -> bool:
@@ -91,7 +97,7 @@ _newton_leaf = _leaf if residual_pinned() else njit(cache=False, error_model="nu
 #: evaluations per equilibrium (counted evaluations x the measured cost with / without the Jacobian; all: 85.7)
 LAZY = 1e5
 MODES = ("compiled", "reference")
-_state = {"mode": os.environ.get("LUMBAR_KERNEL", "compiled"), "warned": False}
+_state = {"mode": os.environ.get("LUMBAR_KERNEL", "compiled"), "warned": False, "ready": False}
 if _state["mode"] not in MODES:
     raise ValueError(f"environment variable LUMBAR_KERNEL={_state['mode']!r}; expected one of {MODES}")
 
@@ -248,6 +254,7 @@ def scenario_data(model, B, loads, fmask, cmask, params) -> tuple:
 
 def evaluate(model, x, R, loads=None, fmask=1.0, cmask=1.0, jacobian=True, params=None):
     """Compiled ``SpineModel.evaluate`` (same arguments and results as the reference path)."""
+    _first_use()
     x, R = _f64(x), _f64(R)
     B, nb = x.shape[0], model.nb
     L, fm, cm, l0, kt, off = scenario_data(model, B, loads, fmask, cmask, params)
@@ -441,17 +448,20 @@ def newton_batch(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max
     xt, Rt, E = np.empty((nb, 3)), np.empty((nb, 3, 3)), np.empty((3, 3))
     wv = np.empty(3)
     w3, w33, acc = np.empty((16, 4)), np.empty((8, 3, 3)), np.empty((nb, ACC))
-    # the Jacobian at the start state (it does not depend on the loads): shared by consecutive scenarios that start
-    # from the same state with the same element data (a batch of loads from one equilibrium), whose residuals are
-    # then evaluated without it (the same arithmetic as with it: the results are bit-identical to unshared solves)
-    J0 = np.empty((nb, 6, nb, 6))
+    # the internal forces Q0 and the Jacobian J0 at the start state (neither depends on the loads): shared by
+    # consecutive scenarios that start from the same state with the same element data (a batch of loads from one
+    # equilibrium), whose start residual is then their loads plus Q0, as that of a scenario solved alone (the results
+    # are bit-identical to unshared solves)
+    J0, Q0 = np.empty((nb, 6, nb, 6)), np.empty((nb, 6))
     _newton_scenarios(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max_st, max_sr, reg, S, lscale,
-                      x, R, conv, res_f, res_m, iters, Q, Qt, J, Jt, J0, A, sym, W, rhs, d, xt, Rt, E, wv, w3, w33, acc)
+                      x, R, conv, res_f, res_m, iters, Q, Qt, J, Jt, J0, Q0, A, sym, W, rhs, d, xt, Rt, E, wv, w3, w33,
+                      acc)
 
 
 @_newton_leaf
 def _newton_scenarios(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m, max_st, max_sr, reg, S, lscale,
-                      x, R, conv, res_f, res_m, iters, Q, Qt, J, Jt, J0, A, sym, W, rhs, d, xt, Rt, E, wv, w3, w33, acc):
+                      x, R, conv, res_f, res_m, iters, Q, Qt, J, Jt, J0, Q0, A, sym, W, rhs, d, xt, Rt, E, wv, w3, w33,
+                      acc):
     """The iteration of newton_batch on its work arrays, compiled without reference counting (the residual's
     arguments, inlined here, are then plain values: no reference count to raise and lower at every trial)."""
     B, nb = x0.shape[0], x0.shape[1]
@@ -466,15 +476,16 @@ def _newton_scenarios(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m
         xs, Rs = x[s], R[s]
         copy_array(xs, x0[s])
         copy_array(Rs, R0[s])
-        copy_array(Q, Ls)
         if s0 < 0 or not (same_array(x0[s], x0[s0]) and same_array(R0[s], R0[s0]) and same_row(fm, s, s0)
                           and same_row(cm, s, s0) and same_row(l0, s, s0) and same_row(kt, s, s0)
                           and same_row(off, s, s0)):
+            zero_array(Q0)
             zero_array(J0)
-            eval_one(xs, Rs, Q, J0, want_j, md, fms, cms, l0s, kts, offs, w3, w33, acc)
+            eval_one(xs, Rs, Q0, J0, want_j, md, fms, cms, l0s, kts, offs, w3, w33, acc)
             s0 = s
-        else:
-            eval_one(xs, Rs, Q, J0, no_j, md, fms, cms, l0s, kts, offs, w3, w33, acc)
+        for k in range(nb):          # the start's residual: its loads plus the internal forces it shares
+            for i in range(6):
+                Q[k, i] = Ls[k, i] + Q0[k, i]
         copy_array(J, J0)
         conv[s] = False
         iters[s] = 0
@@ -548,6 +559,7 @@ def _newton_scenarios(x0, R0, L, fm, cm, l0, kt, off, md, max_iter, tol_f, tol_m
 def newton(model, x, R, loads, fmask, cmask, params, max_iter, tol_force, tol_moment, max_step_trans,
            max_step_rot, reg, S, length_scale):
     """Compiled ``lumbar.mechanics.solve.newton`` (same arguments and results as the reference path)."""
+    _first_use()
     x0, R0 = _f64(x), _f64(R)
     B = x0.shape[0]
     L, fm, cm, l0, kt, off = scenario_data(model, B, loads, fmask, cmask, params)
@@ -562,7 +574,13 @@ def newton(model, x, R, loads, fmask, cmask, params, max_iter, tol_force, tol_mo
 def warm_up() -> bool:
     """Compile both kernels, or load them from the on-disk cache, on an empty one-body model (a process that is
     about to start others, e.g. a test session before its Snakemake runs, calls this so that they all load the
-    cache instead of compiling at the same time). Returns whether the compiled core is active."""
+    cache instead of compiling at the same time), holding :func:`first_use_lock`. Returns whether the compiled core
+    is active."""
+    with first_use_lock():
+        return _warm_up()
+
+
+def _warm_up() -> bool:
     if not active():
         return False
     f2, f3, i1 = np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros(0, np.int64)
@@ -575,3 +593,36 @@ def warm_up() -> bool:
     newton_batch(x, R, *rows, md, 5, 1e-8, 1e-8, 1e-3, 0.05, np.ones(6), np.ones(6), 0.05, np.empty_like(x),
                  np.empty_like(R), np.zeros(1, bool), np.empty(1), np.empty(1), np.zeros(1, np.int64))
     return True
+
+
+def lock_path() -> Path:
+    """The lock file of :func:`first_use_lock`: one per numba cache of this package (``NUMBA_CACHE_DIR`` or the
+    package's folder), in the system's temporary folder."""
+    where = os.environ.get("NUMBA_CACHE_DIR") or str(Path(__file__).resolve().parent)
+    return Path(tempfile.gettempdir()) / f"lumbar-kernel-{hashlib.sha256(where.encode()).hexdigest()[:16]}.lock"
+
+
+@contextlib.contextmanager
+def first_use_lock():
+    """An exclusive lock (flock) shared by the processes of this machine that use the same numba cache."""
+    if fcntl is None:  # pragma: no cover
+        yield
+        return
+    with open(lock_path(), "a+") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
+def _first_use():
+    """The first use of the compiled core in this process compiles both kernels, or loads them from the on-disk cache
+    (:func:`warm_up`), holding :func:`first_use_lock`: jobs that start together on a fresh clone (an empty cache) do
+    not compile the same machine code side by side, each on a core; the first compiles, the others wait and load it
+    from the cache (a fraction of a second once it is there)."""
+    if _state["ready"]:
+        return
+    with first_use_lock():
+        _warm_up()
+    _state["ready"] = True

@@ -454,6 +454,59 @@ def _acc_end(acc, k, beta, alpha, u0, u1, u2, r0, r1, r2, s, f0, f1, f2):
 
 
 @_inner
+def _acc_point(acc, k, w0, w1, w2, a0, a1, a2, b0, b1, b2, c0, c1, c2, r0, r1, r2, f0, f1, f2):
+    """Add a point element on body k against the ground (a facet contact point) to body k's accumulators (_acc_end):
+    its stiffness K = w0 a a^T + w1 b b^T + w2 c c^T (world vectors a, b, c; symmetric) at lever r gives the symmetric
+    block G K G^T = [[K, K C^T], [C K, C K C^T]] (C = [r]x), and its force f the geometric stiffness r f^T - (f.r) I
+    (_assemble_j with a free body a and b the ground)."""
+    K = (w0 * a0 * a0 + w1 * b0 * b0 + w2 * c0 * c0, w0 * a0 * a1 + w1 * b0 * b1 + w2 * c0 * c1,
+         w0 * a0 * a2 + w1 * b0 * b2 + w2 * c0 * c2, w0 * a1 * a1 + w1 * b1 * b1 + w2 * c1 * c1,
+         w0 * a1 * a2 + w1 * b1 * b2 + w2 * c1 * c2, w0 * a2 * a2 + w1 * b2 * b2 + w2 * c2 * c2)
+    k00, k01, k02, k11, k12, k22 = K
+    # T = K C^T, T[i][j] = K_i . C_j with the rows of C: (0, -r2, r1), (r2, 0, -r0), (-r1, r0, 0)
+    t00, t01, t02 = -r2 * k01 + r1 * k02, r2 * k00 - r0 * k02, -r1 * k00 + r0 * k01
+    t10, t11, t12 = -r2 * k11 + r1 * k12, r2 * k01 - r0 * k12, -r1 * k01 + r0 * k11
+    t20, t21, t22 = -r2 * k12 + r1 * k22, r2 * k02 - r0 * k22, -r1 * k02 + r0 * k12
+    # C T (symmetric): (C T)[i][j] = C_i . T[:, j]
+    b00 = -r2 * t10 + r1 * t20
+    b01 = -r2 * t11 + r1 * t21
+    b02 = -r2 * t12 + r1 * t22
+    b11 = r2 * t01 - r0 * t21
+    b12 = r2 * t02 - r0 * t22
+    b22 = -r1 * t02 + r0 * t12
+    acc[k, 0] += k00
+    acc[k, 1] += k01
+    acc[k, 2] += k02
+    acc[k, 3] += t00
+    acc[k, 4] += t01
+    acc[k, 5] += t02
+    acc[k, 6] += k11
+    acc[k, 7] += k12
+    acc[k, 8] += t10
+    acc[k, 9] += t11
+    acc[k, 10] += t12
+    acc[k, 11] += k22
+    acc[k, 12] += t20
+    acc[k, 13] += t21
+    acc[k, 14] += t22
+    acc[k, 15] += b00
+    acc[k, 16] += b01
+    acc[k, 17] += b02
+    acc[k, 18] += b11
+    acc[k, 19] += b12
+    acc[k, 20] += b22
+    acc[k, 31] += r0 * f0
+    acc[k, 32] += r0 * f1
+    acc[k, 33] += r0 * f2
+    acc[k, 34] += r1 * f0
+    acc[k, 35] += r1 * f1
+    acc[k, 36] += r1 * f2
+    acc[k, 37] += r2 * f0
+    acc[k, 38] += r2 * f1
+    acc[k, 39] += r2 * f2
+
+
+@_inner
 def _acc_to_j(J, acc, k):
     """J[k, :, k, :] += body k's fibre block from its accumulators (_acc_end)."""
     a = acc[k]
@@ -497,10 +550,6 @@ def _fibres(x, R, Q, J, jac, c, f_a, f_b, f_sa, f_sb, f_extra, f_law, f_par, f_s
     a call per fibre cost more than the fibre's arithmetic. A fibre's diagonal blocks of J (body a with itself, body b
     with itself) are summed in ``acc`` (nb, ACC) by :func:`_acc_end` and written once by :func:`_acc_to_j`; the blocks
     between two free bodies go to J directly (_fibre_block)."""
-    if jac:
-        for k in range(acc.shape[0]):
-            for i in range(ACC):
-                acc[k, i] = 0.0
     for n in range(f_a.shape[0]):
         a, b = f_a[n], f_b[n]
         if a < 0:
@@ -586,14 +635,13 @@ def _fibres(x, R, Q, J, jac, c, f_a, f_b, f_sa, f_sb, f_extra, f_law, f_par, f_s
             rat, rbt = (ra0, ra1, ra2), (rb0, rb1, rb2)
             _fibre_block(J, a, b, -1.0, beta, alpha, ut, rat, rbt, 0.0, ft)
             _fibre_block(J, b, a, -1.0, beta, alpha, ut, rbt, rat, 0.0, ft)
-    if jac:
-        for k in range(acc.shape[0]):
-            _acc_to_j(J, acc, k)
 
 
 @_inner
-def _contacts(x, R, Q, J, jac, c, k_a, k_b, k_s, k_surf, k_stiff, ceps, s_orig, s_axes, s_coef, cm, w3, w33):
-    """Facet contact: the penalty on the gap of each contact point to the lower body's cubic surface."""
+def _contacts(x, R, Q, J, jac, c, k_a, k_b, k_s, k_surf, k_stiff, ceps, s_orig, s_axes, s_coef, cm, w3, w33, acc):
+    """Facet contact: the penalty on the gap of each contact point to the lower body's cubic surface. A point on a
+    free body against a surface on the ground adds its Jacobian block to the body's accumulators (_acc_point, as the
+    fibres); between two free bodies it goes to J directly (_assemble_j)."""
     ra, rb, f, v0, v1, v2 = w3[2], w3[3], w3[5], w3[7], w3[8], w3[9]
     K = w33[0]
     # screen: the surface coordinates (u, v, w) of a point are one affine map of its reference coordinates, G (S - c_a)
@@ -667,11 +715,15 @@ def _contacts(x, R, Q, J, jac, c, k_a, k_b, k_s, k_surf, k_stiff, ceps, s_orig, 
             continue
         fuu = 6 * cf0 * u + 2 * cf2
         fvv = 6 * cf1 * v + 2 * cf3
+        w0, w1, w2 = -dFm, -Fm * fuu, -Fm * fvv
+        if b < 0 and a >= 0:
+            _acc_point(acc, a, w0, w1, w2, v00, v01, v02, s_axes[sid, 0, 0], s_axes[sid, 0, 1], s_axes[sid, 0, 2],
+                       s_axes[sid, 1, 0], s_axes[sid, 1, 1], s_axes[sid, 1, 2], q0, q1, q2, f0, f1, f2)
+            continue
         ax = s_axes[sid]
         v0[0], v0[1], v0[2] = v00, v01, v02
         _rot(R, b, ax[0], v1)
         _rot(R, b, ax[1], v2)
-        w0, w1, w2 = -dFm, -Fm * fuu, -Fm * fvv
         for i in range(3):
             for j in range(3):
                 K[i, j] = w0 * v0[i] * v0[j] + w1 * v1[i] * v1[j] + w2 * v2[i] * v2[j]
@@ -761,8 +813,15 @@ def eval_one(x, R, Q, J, jac, md, fm, cm, l0, kt, off, w3, w33, acc):
     (c, f_a, f_b, f_sa, f_sb, f_extra, f_law, f_par, f_scale, width,
      k_a, k_b, k_s, k_surf, k_stiff, ceps, s_orig, s_axes, s_coef,
      d_up, d_lo, d_centre, d_frame, d_k, d_torque) = md
+    if jac:
+        for k in range(acc.shape[0]):
+            for i in range(ACC):
+                acc[k, i] = 0.0
     _fibres(x, R, Q, J, jac, c, f_a, f_b, f_sa, f_sb, f_extra, f_law, f_par, f_scale, width, fm, l0, acc)
-    _contacts(x, R, Q, J, jac, c, k_a, k_b, k_s, k_surf, k_stiff, ceps, s_orig, s_axes, s_coef, cm, w3, w33)
+    _contacts(x, R, Q, J, jac, c, k_a, k_b, k_s, k_surf, k_stiff, ceps, s_orig, s_axes, s_coef, cm, w3, w33, acc)
+    if jac:
+        for k in range(acc.shape[0]):
+            _acc_to_j(J, acc, k)
     _discs(x, R, Q, J, jac, c, d_up, d_lo, d_centre, d_frame, d_k, d_torque, kt, off, w3, w33)
 
 

@@ -12,7 +12,6 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from scipy.optimize import least_squares
 
 from ...inputs.characteristics import load_characteristic_set
 from .. import admissibility as ADM
@@ -377,6 +376,7 @@ def fit_admissible(geometry, charset, targets: pd.DataFrame, level="L4-L5", publ
     name: value in fit units} to start from (e.g. a previous fit). The admissibility of the result is checked
     afterwards on 0.25 N*m curves (:func:`admissibility.evaluate`).
     """
+    from scipy.optimize import least_squares  # noqa: PLC0415 - scipy.optimize (about a second) only where a fit runs
     t = targets.reset_index(drop=True)
     if t.empty:
         raise ValueError("fit_admissible: no target rows")

@@ -12,7 +12,6 @@ import math
 
 import numpy as np
 import pandas as pd
-from scipy.optimize import brentq, least_squares
 
 from ..stepwise_reduction import MAIN_DIRECTIONS
 
@@ -50,6 +49,7 @@ P1_MAX_NM = 25.0
 def fit_disc_direction(phi_rad, torque_nm):
     """Eq. 3 parameters (p1 [N*m], p2 [rad^3], p3 [N*m/rad]) with T(phi) = torque, least squares (trf) with
     p1 >= :data:`P1_MIN_NM` (p3 is free: the paper's flexion law has p3 < 0)."""
+    from scipy.optimize import least_squares  # noqa: PLC0415 - scipy.optimize (about a second) only where a fit runs
     phi = np.asarray(phi_rad, float)
     M = np.asarray(torque_nm, float)
     ok = np.isfinite(phi) & np.isfinite(M)
@@ -82,6 +82,7 @@ def fit_disc_direction(phi_rad, torque_nm):
 
 def invert_eq3(p, moment_nm):
     """Smallest phi >= 0 [rad] with Eq. 3 T(phi) = moment (before any torque peak); NaN if none."""
+    from scipy.optimize import brentq  # noqa: PLC0415 - scipy.optimize (about a second) only where a fit runs
 
     grid = np.linspace(0.0, math.radians(60.0), 60001)
     T = eq3(grid, p)

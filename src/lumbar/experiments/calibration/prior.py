@@ -7,7 +7,6 @@ import dataclasses
 
 import numpy as np
 import pandas as pd
-from scipy.optimize import least_squares
 
 from ...inputs.characteristics import SoftplusLaw, load_characteristic_set, load_shape_check
 from .disc import c_zero, softplus_zero_law
@@ -40,6 +39,7 @@ def paper_fibre_slack_length(kind, prestrain_pct, data_dir=None) -> float:
 def rupp_as_softplus(law, law_length_m, max_elongation_m=5e-3, n=201):
     """Eq. 7 (a, b, c, d) with F(0) = 0, d > 0, least-squares fitted on elongation 0..``max_elongation_m`` in percent of
     ``law_length_m`` to a Rupp et al. (2015) law of the whole ligament (toe F_A (dl/l_A)^nu, linear beyond)."""
+    from scipy.optimize import least_squares  # noqa: PLC0415 - scipy.optimize (about a second) only where a fit runs
     e = np.linspace(0.0, max_elongation_m, n)
     K = (law.f_b_n - law.f_a_n) / (law.l_b_m - law.l_a_m)
     nu = law.l_a_m * K / law.f_a_n

@@ -9,7 +9,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-from scipy.optimize import least_squares
 
 from ..fsu import build_fsu
 from ..stepwise_reduction import StageSolver
@@ -143,6 +142,7 @@ def fit_real_targets(geometry, charset, targets: pd.DataFrame, level="L4-L5", pa
     not fitted: they keep the start value and are listed with ``identifiable = False``. After the fit,
     ``at_bound`` flags parameters within ``AT_BOUND_FRACTION`` of a bound.
     """
+    from scipy.optimize import least_squares  # noqa: PLC0415 - scipy.optimize (about a second) only where a fit runs
     t = targets.reset_index(drop=True)
     if t.empty:
         raise ValueError("fit_real_targets: no target rows")

@@ -43,7 +43,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
-from scipy.optimize import least_squares
 
 from ...inputs.characteristics import SoftplusLaw, load_characteristic_set
 from ..fsu import build_fsu, facet_surfaces, set_ligament_law
@@ -236,6 +235,7 @@ class _StepwiseFit:
     def best_fit(self, candidates, residual):
         """The least-squares fit of every candidate, the best applied to the model: (solution, q -> law, indices of
         the parameters at a bound)."""
+        from scipy.optimize import least_squares  # noqa: PLC0415 - scipy.optimize (about a second) only where a fit runs
         best = None
         for apply, x0, lb, ub, xs, to_law in candidates:
             x0 = np.clip(x0, lb, ub)
