@@ -22,6 +22,7 @@ import functools
 
 import numpy as np
 
+from .analysis import closest_point
 from .core import LEVEL_NAMES, LIGAMENT_NAMES, level_vertebrae
 from .register import mesh_sample, register, welded
 
@@ -95,8 +96,7 @@ def disc_height(level: str, meshes: dict) -> float:
 
 
 def _surface_distance(mesh, P):
-    import trimesh  # noqa: PLC0415 - mesh library, imported where used (docs/design.md)
-    return np.asarray(trimesh.proximity.closest_point(mesh, np.asarray(P, float))[1], float)
+    return np.asarray(closest_point(mesh, np.asarray(P, float))[1], float)
 
 
 @functools.lru_cache(maxsize=2)
@@ -185,7 +185,6 @@ def transfer(target: str, mesh, role: str, atlas: dict, exclude=(), warps: dict 
              method: str = "full") -> dict:
     """Landmarks of ``role`` on the target vertebra ``mesh`` (project frame): {structure: dict(points (k,3),
     extra (k,) or None, spread_m (k,): largest distance of a template's point from the median, templates)}."""
-    import trimesh  # noqa: PLC0415 - mesh library, imported where used (docs/design.md)
     temps = templates_for(target, role, atlas, exclude)
     if not temps and target == "S1":      # the atlas's only sacrum: kept under leave-one-out (S1 ends not scored)
         temps = templates_for(target, role, atlas)
@@ -217,7 +216,7 @@ def transfer(target: str, mesh, role: str, atlas: dict, exclude=(), warps: dict 
         spread = np.max(np.linalg.norm(np.stack(cand) - P, axis=-1), axis=0)
         on = np.all([atlas[t][role][s]["on_surface"] for t in temps], axis=0)
         if on.any():
-            snapped, _, _ = trimesh.proximity.closest_point(mesh, P[on])
+            snapped, _, _ = closest_point(mesh, P[on])
             P[on] = snapped
         extra = None
         if atlas[temps[0]][role][s]["extra"] is not None:
@@ -271,9 +270,8 @@ def _facing_face(upper_mesh, lower_mesh, sup):
     superior one turns the joint's contact surface around (its normal is oriented from the superior to the inferior
     face): the facet then resists the wrong motions (Visible Human L4-L5, leave one out: no facet force in axial
     rotation, twice the reference's axial range of motion)."""
-    import trimesh  # noqa: PLC0415 - mesh library, imported where used (docs/design.md)
     inf = _closest(upper_mesh, sup)
-    tri = trimesh.proximity.closest_point(lower_mesh, sup)[2]
+    tri = closest_point(lower_mesh, sup)[2]
     n = np.asarray(lower_mesh.face_normals)[tri].sum(0)
     n /= np.linalg.norm(n) or 1.0
     if float((inf.mean(0) - np.asarray(sup).mean(0)) @ n) < 0:
@@ -282,8 +280,7 @@ def _facing_face(upper_mesh, lower_mesh, sup):
 
 
 def _closest(mesh, P):
-    import trimesh  # noqa: PLC0415 - mesh library, imported where used (docs/design.md)
-    return np.asarray(trimesh.proximity.closest_point(mesh, np.asarray(P, float))[0], float)
+    return np.asarray(closest_point(mesh, np.asarray(P, float))[0], float)
 
 
 def _allowed(per_level: dict, exclude, shape=None) -> list:
