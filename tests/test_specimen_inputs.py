@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import functools
 import json
+import os
 import shutil
 import tempfile
 from pathlib import Path
@@ -343,16 +344,22 @@ def _output_case(case, d: Path, tmp: Path):
         (tmp / "foreign").mkdir()
         (tmp / "foreign" / "results.xlsx").write_text("mine")
         return tmp / "foreign", "results.xlsx", tmp / "foreign" / "results.xlsx"
+    if case == "the_current_folder":
+        (tmp / "here").mkdir()
+        os.chdir(tmp / "here")
+        return Path("."), "the current folder", None
     return d, "holds the input", d / "L4.stl"
 
 
-@pytest.mark.parametrize("case", ["a_file", "unwritable", "folder_where_a_figure_goes", "foreign_files", "the_input"])
+@pytest.mark.parametrize("case", ["a_file", "unwritable", "folder_where_a_figure_goes", "foreign_files", "the_input",
+                                  "the_current_folder"])
 def test_output_paths_are_checked_before_any_work(case, posed, tmp_path, capsys, monkeypatch):
     """Each refused with exit status 2 and a message naming it, before any input is read, leaving the user's files
     as they were. Control: a new folder passes the check and the run reaches the reader."""
     import lumbar.geometry.specimen_io as sio
     monkeypatch.setattr(sio, "read_specimen", lambda *a, **k: pytest.fail("input read before the output check"))
     d = _folder(tmp_path, "pair", {"L4.stl": posed / "L4.stl", "L5.stl": posed / "L5.stl"})
+    monkeypatch.chdir(tmp_path)                          # restored after the test (the_current_folder moves it)
     out, want, keep = _output_case(case, d, tmp_path)
     rc, _, err = _run([d, "--out", out, "--backend", "none"], capsys)
     assert rc == 2 and want in err, err
