@@ -159,3 +159,77 @@ def summary_table(geo) -> pd.DataFrame:
             row[f"{lig.name}_mean_length_mm"] = 1e3 * float(length.mean()) if len(length) else np.nan
         rows.append(row)
     return pd.DataFrame(rows)
+
+
+# ------------------------------------------------------------------ closest points on a surface
+_CLOSEST_CACHE = "lumbar_closest_point_trees"
+#: the triangles are searched in groups of similar circumradius (from their centre), split at these quantiles: each
+#: group's KD-tree of centres is searched with its own largest radius as margin (a hole's fan or a sliver would
+#: otherwise widen every search)
+_RADIUS_QUANTILES = (0.9, 0.99)
+
+
+def _closest_trees(mesh):
+    from scipy.spatial import cKDTree  # noqa: PLC0415 - scipy.spatial where geometry is computed
+    if _CLOSEST_CACHE in mesh._cache:      # trimesh's cache: cleared when the mesh's data change
+        return mesh._cache[_CLOSEST_CACHE]
+    tri = np.asarray(mesh.triangles)
+    centre = tri.mean(axis=1)
+    radius = np.linalg.norm(tri - centre[:, None, :], axis=2).max(axis=1)
+    edges = np.r_[-np.inf, np.quantile(radius, _RADIUS_QUANTILES), np.inf]
+    groups = []
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        idx = np.flatnonzero((radius > lo) & (radius <= hi))
+        if len(idx):
+            groups.append((cKDTree(centre[idx]), idx, float(radius[idx].max())))
+    out = (groups, tri)
+    mesh._cache[_CLOSEST_CACHE] = out
+    return out
+
+
+def _nearest_of(Q, qi, fi, tri):
+    """Per query point (index qi into Q) the candidate triangle fi with the closest point: (points, distances,
+    triangles, which rows of Q got one)."""
+    from trimesh.triangles import closest_point as on_triangles  # noqa: PLC0415 - the exact point-triangle step
+    cp = on_triangles(tri[fi], Q[qi])
+    d = np.linalg.norm(cp - Q[qi], axis=1)
+    order = np.lexsort((fi, d, qi))            # per point the smallest distance, then the lowest triangle index
+    first = order[np.r_[True, qi[order][1:] != qi[order][:-1]]]
+    return cp[first], d[first], fi[first], qi[first]
+
+
+def closest_point(mesh, points, chunk: int = 4096):
+    """(closest points on the surface of ``mesh``, their distances, their triangles) of ``points`` (n, 3), as
+    ``trimesh.proximity.closest_point`` returns them, exactly (trimesh's candidate search missed the closest
+    triangle for some points, up to 0.03 mm off on a Visible Human vertebra) and without its R-tree of triangle
+    boxes, whose construction took 0.45 s per 40,000 triangles and was repeated for every moved copy of a mesh. Two
+    passes over KD-trees of the triangle centres (grouped by circumradius): the exact closest points on the
+    triangles of the 8 nearest centres bound each point's distance by d; every triangle holding a point within d
+    has its centre within d + its circumradius, so the second pass takes, per group, the triangles whose centres lie
+    within d + the group's largest circumradius. The trees are cached on the mesh (trimesh clears its cache when
+    the mesh changes)."""
+    P = np.atleast_2d(np.asarray(points, float))
+    groups, tri = _closest_trees(mesh)
+    best_p = np.empty_like(P)
+    best_d = np.full(len(P), np.inf)
+    best_f = np.zeros(len(P), np.int64)
+    for s in range(0, len(P), chunk):
+        Q = P[s:s + chunk]
+        n = len(Q)
+        qi, fi = [], []
+        for tree, idx, _ in groups:
+            k = min(8, len(idx))
+            j = np.asarray(tree.query(Q, k=k)[1]).reshape(n, -1)
+            qi.append(np.repeat(np.arange(n), j.shape[1]))
+            fi.append(idx[j.ravel()])
+        _, d1, _, _ = _nearest_of(Q, np.concatenate(qi), np.concatenate(fi), tri)
+        qi, fi = [], []
+        for tree, idx, rmax in groups:
+            hits = tree.query_ball_point(Q, d1 + rmax + 1e-12, return_sorted=False)
+            counts = np.fromiter((len(h) for h in hits), np.int64, n)
+            if counts.sum():
+                qi.append(np.repeat(np.arange(n), counts))
+                fi.append(idx[np.concatenate(hits).astype(np.int64)])
+        cp, d, f, q = _nearest_of(Q, np.concatenate(qi), np.concatenate(fi), tri)
+        best_p[s + q], best_d[s + q], best_f[s + q] = cp, d, f
+    return best_p, best_d, best_f

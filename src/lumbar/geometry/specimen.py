@@ -142,9 +142,13 @@ def symmetry_plane(points: np.ndarray, normal0: np.ndarray, iterations: int = SY
         w, V = np.linalg.eigh(M)
         n_new = V[:, -1] * np.sign(V[:, -1] @ n or 1.0)
         mid = 0.5 * (points + points[j])[keep]
-        n = n_new / np.linalg.norm(n_new)
-        d = float(np.median(mid @ n))
+        n_new = n_new / np.linalg.norm(n_new)
+        d_new = float(np.median(mid @ n_new))
         rms = float(np.sqrt(np.mean(dist[keep] ** 2)))
+        done = bool(np.array_equal(n_new, n) and d_new == d)   # a fixed point: every further step repeats it
+        n, d = n_new, d_new
+        if done:
+            break
     return n, d, rms
 
 

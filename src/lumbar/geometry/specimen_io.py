@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .analysis import closest_point
 from .checks import MAX_EXTENT_M, MIN_EXTENT_M
 from .core import LEVEL_NAMES, VERTEBRA_NAMES, GeometryError, level_vertebrae
 from .meshio import read_mesh_arrays
@@ -473,18 +474,18 @@ def working_density(mesh, level: str, file: Path, max_faces: int = MAX_WORKING_F
     decimation opens it is kept as it is (slower, never wrong), and the log says so."""
     if len(mesh.faces) <= max_faces:
         return mesh, []
+    import trimesh  # noqa: PLC0415 - mesh library where meshes are built (docs/design.md)
     n0 = len(mesh.faces)
     # decimated in millimetres: in metres the simplifier's merge of coincident vertices (an absolute tolerance)
     # joins distinct vertices of a bone surface and opens it
-    dec = mesh.copy()
-    dec.apply_scale(1e3)
-    dec = dec.simplify_quadric_decimation(face_count=max_faces)
-    dec.apply_scale(1e-3)
+    mm = trimesh.Trimesh(np.asarray(mesh.vertices) * 1e3, np.asarray(mesh.faces), process=False)
+    dec = mm.simplify_quadric_decimation(face_count=max_faces)
+    dec = trimesh.Trimesh(np.asarray(dec.vertices) * 1e-3, np.asarray(dec.faces), process=False)
     if not (dec.is_watertight and dec.is_winding_consistent and dec.volume > 0):
         return mesh, [Repair(level, file, f"not decimated: decimating {n0} to {max_faces} triangles opened the "
                                           "surface; the landmarks take longer on the full surface")]   # a note
-    v = np.asarray(mesh.vertices)[:: max(1, len(mesh.vertices) // 5000)]
-    d = dec.nearest.on_surface(v)[1]
+    v = np.asarray(mesh.vertices)[:: max(1, len(mesh.vertices) // 2000)]
+    d = closest_point(dec, v)[1]
     return dec, [Repair(level, file, f"decimated {n0} -> {len(dec.faces)} triangles for the landmarks (the input's "
                                      f"vertices lie within {np.max(d) * 1e3:.2f} mm of the decimated surface, 99 % "
                                      f"within {np.quantile(d, 0.99) * 1e3:.2f} mm)", "decimation")]
@@ -564,12 +565,16 @@ def check_neighbours(meshes: dict, files: dict, axes: str = "LPS", hint: str = A
         A, B = meshes[up], meshes[lo]
         where = f"{up} ({files[up]}) and {lo} ({files[lo]})"
         pa, pb = _dense_points(A), _dense_points(B)
-        box_lo, box_hi = pb.min(0) - MAX_NEIGHBOUR_GAP_M, pb.max(0) + MAX_NEIGHBOUR_GAP_M
-        near = pa[np.all((pa >= box_lo) & (pa <= box_hi), axis=1)]   # the rest are farther than the threshold anyway
-        gap = float(cKDTree(pb).query(near, distance_upper_bound=2 * MAX_NEIGHBOUR_GAP_M)[0].min()) if len(near) \
-            else np.inf
-        if not np.isfinite(gap):                                # beyond the bound: the exact gap for the message
-            gap = float(cKDTree(pb[:: max(1, len(pb) // 20000)]).query(pa[:: max(1, len(pa) // 20000)])[0].min())
+        # the gap between the two point sets: a subsample of one against all of the other bounds it from above,
+        # which settles the usual case (neighbours touching, far within the limit) without querying every point;
+        # only a bound above the limit is refined on all points near the other bone (and exactly for the message)
+        tree = cKDTree(pb)
+        gap = float(tree.query(pa[:: max(1, len(pa) // 2000)])[0].min())
+        if gap > MAX_NEIGHBOUR_GAP_M:
+            box_lo, box_hi = pb.min(0) - MAX_NEIGHBOUR_GAP_M, pb.max(0) + MAX_NEIGHBOUR_GAP_M
+            near = pa[np.all((pa >= box_lo) & (pa <= box_hi), axis=1)]   # the rest are farther than the limit
+            if len(near):
+                gap = min(gap, float(tree.query(near)[0].min()))
         if gap > MAX_NEIGHBOUR_GAP_M:
             raise SpecimenError(f"{where}: neighbouring vertebrae {gap * 1e3:.0f} mm apart (nearest surface points); "
                                 f"expected within {MAX_NEIGHBOUR_GAP_M * 1e3:.0f} mm (neighbours touch at their facet "
@@ -588,10 +593,14 @@ def check_neighbours(meshes: dict, files: dict, axes: str = "LPS", hint: str = A
 
 def _inside_distance(mesh, pts):
     """(distance to the nearest face centre, inside by that face's normal) of ``pts``: a screen, exact enough
-    away from the surface; the points that decide are confirmed by :func:`overlap_radius`."""
+    away from the surface; the points that decide are confirmed by :func:`overlap_radius`. The KD-tree of the
+    face centres is kept on the mesh (a vertebra is the lower and then the upper one of two neighbour pairs)."""
     from scipy.spatial import cKDTree  # noqa: PLC0415 - scipy.spatial where geometry is computed (docs/design.md)
     centres = np.asarray(mesh.triangles_center)
-    d, i = cKDTree(centres).query(pts)
+    key = "lumbar_face_centre_tree"
+    if key not in mesh._cache:
+        mesh._cache[key] = cKDTree(centres)
+    d, i = mesh._cache[key].query(pts)
     inside = np.einsum("ij,ij->i", pts - centres[i], np.asarray(mesh.face_normals)[i]) < 0
     return d, inside
 
@@ -602,7 +611,6 @@ def overlap_radius(A, B, step_m: float = 0.001, max_points: int = 40_000) -> flo
     than ``max_points``) inside both, screened by the nearest face (:func:`_inside_distance`); the points screened
     beyond ``MAX_OVERLAP_M`` are confirmed by trimesh's ray test and measured to both surfaces exactly (the ray
     test on every point took seconds per pair of Visible Human vertebrae)."""
-    import trimesh  # noqa: PLC0415 - mesh library where meshes are built (docs/design.md)
     lo = np.maximum(A.bounds[0], B.bounds[0])
     hi = np.minimum(A.bounds[1], B.bounds[1])
     if np.any(hi <= lo):
@@ -628,8 +636,8 @@ def overlap_radius(A, B, step_m: float = 0.001, max_points: int = 40_000) -> flo
     top = top[A.contains(top) & B.contains(top)]
     if len(top) == 0:
         return float(r[~deep].max()) if np.any(~deep) else 0.0
-    ra = trimesh.proximity.closest_point(A, top)[1]
-    rb = trimesh.proximity.closest_point(B, top)[1]
+    ra = closest_point(A, top)[1]
+    rb = closest_point(B, top)[1]
     return float(np.minimum(ra, rb).max())
 
 

@@ -22,6 +22,7 @@ import functools
 
 import numpy as np
 
+from .analysis import closest_point
 from .core import LEVEL_NAMES, LIGAMENT_NAMES, level_vertebrae
 from .register import mesh_sample, register, welded
 
@@ -40,6 +41,17 @@ FACET_PROCESS_ITERATIONS = 20
 #: ligaments whose fibre length (segment and via-point path) is scaled with the target's own disc height
 #: (:func:`lumbar.geometry.specimen.level_disc`): the ALL's path spans the anterior disc and onto the bodies
 DISC_SCALED = ("ALL",)
+SPINOUS = "_spinous"          # atlas key: per (ligament, end) and level the ends' relative position on the process
+#: fibre ends placed from the bone's own features instead of the atlas transfer alone (:func:`_spinous_rule`): the
+#: interspinous ligament's lower ends, on the superior border of the lower spinous process, slid along it under
+#: registration by 4.5-6.9 mm (Visible Human, leave one out); moved to the atlas's relative position between the
+#: lamina and the tip they lie 0.7-2.1 mm from the reference (the group median of the ISL 2.86 -> 1.76 mm). The same
+#: rule made the ISL's upper ends (0.3-2.9 mm -> 0.7-3.8 mm) and the flavum's ends (1.85 -> 3.1 mm median) worse:
+#: they keep the transfer (docs/specimen.md, "Sharper where the transfer misses")
+SPINOUS_RULE = (("ISL", "lower"),)
+#: the rule is not applied where it would move the ends further than this along the process (a spinous process the
+#: section rule misread)
+SPINOUS_MAX_SHIFT_M = 0.010
 
 
 def _canonical_order(up, lo):
@@ -94,9 +106,48 @@ def disc_height(level: str, meshes: dict) -> float:
     return float(level_disc(meshes[U], meshes[L], lower_is_sacrum=L == "S1")["height"])
 
 
+def spinous_axis(mesh):
+    """(x of the lamina's anterior edge, x of the spinous process's tip) of a vertebra in the project frame, at its
+    mid-sagittal section (:func:`lumbar.geometry.specimen.body_split`: the lamina's edge; the tip: the most
+    posterior vertex within 4 mm of the mid-sagittal plane), or None where the section does not show the lamina."""
+    from . import analysis  # noqa: PLC0415 - the mid-sagittal section
+    v = np.asarray(mesh.vertices)
+    y0 = float(np.median(v[:, 1]))
+    _, xl = analysis.sagittal_split(mesh, y_mid=y0)
+    mid = v[np.abs(v[:, 1] - y0) < 0.004]
+    if xl is None or len(mid) == 0:
+        return None
+    xt = float(mid[:, 0].min())
+    return (float(xl), xt) if xt < xl - 0.005 else None
+
+
+def _relative_position(P, axis):
+    xl, xt = axis
+    return float((np.mean(np.asarray(P)[:, 0]) - xl) / (xt - xl))
+
+
+def _spinous_rule(name, end, P, mesh, atlas, level, exclude=()):
+    """The fibre ends ``P`` of ``name``'s ``end`` on the target vertebra ``mesh`` (project frame) moved along x so that
+    their centroid lies at the atlas's relative position between the lamina's anterior edge and the spinous
+    process's tip (:func:`spinous_axis`; the median over the atlas levels not involving ``exclude``), then snapped to
+    the surface (closest point). Returns (points, what was done: a text for landmarks.csv)."""
+    ts = [t for lv, t in atlas.get(SPINOUS, {}).get((name, end), {}).items()
+          if not set(level_vertebrae(lv)) & set(exclude)]
+    axis = spinous_axis(mesh)
+    if not ts or axis is None:
+        return P, "the atlas transfer kept (no lamina found at the mid-sagittal section)"
+    t = float(np.median(ts))
+    shift = (t - _relative_position(P, axis)) * (axis[1] - axis[0])
+    if abs(shift) > SPINOUS_MAX_SHIFT_M:
+        return P, f"the atlas transfer kept (the spinous rule would move it {abs(shift) * 1e3:.1f} mm)"
+    moved = closest_point(mesh, np.asarray(P, float) + np.array([shift, 0.0, 0.0]))[0]
+    return moved, (f"then moved {shift * 1e3:+.1f} mm along the spinous process to the atlas's relative position "
+                   f"{t:.2f} between the lamina's anterior edge (0) and the tip (1) (median of {len(ts)} atlas "
+                   "level(s)) and snapped to the surface")
+
+
 def _surface_distance(mesh, P):
-    import trimesh  # noqa: PLC0415 - mesh library, imported where used (docs/design.md)
-    return np.asarray(trimesh.proximity.closest_point(mesh, np.asarray(P, float))[1], float)
+    return np.asarray(closest_point(mesh, np.asarray(P, float))[1], float)
 
 
 @functools.lru_cache(maxsize=2)
@@ -115,10 +166,14 @@ def build_atlas(geo) -> dict:
     points (k,3), on_surface (k,), extra (k,) or None)}}} from a geometry with insertion sites (Visible Human)."""
     atlas = {v: {"points": mesh_sample(welded(vt.mesh), REG_SAMPLES)[0], "mesh": vt.mesh, "upper": {}, "lower": {}}
              for v, vt in geo.vertebrae.items()}
-    atlas[SEGMENTS], atlas[SPANS] = {}, {}
+    atlas[SEGMENTS], atlas[SPANS], atlas[SPINOUS] = {}, {}, {}
+    axes = {v: spinous_axis(vt.mesh) for v, vt in geo.vertebrae.items() if v != "S1"}
     for lv, lev in geo.levels.items():
         U, L = lev.upper, lev.lower
         for lig in lev.ligaments:
+            for end, body, pts in (("upper", U, lig.upper), ("lower", L, lig.lower)):
+                if (lig.name, end) in SPINOUS_RULE and axes.get(body) is not None:
+                    atlas[SPINOUS].setdefault((lig.name, end), {})[lv] = _relative_position(pts, axes[body])
             o = _canonical_order(lig.upper, lig.lower)
             atlas[SEGMENTS].setdefault(lig.name, {})[lv] = (lig.upper - lig.lower)[o]
             if lig.name in DISC_SCALED:
@@ -185,7 +240,6 @@ def transfer(target: str, mesh, role: str, atlas: dict, exclude=(), warps: dict 
              method: str = "full") -> dict:
     """Landmarks of ``role`` on the target vertebra ``mesh`` (project frame): {structure: dict(points (k,3),
     extra (k,) or None, spread_m (k,): largest distance of a template's point from the median, templates)}."""
-    import trimesh  # noqa: PLC0415 - mesh library, imported where used (docs/design.md)
     temps = templates_for(target, role, atlas, exclude)
     if not temps and target == "S1":      # the atlas's only sacrum: kept under leave-one-out (S1 ends not scored)
         temps = templates_for(target, role, atlas)
@@ -217,7 +271,7 @@ def transfer(target: str, mesh, role: str, atlas: dict, exclude=(), warps: dict 
         spread = np.max(np.linalg.norm(np.stack(cand) - P, axis=-1), axis=0)
         on = np.all([atlas[t][role][s]["on_surface"] for t in temps], axis=0)
         if on.any():
-            snapped, _, _ = trimesh.proximity.closest_point(mesh, P[on])
+            snapped, _, _ = closest_point(mesh, P[on])
             P[on] = snapped
         extra = None
         if atlas[temps[0]][role][s]["extra"] is not None:
@@ -229,15 +283,16 @@ def transfer(target: str, mesh, role: str, atlas: dict, exclude=(), warps: dict 
 def level_landmarks(meshes: dict, level: str, atlas: dict, leave_one_out: bool = False, warps=None,
                     method: str = "full") -> dict:
     """{"ligaments": {name: (upper (n,3), lower (n,3), extra (n,))}, "facets": {side: (superior (9,3),
-    inferior (9,3))}, "spread": {...}} for one level from the transfers of its two vertebrae; ``leave_one_out``:
-    no vertebra is its own template (the accuracy measurement on the atlas's own specimen)."""
+    inferior (9,3))}, "spread": {...}, "rules": {(name, end): what the bone-feature rule did}} for one level from
+    the transfers of its two vertebrae (and :data:`SPINOUS_RULE`); ``leave_one_out``: no vertebra is its own
+    template (the accuracy measurement on the atlas's own specimen)."""
     U, L = level_vertebrae(level)
     warps = {} if warps is None else warps
     up = transfer(U, meshes[U], "upper", atlas, exclude=(U,) if leave_one_out else (), warps=warps.setdefault(U, {}),
                   method=method)
     lo = transfer(L, meshes[L], "lower", atlas, exclude=(L,) if leave_one_out else (), warps=warps.setdefault(L, {}),
                   method=method)
-    ligs, facets, spread = {}, {}, {}
+    ligs, facets, spread, rules = {}, {}, {}, {}
     # the size of the level against the atlas's vertebrae: every registration onto its two vertebrae (the via-point
     # extra lengths are scaled by their own template's; the fibre vectors of _fibre_rule by this)
     size = float(np.median([w.scale for v in (U, L) for w in warps[v].values()]))
@@ -245,7 +300,12 @@ def level_landmarks(meshes: dict, level: str, atlas: dict, leave_one_out: bool =
         if name in up and name in lo and len(up[name]["points"]) == len(lo[name]["points"]):
             ex = [e for e in (up[name]["extra"], lo[name]["extra"]) if e is not None]
             extra = np.mean(ex, axis=0) if ex else np.zeros(len(up[name]["points"]))
-            u, lo_, extra = _fibre_rule(name, up[name]["points"], lo[name]["points"], extra, level, meshes, atlas,
+            ends = {"upper": up[name]["points"], "lower": lo[name]["points"]}
+            for end, body in (("upper", U), ("lower", L)):
+                if (name, end) in SPINOUS_RULE and body != "S1":
+                    ends[end], rules[(name, end)] = _spinous_rule(name, end, ends[end], meshes[body], atlas, level,
+                                                                  exclude=(U, L) if leave_one_out else ())
+            u, lo_, extra = _fibre_rule(name, ends["upper"], ends["lower"], extra, level, meshes, atlas,
                                         exclude=(U, L) if leave_one_out else (), size=size)
             ligs[name] = (u, lo_, extra)
             spread[name] = (up[name]["spread_m"], lo[name]["spread_m"])
@@ -259,7 +319,7 @@ def level_landmarks(meshes: dict, level: str, atlas: dict, leave_one_out: bool =
             facets[side] = (sup, _facing_face(meshes[U], meshes[L], sup))
             spread[f"facet_{side}"] = (lo[ks]["spread_m"], up[ki]["spread_m"])
     templates = {"upper": next(iter(up.values()))["templates"], "lower": next(iter(lo.values()))["templates"]}
-    return dict(ligaments=ligs, facets=facets, spread=spread, templates=templates)
+    return dict(ligaments=ligs, facets=facets, spread=spread, templates=templates, rules=rules)
 
 
 def _facing_face(upper_mesh, lower_mesh, sup):
@@ -271,9 +331,8 @@ def _facing_face(upper_mesh, lower_mesh, sup):
     superior one turns the joint's contact surface around (its normal is oriented from the superior to the inferior
     face): the facet then resists the wrong motions (Visible Human L4-L5, leave one out: no facet force in axial
     rotation, twice the reference's axial range of motion)."""
-    import trimesh  # noqa: PLC0415 - mesh library, imported where used (docs/design.md)
     inf = _closest(upper_mesh, sup)
-    tri = trimesh.proximity.closest_point(lower_mesh, sup)[2]
+    tri = closest_point(lower_mesh, sup)[2]
     n = np.asarray(lower_mesh.face_normals)[tri].sum(0)
     n /= np.linalg.norm(n) or 1.0
     if float((inf.mean(0) - np.asarray(sup).mean(0)) @ n) < 0:
@@ -282,8 +341,7 @@ def _facing_face(upper_mesh, lower_mesh, sup):
 
 
 def _closest(mesh, P):
-    import trimesh  # noqa: PLC0415 - mesh library, imported where used (docs/design.md)
-    return np.asarray(trimesh.proximity.closest_point(mesh, np.asarray(P, float))[0], float)
+    return np.asarray(closest_point(mesh, np.asarray(P, float))[0], float)
 
 
 def _allowed(per_level: dict, exclude, shape=None) -> list:

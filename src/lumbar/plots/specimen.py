@@ -140,6 +140,10 @@ def check_output(out, inputs=()) -> Path:
         i = Path(i).expanduser().resolve()
         if i == out or out in i.parents:
             raise GeometryError(f"--out {out}: holds the input {i}; expected a folder of its own for the output")
+    cwd = Path.cwd().resolve()
+    if cwd == out or out in cwd.parents:
+        raise GeometryError(f"--out {out}: the current folder or one holding it (a run replaces the output folder as "
+                            "a whole); expected a folder of its own, e.g. --out landmarks_out")
     if out.is_dir():
         foreign = sorted(q.name + ("/" if q.is_dir() else "") for q in out.iterdir() if not _ours(q))
         if foreign:
