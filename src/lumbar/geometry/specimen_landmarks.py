@@ -41,17 +41,6 @@ FACET_PROCESS_ITERATIONS = 20
 #: ligaments whose fibre length (segment and via-point path) is scaled with the target's own disc height
 #: (:func:`lumbar.geometry.specimen.level_disc`): the ALL's path spans the anterior disc and onto the bodies
 DISC_SCALED = ("ALL",)
-SPINOUS = "_spinous"          # atlas key: per (ligament, end) and level the ends' relative position on the process
-#: fibre ends placed from the bone's own features instead of the atlas transfer alone (:func:`_spinous_rule`): the
-#: interspinous ligament's lower ends, on the superior border of the lower spinous process, slid along it under
-#: registration by 4.5-6.9 mm (Visible Human, leave one out); moved to the atlas's relative position between the
-#: lamina and the tip they lie 0.7-2.1 mm from the reference (the group median of the ISL 2.86 -> 1.76 mm). The same
-#: rule made the ISL's upper ends (0.3-2.9 mm -> 0.7-3.8 mm) and the flavum's ends (1.85 -> 3.1 mm median) worse:
-#: they keep the transfer (docs/specimen.md, "Sharper where the transfer misses")
-SPINOUS_RULE = (("ISL", "lower"),)
-#: the rule is not applied where it would move the ends further than this along the process (a spinous process the
-#: section rule misread)
-SPINOUS_MAX_SHIFT_M = 0.010
 
 
 def _canonical_order(up, lo):
@@ -106,46 +95,6 @@ def disc_height(level: str, meshes: dict) -> float:
     return float(level_disc(meshes[U], meshes[L], lower_is_sacrum=L == "S1")["height"])
 
 
-def spinous_axis(mesh):
-    """(x of the lamina's anterior edge, x of the spinous process's tip) of a vertebra in the project frame, at its
-    mid-sagittal section (:func:`lumbar.geometry.specimen.body_split`: the lamina's edge; the tip: the most
-    posterior vertex within 4 mm of the mid-sagittal plane), or None where the section does not show the lamina."""
-    from . import analysis  # noqa: PLC0415 - the mid-sagittal section
-    v = np.asarray(mesh.vertices)
-    y0 = float(np.median(v[:, 1]))
-    _, xl = analysis.sagittal_split(mesh, y_mid=y0)
-    mid = v[np.abs(v[:, 1] - y0) < 0.004]
-    if xl is None or len(mid) == 0:
-        return None
-    xt = float(mid[:, 0].min())
-    return (float(xl), xt) if xt < xl - 0.005 else None
-
-
-def _relative_position(P, axis):
-    xl, xt = axis
-    return float((np.mean(np.asarray(P)[:, 0]) - xl) / (xt - xl))
-
-
-def _spinous_rule(name, end, P, mesh, atlas, level, exclude=()):
-    """The fibre ends ``P`` of ``name``'s ``end`` on the target vertebra ``mesh`` (project frame) moved along x so that
-    their centroid lies at the atlas's relative position between the lamina's anterior edge and the spinous
-    process's tip (:func:`spinous_axis`; the median over the atlas levels not involving ``exclude``), then snapped to
-    the surface (closest point). Returns (points, what was done: a text for landmarks.csv)."""
-    ts = [t for lv, t in atlas.get(SPINOUS, {}).get((name, end), {}).items()
-          if not set(level_vertebrae(lv)) & set(exclude)]
-    axis = spinous_axis(mesh)
-    if not ts or axis is None:
-        return P, "the atlas transfer kept (no lamina found at the mid-sagittal section)"
-    t = float(np.median(ts))
-    shift = (t - _relative_position(P, axis)) * (axis[1] - axis[0])
-    if abs(shift) > SPINOUS_MAX_SHIFT_M:
-        return P, f"the atlas transfer kept (the spinous rule would move it {abs(shift) * 1e3:.1f} mm)"
-    moved = closest_point(mesh, np.asarray(P, float) + np.array([shift, 0.0, 0.0]))[0]
-    return moved, (f"then moved {shift * 1e3:+.1f} mm along the spinous process to the atlas's relative position "
-                   f"{t:.2f} between the lamina's anterior edge (0) and the tip (1) (median of {len(ts)} atlas "
-                   "level(s)) and snapped to the surface")
-
-
 def _surface_distance(mesh, P):
     return np.asarray(closest_point(mesh, np.asarray(P, float))[1], float)
 
@@ -166,14 +115,10 @@ def build_atlas(geo) -> dict:
     points (k,3), on_surface (k,), extra (k,) or None)}}} from a geometry with insertion sites (Visible Human)."""
     atlas = {v: {"points": mesh_sample(welded(vt.mesh), REG_SAMPLES)[0], "mesh": vt.mesh, "upper": {}, "lower": {}}
              for v, vt in geo.vertebrae.items()}
-    atlas[SEGMENTS], atlas[SPANS], atlas[SPINOUS] = {}, {}, {}
-    axes = {v: spinous_axis(vt.mesh) for v, vt in geo.vertebrae.items() if v != "S1"}
+    atlas[SEGMENTS], atlas[SPANS] = {}, {}
     for lv, lev in geo.levels.items():
         U, L = lev.upper, lev.lower
         for lig in lev.ligaments:
-            for end, body, pts in (("upper", U, lig.upper), ("lower", L, lig.lower)):
-                if (lig.name, end) in SPINOUS_RULE and axes.get(body) is not None:
-                    atlas[SPINOUS].setdefault((lig.name, end), {})[lv] = _relative_position(pts, axes[body])
             o = _canonical_order(lig.upper, lig.lower)
             atlas[SEGMENTS].setdefault(lig.name, {})[lv] = (lig.upper - lig.lower)[o]
             if lig.name in DISC_SCALED:
@@ -283,16 +228,15 @@ def transfer(target: str, mesh, role: str, atlas: dict, exclude=(), warps: dict 
 def level_landmarks(meshes: dict, level: str, atlas: dict, leave_one_out: bool = False, warps=None,
                     method: str = "full") -> dict:
     """{"ligaments": {name: (upper (n,3), lower (n,3), extra (n,))}, "facets": {side: (superior (9,3),
-    inferior (9,3))}, "spread": {...}, "rules": {(name, end): what the bone-feature rule did}} for one level from
-    the transfers of its two vertebrae (and :data:`SPINOUS_RULE`); ``leave_one_out``: no vertebra is its own
-    template (the accuracy measurement on the atlas's own specimen)."""
+    inferior (9,3))}, "spread": {...}} for one level from the transfers of its two vertebrae; ``leave_one_out``:
+    no vertebra is its own template (the accuracy measurement on the atlas's own specimen)."""
     U, L = level_vertebrae(level)
     warps = {} if warps is None else warps
     up = transfer(U, meshes[U], "upper", atlas, exclude=(U,) if leave_one_out else (), warps=warps.setdefault(U, {}),
                   method=method)
     lo = transfer(L, meshes[L], "lower", atlas, exclude=(L,) if leave_one_out else (), warps=warps.setdefault(L, {}),
                   method=method)
-    ligs, facets, spread, rules = {}, {}, {}, {}
+    ligs, facets, spread = {}, {}, {}
     # the size of the level against the atlas's vertebrae: every registration onto its two vertebrae (the via-point
     # extra lengths are scaled by their own template's; the fibre vectors of _fibre_rule by this)
     size = float(np.median([w.scale for v in (U, L) for w in warps[v].values()]))
@@ -300,12 +244,7 @@ def level_landmarks(meshes: dict, level: str, atlas: dict, leave_one_out: bool =
         if name in up and name in lo and len(up[name]["points"]) == len(lo[name]["points"]):
             ex = [e for e in (up[name]["extra"], lo[name]["extra"]) if e is not None]
             extra = np.mean(ex, axis=0) if ex else np.zeros(len(up[name]["points"]))
-            ends = {"upper": up[name]["points"], "lower": lo[name]["points"]}
-            for end, body in (("upper", U), ("lower", L)):
-                if (name, end) in SPINOUS_RULE and body != "S1":
-                    ends[end], rules[(name, end)] = _spinous_rule(name, end, ends[end], meshes[body], atlas, level,
-                                                                  exclude=(U, L) if leave_one_out else ())
-            u, lo_, extra = _fibre_rule(name, ends["upper"], ends["lower"], extra, level, meshes, atlas,
+            u, lo_, extra = _fibre_rule(name, up[name]["points"], lo[name]["points"], extra, level, meshes, atlas,
                                         exclude=(U, L) if leave_one_out else (), size=size)
             ligs[name] = (u, lo_, extra)
             spread[name] = (up[name]["spread_m"], lo[name]["spread_m"])
@@ -319,7 +258,7 @@ def level_landmarks(meshes: dict, level: str, atlas: dict, leave_one_out: bool =
             facets[side] = (sup, _facing_face(meshes[U], meshes[L], sup))
             spread[f"facet_{side}"] = (lo[ks]["spread_m"], up[ki]["spread_m"])
     templates = {"upper": next(iter(up.values()))["templates"], "lower": next(iter(lo.values()))["templates"]}
-    return dict(ligaments=ligs, facets=facets, spread=spread, templates=templates, rules=rules)
+    return dict(ligaments=ligs, facets=facets, spread=spread, templates=templates)
 
 
 def _facing_face(upper_mesh, lower_mesh, sup):

@@ -76,15 +76,12 @@ def landmark_table(sp, units: str | None = None) -> pd.DataFrame:
             for k in range(len(inf)):
                 items.append(("facet_inferior", side, k, U, inf[k], 0.0))
         tmpl = lm.get("templates", {})
-        feature = lm.get("rules", {})
         for name, side, k, body, p, extra in items:
             d, vi = trees[body].query(p)
             role = "upper" if body == U else "lower"
-            rule = _rule(name, body, tmpl.get(role, []), extra == 0.0 and not name.startswith("CL"))
-            if (name, role) in feature:
-                rule = f"{rule}; {feature[(name, role)]} (the bone's own feature, docs/specimen.md)"
             rows.append(dict(level=lv, structure=name, side=side, point_index=k, x_m=p[0], y_m=p[1], z_m=p[2],
-                             body=body, vertex_index=int(vi), rule=rule,
+                             body=body, vertex_index=int(vi),
+                             rule=_rule(name, body, tmpl.get(role, []), extra == 0.0 and not name.startswith("CL")),
                              source=src[body], kind="derived_from_geometry", extra_length_m=extra))
     df = pd.DataFrame(rows, columns=COLUMNS + ["extra_length_m"])
     P_in = sp.alignment.inverse(df[["x_m", "y_m", "z_m"]].to_numpy(float)) / f if len(df) else np.zeros((0, 3))
