@@ -563,7 +563,7 @@ def test_muscle_sentence_names_reached_but_uncertified_apart_from_not_reached(fa
     extra = [str(t / "in_vivo_validation.csv")]
     html_path, _, _ = _build(tmp, config, inputs + [e for e in extra if e not in inputs])
     text = parse_report(html_path).text
-    assert "activities it reaches with a certified optimum" in text
+    assert "activities with a certified optimum" in text
     assert "reached, but IPOPT could not certify the optimum (left out; Flags): upright standing" in text
     assert "not reached (beyond its muscles' capacity; muscle capacity table): crate far" in text
     # control: the uncertified posture is not called "not reached", nor the unreached one "reached"

@@ -206,6 +206,7 @@ SKIPPED_STAGE_OUTPUTS = {
     ),
     "muscle_model": (
         "muscle",
+        "paper2_",
         "in_vivo",
         "flexion_relaxation",
         "sensitivity_",
