@@ -345,8 +345,12 @@ def test_noisy_round_trip_reaches_noise_level_from_away_and_reports_identifiabil
     # slack - it fits the noise; the flag is what keeps this from reading as a result.
     assert ident["SSL"] == {"log_a": math.inf, "b_pct": math.inf, "log_d": math.inf}
     ssl = summary.loc["SSL"]
+    # a third outcome: the fit moves the law to where it carries almost nothing (the truth's slack SSL) and no ROM
+    # responds to it any more: identifiable at the start, not at the fit, so flagged not identifiable
+    assert not ssl.get("identifiable", False) or bool(ssl.get("at_bound", False)), ssl
     kept = np.allclose([res.ligaments["SSL"][i] for i in (0, 1, 3)], START["SSL"], rtol=1e-6)
-    assert (kept and not ssl.get("identifiable", False)) or bool(ssl.get("at_bound", False)), ssl
+    if not kept and not ssl.get("at_bound", False):
+        assert "not identifiable at the fit" in ssl["parameters"], ssl
     # the best-determined ligament parameter is known within a factor ~1.5 (ALL's log d), none below 10 %
     assert min(min(v.values()) for k, v in ident.items() if k != "facets") < 0.5
     assert not any(fit.loc[k, "identifiable"] for k in TRUTH)

@@ -248,7 +248,8 @@ class _StepwiseFit:
         span = ub - lb
         at_bound = [j for j in range(len(sol.x))
                     if sol.x[j] - lb[j] <= AT_BOUND_FRACTION * span[j] or ub[j] - sol.x[j] <= AT_BOUND_FRACTION * span[j]]
-        return sol, to_law, at_bound
+        xs = next(c[4] for c in candidates if c[0] is apply)
+        return sol, to_law, at_bound, (apply, sol.x, lb, ub, xs, to_law)
 
     def keep_start(self, what):
         """A structure that is not identifiable keeps the start set's value (a ligament: the start set's law)."""
@@ -279,17 +280,27 @@ class _StepwiseFit:
 
         candidates = self.candidates(what)
         identifiable = self.identifiable(candidates, residual, w)
-        at_bound = []
+        at_bound, sol, not_fixed = [], None, ""
         if not identifiable:
             self.keep_start(what)
             log.info("calibration step %d (%s on %s): not identifiable (no ROM of the stage changes by %.2g "
                      "deg when its parameters change): kept at the start set's value", step, what, stage,
                      IDENTIFIABLE_MIN_DEG)
         else:
-            sol, to_law, at_bound = self.best_fit(candidates, residual)
+            sol, to_law, at_bound, found = self.best_fit(candidates, residual)
+            # identifiable where the fit started need not mean identifiable where it ended: a law moved to where it
+            # carries (almost) nothing over the stage changes no ROM any more, so the data do not fix it there
+            # (a structure slack in the experiment). Flagged, the fitted value kept.
+            if not self.identifiable([found], residual, w):
+                identifiable = False
+                not_fixed = (" (not identifiable at the fit: no ROM of the stage changes by "
+                             f"{IDENTIFIABLE_MIN_DEG:.2g} deg when its parameters change there)")
+                log.info("calibration step %d (%s on %s): the fit ends where no ROM of the stage responds to it: "
+                         "flagged not identifiable", step, what, stage)
+            found[0](sol.x)
         rom, conv, res = ss.run()
         fitted = self.fitted
-        if not identifiable:
+        if not identifiable and sol is None:
             if what == "facets":
                 params = f"c_stiff={self.k_fac:.6g} N/m (not identifiable: start value)"
             else:
@@ -301,10 +312,10 @@ class _StepwiseFit:
                     *fitted[what])
         elif what == "facets":
             self.k_fac = 10.0 ** sol.x[0]
-            params = f"c_stiff={self.k_fac:.6g} N/m"
+            params = f"c_stiff={self.k_fac:.6g} N/m" + not_fixed
         else:
             fitted[what] = tuple(float(v) for v in to_law(sol.x))
-            params = "a={:.5g} N, b={:.5g} %, c={:.5g} N, d={:.5g} %".format(*fitted[what])
+            params = "a={:.5g} N, b={:.5g} %, c={:.5g} N, d={:.5g} %".format(*fitted[what]) + not_fixed
             # Fig. 5 data: group strain and force at the stage's solutions (and its 0 N*m state)
             _, strain, *_ = m.fibre_state(res.x, res.R)
             gf = m.group_forces(res.x, res.R)
@@ -438,7 +449,9 @@ def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_
     ``info["real_fit"]``).
     Every step records ``identifiable`` (a structure whose parameters change no ROM of its fit stage by
     ``IDENTIFIABLE_MIN_DEG`` per step is not fitted: it keeps the ``initial`` set's law, e.g. a ligament
-    that stays slack) and ``at_bound`` (a fitted parameter within ``AT_BOUND_FRACTION`` of a bound).
+    that stays slack; a structure whose fit ends where no ROM responds to it any more, e.g. a law moved to carry
+    almost nothing, keeps its fitted value and is flagged not identifiable too) and ``at_bound`` (a fitted parameter
+    within ``AT_BOUND_FRACTION`` of a bound).
 
     ``initial``: characteristic set providing everything that is not fitted (axial disc law, shear
     stiffness, prestrains, damping); default ``load_characteristic_set("calibrated")``.
