@@ -5,10 +5,20 @@ Markers (pyproject.toml): every test that uses the session DAG (``dag_workdir``,
 fixture built on them) is marked ``workflow`` here, so the fast lane ``pytest -m "not workflow and not slow"``
 never starts Snakemake.
 """
+# ruff: noqa: E402 - the thread variables below are set before numpy is imported
+import os
+
+# One BLAS/OpenMP thread per test process, as every Snakemake job gets (workflow/scripts/_common.py): the tests' numbers
+# are then the jobs' (the last digits of a multithreaded BLAS differ), and two xdist workers beside the background
+# Snakemake runs on two cores do not each start BLAS threads that wait spinning for a core. Set before numpy is
+# imported; a value already in the environment is kept.
+for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS",
+              "NUMEXPR_NUM_THREADS"):
+    os.environ.setdefault(_name, "1")
+
 import atexit
 import dataclasses
 import json
-import os
 import shutil
 import signal
 import subprocess

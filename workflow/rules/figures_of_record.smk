@@ -15,8 +15,8 @@ rule figures_of_record:
     conda:
         "../envs/lumbar.yaml"
     params:
-        # the run's results root (<root>/figures_of_record/figures_of_record.json): the figures are read by their roles
+        # the run's results root (<root>/figures_of_record.json): the figures are read by their roles
         # under it, the job times from its benchmarks/
-        root=lambda wildcards, output: str(Path(output.json).parents[1]),
+        root=lambda wildcards, output: str(Path(output.json).parent),
     script:
         "../scripts/figures_of_record.py"
