@@ -106,7 +106,7 @@ def timed_run(work: Path, tmp: Path, cores: int, configfiles: list[str], label: 
     load0 = os.getloadavg()[0]
     speed0 = speed_reference()
     proc, t0, log = _start(work, tmp, cores, configfiles, label)
-    rc, text, wall = finish_dag(proc, t0, log, timeout)
+    rc, text, wall, _ = finish_dag(proc, t0, log, timeout)
     steps = re.findall(r"(\d+) of (\d+) steps \(100%\) done", text or "")
     return dict(success=rc == 0, wall_time_s=round(wall, 2), jobs=int(steps[-1][1]) if steps else None,
                 load_average_1min_before_after=[round(load0, 2), round(os.getloadavg()[0], 2)],

@@ -81,3 +81,36 @@ def test_specimen_dag_credits_each_job_to_its_rule():
         "stepwise_reduction_surrogate": 1.0}
     fewer = bench.per_rule_seconds(per_job, {"stepwise_reduction"})
     assert fewer["stepwise_reduction"] == 8.0
+
+
+def test_dag_profile_sums_jobs_per_rule(tmp_path):
+    """bench_dag --profile: job files of one rule add up; shares of the jobs' wall time sum to 1; the time per
+    equilibrium is the rule's solve time over its equilibria; a rule without equilibria has none."""
+    bench_dag = _load("bench_dag")
+    jobs = [("calibrate", 10.0, 6.0, 20000), ("calibrate", 30.0, 18.0, 40000), ("paper_report", 20.0, 0.0, 0)]
+    for i, (rule, wall, solve, n) in enumerate(jobs):
+        rec = {"rule": rule, "job": f"j{i}", "pid": i, "wall_s": wall, "cpu_s": wall * 0.9,
+               "phases_s": {"startup_imports": 2.0, "fsu_solve": solve, "rest": wall - 2.0 - solve},
+               "counts": {"equilibria": n, "muscle_postures": 0}}
+        (tmp_path / f"{rule}__j{i}__{i}.json").write_text(json.dumps(rec))
+    prof = bench_dag.read_profiles(tmp_path)
+    cal, rep = prof["rules"]["calibrate"], prof["rules"]["paper_report"]
+    assert list(prof["rules"]) == ["calibrate", "paper_report"]          # largest first
+    assert cal["jobs"] == 2 and cal["wall_s"] == 40.0 and cal["counts"]["equilibria"] == 60000
+    assert cal["fsu_solve_s_per_equilibrium"] == round(24.0 / 60000, 7)
+    assert rep["fsu_solve_s_per_equilibrium"] is None
+    assert abs(sum(r["share_of_jobs_wall"] for r in prof["rules"].values()) - 1.0) < 1e-3
+    assert prof["phases_s"]["startup_imports"] == 6.0 and prof["jobs_wall_s"] == 60.0
+
+
+def test_dag_finish_reports_the_cpu_of_the_whole_process_tree(tmp_path):
+    """finish_dag's CPU time includes the children of the waited-for process (a job's CPU under Snakemake)."""
+    bench_dag = _load("bench_dag")
+    import time
+    log = tmp_path / "log.txt"
+    code = ("import subprocess, sys; subprocess.run([sys.executable, '-c', "
+            "'import time\\nt=time.process_time()\\nwhile time.process_time()-t<0.6: pass'])")
+    with log.open("w") as fh:
+        proc = subprocess.Popen([sys.executable, "-c", code], stdout=fh, stderr=subprocess.STDOUT)
+    rc, _, wall, usage = bench_dag.finish_dag(proc, time.perf_counter(), log, 120)
+    assert rc == 0 and usage["cpu_s"] >= 0.6 and usage["max_rss_mb"] > 1

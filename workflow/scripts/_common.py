@@ -178,6 +178,10 @@ def start(script_globals: dict):
     smk = script_globals.get("snakemake")
     if smk is None:
         smk = from_command_line(script_globals["__file__"], script_globals.get("__doc__"))
+    # with LUMBAR_PROFILE_DIR set (benchmarks/bench_dag.py), the job's phase times and equilibrium counts are written
+    # at exit; start-up and imports end here
+    from lumbar.mechanics import profile  # noqa: PLC0415
+    profile.start_job(smk.rule, ",".join(f"{k}={v}" for k, v in dict(smk.wildcards.items()).items()))
     return smk, setup_logging(smk)
 
 

@@ -45,6 +45,12 @@ def load_geometry(kind: str = "visible_human", path=None, levels=None) -> SpineG
     accepted. levels: None (all of "L1-L2".."L5-S1") or an iterable of level names; only their vertebrae
     are loaded.
     """
+    from ..mechanics import profile  # noqa: PLC0415
+    with profile.phase("geometry"):
+        return _load_geometry(kind, path, levels)
+
+
+def _load_geometry(kind, path, levels) -> SpineGeometry:
     k = str(kind).lower()
     if k in ("default", "myo_sim", "myo-sim"):
         return _checked(load_myo_sim(landmarks_csv=path, levels=levels))

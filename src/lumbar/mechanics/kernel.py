@@ -45,7 +45,7 @@ except ImportError:  # pragma: no cover
 
 import numpy as np
 
-from . import kernel_residual
+from . import kernel_residual, profile
 from .elements.ligament import LAW_CABLE, LAW_RUPP, LAW_SOFTPLUS  # noqa: F401 - the laws' codes, for callers
 from .jit import HAVE_NUMBA, njit
 from .jit import inner_jit as _inner
@@ -623,6 +623,6 @@ def _first_use():
     from the cache (a fraction of a second once it is there)."""
     if _state["ready"]:
         return
-    with first_use_lock():
+    with profile.phase("numba_load"), first_use_lock():
         _warm_up()
     _state["ready"] = True

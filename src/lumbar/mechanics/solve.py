@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import so3
+from . import profile, so3
 from .model import SpineModel
 
 log = logging.getLogger(__name__)
@@ -100,6 +100,14 @@ def newton(model, x, R, loads, fmask=1.0, cmask=1.0, params=None, max_iter=50, t
     muscle model, which adds its own terms to the SpineModels' residuals) and the reference mode run
     :func:`newton_reference`."""
     from . import kernel  # noqa: PLC0415 - numba only where equilibria are computed (lumbar/__init__.py)
+    profile.count("equilibria", x.shape[0])
+    with profile.phase("fsu_solve"):
+        return _newton_dispatch(kernel, model, x, R, loads, fmask, cmask, params, max_iter, tol_force, tol_moment,
+                                max_step_trans, max_step_rot, damping)
+
+
+def _newton_dispatch(kernel, model, x, R, loads, fmask, cmask, params, max_iter, tol_force, tol_moment,
+                     max_step_trans, max_step_rot, damping):
     if isinstance(model, SpineModel) and type(model).evaluate is SpineModel.evaluate and kernel.active() \
             and model.kernel_supported():
         nb = x.shape[1]

@@ -401,6 +401,12 @@ class RedundancySolver:
         equilibrium (no equilibrium found) is solved once more from the same start with the step lengths
         extended down to ``retry_line_search`` (the close crate with the OpenSim 4.6 active curve stalled at a
         30 N residual with the short search, and is certified with the long one)."""
+        from ..mechanics import profile  # noqa: PLC0415
+        profile.count("muscle_postures", len(np.atleast_1d(targets_deg)))
+        with profile.phase("muscle_solve"):
+            return self._solve_batch_certified(targets_deg, params, x0, R0, a0)
+
+    def _solve_batch_certified(self, targets_deg, params, x0=None, R0=None, a0=None) -> list:
         out = self._solve_batch(targets_deg, params, x0, R0, a0)
         B = len(out)
         out = self._retry(out, B, targets_deg, params, x0, R0, a0)
