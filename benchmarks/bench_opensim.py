@@ -109,7 +109,7 @@ def lumbar_side(geo, cs, case="wo_va", moments=MOMENTS_NM, directions=MAIN_DIREC
                 level="L4-L5", n_large=1000):
     """ROM (deg) per scenario and wall time per equilibrium, batched and one scenario at a time."""
     stage = CASES[case][0]
-    fsu = build_fsu(geo, cs, level, facet_stiffness=0.0)
+    fsu = build_fsu(geo, cs, level, facet_stiffness_n_per_m=0.0)
     grid = scenario_grid(moments, directions)
     n = len(grid)
     best_batch = np.inf

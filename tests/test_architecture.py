@@ -370,3 +370,48 @@ def test_heavy_import_check_sees_a_solver_import():
     # the check can fail: a module that solves (the compiled core) holds numba, one that reads meshes trimesh
     assert set(heavy_imports_of(["lumbar.mechanics.kernel", "lumbar.geometry.landmarks"])) >= \
         {"trimesh", "numba", "lumbar.mechanics.kernel"}
+
+
+def test_facet_stiffness_is_written_only_by_its_setter():
+    """The per-point facet stiffness array is written in one place, ``SpineModel.set_facet_stiffness`` (and its build
+    in ``finalize``): an in-place write elsewhere (``m.k_stiff[:] = ...``) is how formulas drift apart."""
+    import re
+    ROOT = Path(__file__).resolve().parents[1]
+    write = re.compile(r"\bk_stiff\s*(\[[^\]]*\])?\s*[-+*/]?=(?!=)")
+    offenders = []
+    for folder in ("src", "workflow", "benchmarks"):
+        for p in (ROOT / folder).rglob("*.py"):
+            if p.as_posix().endswith("lumbar/mechanics/model.py"):
+                continue
+            for i, line in enumerate(p.read_text().splitlines(), 1):
+                if write.search(line.split("#")[0]):
+                    offenders.append(f"{p.relative_to(ROOT)}:{i}: {line.strip()}")
+    assert not offenders, "facet stiffness written outside SpineModel.set_facet_stiffness:\n" + "\n".join(offenders)
+    assert write.search("m.k_stiff[:] = k0 * 2") and write.search("model.k_stiff *= 2")   # the pattern finds both
+    assert not write.search("k = k_stiff[n]") and not write.search("ok = m.k_stiff == 0")
+
+
+def test_the_unit_keys_of_the_configuration_are_unpacked_in_one_place():
+    """One way from a configuration to a unit: ``lumbar.experiments.fsu.unit_options`` / ``configured_unit`` read the
+    stiffness keys of the configuration's ``fsu`` section; no other script or library module reads them from a
+    mapping (the report displays the configuration, and two tables have columns of the same name: listed)."""
+    import re
+    ROOT = Path(__file__).resolve().parents[1]
+    keys = ("facet_stiffness_n_per_m", "disc_shear_stiffness_n_per_m")
+    read = re.compile(r"""(\.get\(|\[)\s*['"](%s)['"]""" % "|".join(keys))
+    allowed = {"src/lumbar/experiments/fsu.py",              # the builder
+               "src/lumbar/report/front_sections.py",        # prints the configuration
+               "src/lumbar/report/influence_text.py",        # column of the influence table
+               "src/lumbar/muscles/muscle_validation.py"}    # column of the chain admissibility table
+    offenders = []
+    for folder in ("src", "workflow/scripts"):
+        for p in (ROOT / folder).rglob("*.py"):
+            rel = p.relative_to(ROOT).as_posix()
+            if rel in allowed:
+                continue
+            for i, line in enumerate(p.read_text().splitlines(), 1):
+                if read.search(line):
+                    offenders.append(f"{rel}:{i}: {line.strip()}")
+    assert not offenders, ("configuration unit keys unpacked outside lumbar.experiments.fsu (use configured_unit / "
+                           "unit_options):\n" + "\n".join(offenders))
+    assert read.search('f.get("facet_stiffness_n_per_m")') and read.search("f['disc_shear_stiffness_n_per_m']")

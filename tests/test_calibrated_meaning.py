@@ -73,8 +73,8 @@ def _unit_rom(charset, config, keys):
     g, f = config["geometry"], config.get("fsu") or {}
     level = f.get("level", "L4-L5")
     geo = load_geometry(g["kind"], path=g.get("path") if g["kind"] == "visible_human" else None, levels=[level])
-    fsu = build_fsu(geo, charset, level, facet_stiffness=f.get("facet_stiffness_n_per_m"),
-                    k_shear=f.get("disc_shear_stiffness_n_per_m"))
+    fsu = build_fsu(geo, charset, level, facet_stiffness_n_per_m=f.get("facet_stiffness_n_per_m"),
+                    disc_shear_stiffness_n_per_m=f.get("disc_shear_stiffness_n_per_m"))
     rom = range_of_motion(fsu, sorted(set(keys["moment_nm"])), list(dict.fromkeys(keys["direction"])),
                           stages=["intact"], tol=1e-8)
     m = rom.set_index(["direction", "moment_nm"])["rom_deg"]

@@ -230,7 +230,7 @@ def _with_ligament(cs, kind, a, b, d):
 
 
 def _stage_rom(geo, cs, stage, facet_stiffness=None):
-    fsu = build_fsu(geo, cs, facet_stiffness=facet_stiffness)
+    fsu = build_fsu(geo, cs, facet_stiffness_n_per_m=facet_stiffness)
     df = simulate_stepwise_reduction(fsu, stages=[stage], moments_nm=NOISY_MOMENTS)
     assert df["converged"].all(), (stage, df[~df["converged"]])      # near the truth: always in equilibrium
     return df["rom_deg"].to_numpy()

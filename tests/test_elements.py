@@ -201,3 +201,41 @@ def test_property_softplus_tension_only_and_continuous(a, b, c, d, eps):
     assert F >= 0.0 and np.isfinite(F) and np.isfinite(dF)
     F2, _ = softplus_force(eps + 1e-7, a, b, c, d)
     assert abs(F2 - F) <= abs(dF) * 1e-7 + 1e-3 * max(1.0, a / d) * 1e-3
+
+
+@pytest.mark.parametrize("n_points", [1, 4])
+def test_joint_stiffness_is_shared_by_its_points_and_set_by_one_setter(n_points):
+    """A facet joint pressed evenly 0.2 mm deep carries the same total force with 1 or 4 contact points (each point
+    gets 1/n of the joint's stiffness; a builder that gave every point the whole stiffness would carry 4x with 4);
+    ``set_facet_stiffness`` scales it as a rebuild with the new stiffness would, and ``facet_stiffness`` reads back
+    the joint's value."""
+    from lumbar.mechanics.model import SpineModel
+    sup, inf = _facet_sets([0.0, 0.0, 8.0, 5.0])
+    s = fit_surface(sup, inf)
+    (u0, u1), (v0, v1) = s.u_range, s.v_range
+    uc, vc = 0.5 * (u0 + u1), 0.5 * (v0 + v1)
+    du, dv = 0.1 * (u1 - u0), 0.1 * (v1 - v0)
+    uv = [(uc, vc)] if n_points == 1 else [(uc - du, vc - dv), (uc + du, vc - dv), (uc - du, vc + dv), (uc + du, vc + dv)]
+    pts = np.array([s.origin + np.array([u, v, s.surface(u, v)[0] - 2e-4]) @ s.axes for u, v in uv])
+
+    def total(k_build, k_set=None):
+        m = SpineModel()
+        low = m.add_body("low", np.zeros(3), fixed=True)
+        up = m.add_body("up", np.array([0.0, 0.0, 0.03]))
+        m.add_facet(up, low, s, pts, k_build)
+        m.finalize()
+        if k_set is not None:
+            m.set_facet_stiffness(k_set)
+        x, R = m.reference_state(1)
+        return float(m.contact_forces(x, R)[0].sum()), m.facet_stiffness()
+
+    f1, k1 = total(12000.0)
+    # the joint's penalty law at 0.2 mm (the model's default smoothing), whatever n (the surface is curved a little)
+    f_joint = float(contact_penalty(np.array([2e-4]), 12000.0, 5e-5)[0][0])
+    assert f1 == pytest.approx(f_joint, rel=0.02)
+    f2, k2 = total(12000.0, 24000.0)
+    f3, _ = total(24000.0)
+    assert f2 == pytest.approx(f3, rel=1e-12) and f2 == pytest.approx(2 * f1, rel=0.05)
+    np.testing.assert_allclose(k1, [12000.0]) and np.testing.assert_allclose(k2, [24000.0])
+    with pytest.raises(ValueError, match="facet_stiffness_n_per_m"):
+        total(12000.0, -1.0)

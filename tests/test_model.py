@@ -247,3 +247,27 @@ def test_neutral_angle_offset_shifts_the_unloaded_disc_only_posture(charset):
     res = solve(fsu.model, np.zeros((1, 1, 6)), params={"disc_phi_offset": np.array([[off, 0.0, 0.0]])})
     assert res.converged[0]
     assert np.degrees(so3.log(res.R[0, 0])[0]) == pytest.approx(2.0, abs=1e-6)
+
+
+def test_configured_unit_is_build_fsu_with_the_configurations_overrides():
+    """The one builder: the configuration's facet and disc shear stiffness reach the model (per joint, as the set's
+    own value would), null keeps the set's, the whole configuration and its ``fsu`` section give the same unit, and
+    a bad value is refused with its key named."""
+    from lumbar.experiments.fsu import configured_unit, unit_options, unit_stiffness
+    cs = make_charset()
+    own = configured_unit(symmetric_fsu(), cs, {"fsu": {"level": "L4-L5"}})
+    np.testing.assert_allclose(own.model.facet_stiffness(), cs.facet.stiffness)
+    cfg = {"level": "L4-L5", "facet_stiffness_n_per_m": 2.5 * cs.facet.stiffness,
+           "disc_shear_stiffness_n_per_m": 3.0e5}
+    for c in (cfg, {"fsu": cfg}):
+        u = configured_unit(symmetric_fsu(), cs, c)
+        np.testing.assert_allclose(u.model.facet_stiffness(), 2.5 * cs.facet.stiffness)
+        assert [d.k_shear for d in u.model.discs] == [3.0e5]
+        ref = build_fsu(symmetric_fsu(), cs, "L4-L5", facet_stiffness_n_per_m=2.5 * cs.facet.stiffness,
+                        disc_shear_stiffness_n_per_m=3.0e5)
+        np.testing.assert_array_equal(u.model.k_stiff, ref.model.k_stiff)
+    assert unit_stiffness(cs, {"fsu": {}}) == (cs.facet.stiffness, cs.disc.k_shear)
+    with pytest.raises(ValueError, match="fsu.facet_stiffness_n_per_m"):
+        unit_options({"facet_stiffness_n_per_m": -1.0})
+    with pytest.raises(ValueError, match="fsu.disc_shear_stiffness_n_per_m"):
+        unit_options({"fsu": {"disc_shear_stiffness_n_per_m": "stiff"}})

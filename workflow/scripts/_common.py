@@ -227,7 +227,7 @@ def set_fsu(smk, **kw):
     """(characteristic set name, the configured L4-L5 unit with the job's characteristic set ``{set}``): geometry
     from ``params.geometry``, level and stiffness overrides from ``params.fsu``, the set read from the folder of
     ``input.characteristics`` (a file or the folder); ``kw`` goes to ``lumbar.experiments.fsu.build_fsu``."""
-    from lumbar.experiments.fsu import build_fsu  # noqa: PLC0415 - the library only for the jobs that build a unit
+    from lumbar.experiments.fsu import configured_unit  # noqa: PLC0415 - the library only for the jobs that build a unit
     from lumbar.geometry.configured import load_configured  # noqa: PLC0415
     from lumbar.inputs.characteristics import load_characteristic_set  # noqa: PLC0415
 
@@ -236,6 +236,5 @@ def set_fsu(smk, **kw):
     data_dir = data_dir.parent if data_dir.is_file() else data_dir
     geo = load_configured(g, levels=[f["level"]])
     cs = load_characteristic_set(smk.wildcards.set, data_dir=data_dir)
-    fsu = build_fsu(geo, cs, f["level"], facet_stiffness=f.get("facet_stiffness_n_per_m"),
-                    k_shear=f.get("disc_shear_stiffness_n_per_m"), **kw)
+    fsu = configured_unit(geo, cs, f, **kw)
     return smk.wildcards.set, data_dir, fsu

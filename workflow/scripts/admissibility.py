@@ -29,10 +29,9 @@ limits = ADM.pretension_limits(published, prior, geo, f["level"],
                                g["path"] if g["kind"] == "visible_human" else None)
 remus = None
 if g["kind"] == "visible_human":
-    from lumbar.experiments.fsu import build_fsu
+    from lumbar.experiments.fsu import configured_unit
 
-    remus = ADM.remus_comparison(build_fsu(geo, cal, f["level"], facet_stiffness=f.get("facet_stiffness_n_per_m"),
-                                           k_shear=f.get("disc_shear_stiffness_n_per_m")), g["path"])
+    remus = ADM.remus_comparison(configured_unit(geo, cal, f), g["path"])
 (remus if remus is not None else pd.DataFrame(columns=["ligament", "state", "model_n", "remus2021_n", "ratio"])).pipe(
     write_table_atomic, snakemake.output.remus)
 table = ADM.criteria_table(pd.read_csv(snakemake.input.curves), pd.read_csv(snakemake.input.compression), limits,

@@ -12,7 +12,7 @@ import pandas as pd  # noqa: E402
 snakemake, log = _common.start(globals())
 
 from lumbar.inputs.characteristics import resolve_characteristic_set  # noqa: E402
-from lumbar.experiments.fsu import build_fsu, range_of_motion  # noqa: E402
+from lumbar.experiments.fsu import configured_unit, range_of_motion  # noqa: E402
 from lumbar.geometry.configured import load_configured  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 
@@ -23,8 +23,7 @@ for name in snakemake.params.sets:
     cal = _common.as_list(snakemake.input.calibrated)
     cs = resolve_characteristic_set(name, data_dir=snakemake.input.characteristics,
                                     calibrated_dir=Path(cal[0]).parent if cal else None)
-    fsu = build_fsu(geo, cs, f["level"], facet_stiffness=f["facet_stiffness_n_per_m"],
-                    k_shear=f.get("disc_shear_stiffness_n_per_m"))
+    fsu = configured_unit(geo, cs, f)
     df = range_of_motion(fsu, f["moments_nm"], f["directions"], stages=["intact"], load_steps=s["load_steps"],
                          max_iter=s["max_iter"], tol=min(s["tol_force_n"], s["tol_moment_nm"]))
     df.insert(0, "set", name)

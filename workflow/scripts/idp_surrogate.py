@@ -10,6 +10,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _c
 import _common  # noqa: E402
 
 from lumbar.experiments import l2s1  # noqa: E402
+from lumbar.experiments.fsu import disc_shear_override  # noqa: E402
 from lumbar.experiments.virtual_experiment import idp_table  # noqa: E402
 from lumbar.geometry.configured import load_configured  # noqa: E402
 from lumbar.inputs.characteristics import resolve_characteristic_set  # noqa: E402
@@ -27,7 +28,7 @@ def main(snakemake, log):
     geo = load_configured(g, levels=list(l2s1.LEVELS))
     df = idp_table(geo, cs, snakemake.params.seed, n_specimens=p["n_specimens"], variation=p["variation"],
                    noise_sd_mpa=p["noise_sd_mpa"], cables=l2s1.derive_cables(snakemake.input.cables),
-                   idp_formula=p["idp_formula"], k_shear=snakemake.params.fsu.get("disc_shear_stiffness_n_per_m"),
+                   idp_formula=p["idp_formula"], k_shear=disc_shear_override(snakemake.params.fsu),
                    max_iter=snakemake.params.solver["max_iter"])
     log.info("SURROGATE IDP table: %d rows from %d virtual specimens of set %s", len(df), p["n_specimens"],
              p["generator_set"])

@@ -11,6 +11,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _c
 import _common  # noqa: E402
 from lumbar.experiments import l2s1  # noqa: E402
 from lumbar.experiments.calibration import shift_parameter  # noqa: E402
+from lumbar.experiments.fsu import unit_options  # noqa: E402
 from lumbar.experiments.posterior import table_bands_from_files  # noqa: E402
 from lumbar.geometry.configured import load_configured  # noqa: E402
 from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
@@ -28,7 +29,7 @@ def main(snakemake, log):
     def table_of(c):
         df, _ = l2s1.run_set(geo, c, cables, idp_formula=p["idp_formula"],
                              idp_kwargs={"area_m2": p["disc_area_m2"]} if p["idp_formula"] == "paper2" else None,
-                             facet_stiffness=f["facet_stiffness_n_per_m"], k_shear=f.get("disc_shear_stiffness_n_per_m"),
+                             **unit_options(f),
                              load_steps=s["load_steps"], max_iter=s["max_iter"],
                              tol=min(s["tol_force_n"], s["tol_moment_nm"]), moment_nm=p["moment_nm"])
         return df

@@ -14,7 +14,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from lumbar.experiments import load_sharing as LS  # noqa: E402
 from lumbar.experiments.calibration import shift_parameter  # noqa: E402
-from lumbar.experiments.fsu import build_fsu  # noqa: E402
+from lumbar.experiments.fsu import configured_unit  # noqa: E402
 from lumbar.experiments.posterior import (BAND_COLUMNS, DRAW_VALUE_COLUMNS, curve_bands, curve_draws_table,  # noqa: E402
                                          read_draw_offsets, read_posterior)
 from lumbar.geometry.configured import load_configured  # noqa: E402
@@ -36,8 +36,7 @@ def main(snakemake, log):
     moments = np.round(np.arange(0.0, ls["max_moment_nm"] + 1e-9, ls["moment_step_nm"]), 6)
 
     def build(c):
-        return build_fsu(geo, c, f["level"], facet_stiffness=f.get("facet_stiffness_n_per_m"),
-                         k_shear=f.get("disc_shear_stiffness_n_per_m"))
+        return configured_unit(geo, c, f)
 
     def curves_of(fsu):
         return LS.moment_rotation_curves(fsu, moments_nm=moments, stages=("intact",), max_iter=s["max_iter"])

@@ -18,7 +18,7 @@ from lumbar.experiments import admissibility as ADM  # noqa: E402
 from lumbar.experiments import level_transfer as LT  # noqa: E402
 from lumbar.experiments.calibration import read_prior_set, shift_parameter  # noqa: E402
 from lumbar.experiments import validation as V  # noqa: E402
-from lumbar.experiments.fsu import build_fsu  # noqa: E402
+from lumbar.experiments.fsu import build_fsu, configured_unit, unit_options  # noqa: E402
 from lumbar.experiments.load_sharing import moment_rotation_curves  # noqa: E402
 from lumbar.experiments.posterior import read_draw_offsets, read_posterior  # noqa: E402
 from lumbar.geometry.configured import load_configured  # noqa: E402
@@ -42,8 +42,7 @@ def main(snakemake, log):
     moments = np.round(np.arange(0.0, ls["max_moment_nm"] + 1e-9, ls["moment_step_nm"]), 6)
     curves, adm = [], []
     for lv in levels:
-        fsu = build_fsu(geo, cal, lv, facet_stiffness=f.get("facet_stiffness_n_per_m"),
-                        k_shear=f.get("disc_shear_stiffness_n_per_m"), follower=True)
+        fsu = configured_unit(geo, cal, f, lv, follower=True)
         cv, comp = ADM.assess(fsu, fsu, moments_nm=moments)
         cv.insert(0, "level", lv)
         curves.append(cv)
@@ -51,8 +50,7 @@ def main(snakemake, log):
         limits = ADM.pretension_limits(published, prior, geo, lv, vh_path)
         # the force scales' sourced exception, evaluated on this level's fibres (as at the calibrated level)
         remus = None if vh_path is None else ADM.remus_comparison(
-            build_fsu(geo, cal, lv, facet_stiffness=f.get("facet_stiffness_n_per_m"),
-                      k_shear=f.get("disc_shear_stiffness_n_per_m")), vh_path)
+            configured_unit(geo, cal, f, lv), vh_path)
         adm.append(ADM.criteria_table(cv, comp, limits, lv, ADM.neutral_zones(lv, snakemake.input.yamamoto), lit,
                                       ADM.force_scales(cal, prior), remus=remus))
     curves = pd.concat(curves, ignore_index=True)
@@ -63,8 +61,7 @@ def main(snakemake, log):
     if post is not None and len(rom):
         bands = V.level_rom_bands(geo, cal, levels, post[0], post[1], shift_parameter,
                                   offsets=read_draw_offsets(snakemake.input.posterior, snakemake.input.draws, post[0]),
-                                  facet_stiffness=f.get("facet_stiffness_n_per_m"),
-                                  k_shear=f.get("disc_shear_stiffness_n_per_m"))
+                                  **unit_options(f))
         rom = rom.merge(bands[["level", "direction", "band_low", "band_high"]].rename(
             columns={"band_low": "sim_band_low", "band_high": "sim_band_high"}), on=["level", "direction"],
             how="left")
@@ -75,7 +72,7 @@ def main(snakemake, log):
     # the same levels (and the calibrated one) under the other readings of the transfer (lumbar.experiments.
     # level_transfer): whether a miss comes from the transfer rule or from what the model does not have
     yam = pd.read_csv(snakemake.input.yamamoto)
-    kw = dict(facet_stiffness=f.get("facet_stiffness_n_per_m"), k_shear=f.get("disc_shear_stiffness_n_per_m"))
+    kw = unit_options(f)
     by_reading = {}
     for reading in LT.READINGS:
         cvs = [curves[curves["stage"] == "intact"]] if reading == "as_calibrated" else []

@@ -11,7 +11,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))   # this folder, for _c
 import _common  # noqa: E402
 from lumbar.experiments import stepwise_reduction as sr_mod  # noqa: E402
 from lumbar.experiments.calibration import shift_parameter  # noqa: E402
-from lumbar.experiments.fsu import build_fsu  # noqa: E402
+from lumbar.experiments.fsu import configured_unit  # noqa: E402
 from lumbar.experiments.posterior import table_bands_from_files  # noqa: E402
 from lumbar.geometry.configured import load_configured  # noqa: E402
 from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
@@ -26,8 +26,7 @@ def main(snakemake, log):
     cs = load_characteristic_set("calibrated", data_dir=Path(_common.as_list(snakemake.input.characteristics)[0]).parent)
 
     def table_of(c):
-        fsu = build_fsu(geo, c, f["level"], facet_stiffness=f.get("facet_stiffness_n_per_m"),
-                        k_shear=f.get("disc_shear_stiffness_n_per_m"))
+        fsu = configured_unit(geo, c, f)
         return sr_mod.simulate_stepwise_reduction(fsu, moments_nm=sr["moments_nm"], max_iter=s["max_iter"],
                                                   tol=min(s["tol_force_n"], s["tol_moment_nm"]),
                                                   load_steps=s["load_steps"])

@@ -15,6 +15,7 @@ snakemake, log = _common.start(globals())
 from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
 from lumbar.geometry.configured import load_configured  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
+from lumbar.experiments.fsu import disc_shear_override  # noqa: E402
 from lumbar.experiments.virtual_experiment import stepwise_reduction_table  # noqa: E402
 
 g, f, s, sr = snakemake.params.geometry, snakemake.params.fsu, snakemake.params.solver, snakemake.params.sr
@@ -33,12 +34,12 @@ if sr.get("anchor_generator") and sr.get("real_targets"):
         cs, _, spreads = calibration_prior(published, geo, f["level"], vh_path, sr["ligament_prior"])
         derived = _common.first(snakemake.input.get("derived", []))
         fit = fit_admissible(geo, cs, targets, level=f["level"], published=published, geometry_path=vh_path,
-                             k_shear=f.get("disc_shear_stiffness_n_per_m"), max_iter=s["max_iter"],
+                             k_shear=disc_shear_override(f), max_iter=s["max_iter"],
                              prior_spread=spreads,
                              disc_rows=read_experiment_table(derived) if derived else None,
                              diagnostic=True)      # an anchor of the virtual specimens: its verdict is a column
     else:
-        fit = fit_real_targets(geo, cs, targets, level=f["level"], k_shear=f.get("disc_shear_stiffness_n_per_m"),
+        fit = fit_real_targets(geo, cs, targets, level=f["level"], k_shear=disc_shear_override(f),
                                max_iter=s["max_iter"])
     cs = fit.charset
     out = fit.parameters.assign(role="generator anchoring (force scales of the generator set)",
@@ -64,6 +65,6 @@ df = stepwise_reduction_table(geo, cs, snakemake.params.seed, n_specimens=sr["n_
                               effects={"disc_tension": effects["disc_tension_n_per_m"]}
                               if "disc_tension_n_per_m" in effects else None,
                               moments_nm=sr["moments_nm"], level=f["level"],
-                              k_shear=f.get("disc_shear_stiffness_n_per_m"), max_iter=s["max_iter"])
+                              k_shear=disc_shear_override(f), max_iter=s["max_iter"])
 write_table_atomic(df, snakemake.output.table)
 log.info("wrote %s (%d rows, kind=surrogate)", snakemake.output.table, len(df))

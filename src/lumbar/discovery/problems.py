@@ -14,7 +14,7 @@ import pandas as pd
 
 from ..experiments import effects as fx
 from ..inputs.characteristics import resolve_characteristic_set
-from ..experiments.fsu import MAIN_DIRECTIONS, STAGES, build_fsu
+from ..experiments.fsu import MAIN_DIRECTIONS, STAGES, build_fsu, unit_options, unit_stiffness
 from ..geometry.configured import load_configured
 from ..mechanics.idp import DISC_AREA_M2, idp_per_newton
 from ..experiments.l2s1 import LEVELS, derive_cables, run_set
@@ -61,15 +61,15 @@ def _rom_sigma(df, s):
 def _fsu_variants(geometry, level, set_name, data_dir, facet_k, k_shear, calibrated_dir=None):
     geo = load_configured(dict(geometry), levels=[level])
     cs = resolve_charset(set_name, data_dir, calibrated_dir)
-    return fx.FsuVariants(build_fsu(geo, cs, level, facet_stiffness=facet_k, k_shear=k_shear))
+    return fx.FsuVariants(build_fsu(geo, cs, level, facet_stiffness_n_per_m=facet_k,
+                                    disc_shear_stiffness_n_per_m=k_shear))
 
 
 def fsu_variants_from_config(config):
     g, f = config.get("geometry", {}), config.get("fsu", {})
     s = discovery_settings(config)
     return _fsu_variants(tuple(sorted({"kind": "default", **g}.items())), f.get("level", "L4-L5"), s["characteristic_set"],
-                         (config.get("characteristics") or {}).get("data_dir"), f.get("facet_stiffness_n_per_m"),
-                         f.get("disc_shear_stiffness_n_per_m"),
+                         (config.get("characteristics") or {}).get("data_dir"), *unit_options(f).values(),
                          (config.get("characteristics") or {}).get("calibrated_dir"))
 
 
@@ -90,8 +90,7 @@ def nominal_model_label(config) -> str:
     name = discovery_settings(config)["characteristic_set"]
     cs = resolve_charset(name, c.get("data_dir"), c.get("calibrated_dir"))
     f = (config or {}).get("fsu") or {}
-    k_f = f.get("facet_stiffness_n_per_m") or cs.facet.stiffness
-    k_s = f.get("disc_shear_stiffness_n_per_m") or cs.disc.k_shear
+    k_f, k_s = unit_stiffness(cs, f)
     return (f"set {name} from {Path(cs.source).parent} (facet stiffness {k_f:.4g} N/m, disc shear stiffness "
             f"{k_s:.4g} N/m)")
 
@@ -244,7 +243,7 @@ def solve_idp_model(config):
     data_dir = (config.get("characteristics") or {}).get("data_dir")
     cs = resolve_charset(s["characteristic_set"], data_dir, (config.get("characteristics") or {}).get("calibrated_dir"))
     sim, _ = run_set(geo, cs, derive_cables(l2.get("cables")), idp_formula=l2.get("idp_formula", "paper1"),
-                     k_shear=(config.get("fsu") or {}).get("disc_shear_stiffness_n_per_m"),
+                     **unit_options(config),
                      moment_nm=l2.get("moment_nm", 3.75))
     sim["idp_per_newton_pa"] = idp_per_newton(l2.get("idp_formula", "paper1"), geo.levels["L4-L5"].disc_csa,
                                                l2.get("disc_area_m2", DISC_AREA_M2))

@@ -40,7 +40,7 @@ import numpy as np
 import pandas as pd
 
 from ..experiments import effects as fx
-from ..experiments.fsu import build_fsu
+from ..experiments.fsu import configured_unit
 from ..experiments.validation import MULTILEVEL_DIRECTIONS
 from ..geometry.configured import load_configured
 from ..inputs.io import write_json_atomic, write_table_atomic
@@ -147,9 +147,7 @@ def level_units(config, levels) -> dict:
         # the configured geometry, a user's specimen included (from the geometry cache its rule filled)
         geo = load_configured(dict(g), levels=list(levels))
         cs = resolve_charset(s["characteristic_set"], c.get("data_dir"), c.get("calibrated_dir"))
-        _UNITS[key] = {lv: fx.FsuVariants(build_fsu(geo, cs, lv, facet_stiffness=f.get("facet_stiffness_n_per_m"),
-                                                    k_shear=f.get("disc_shear_stiffness_n_per_m")))
-                       for lv in levels}
+        _UNITS[key] = {lv: fx.FsuVariants(configured_unit(geo, cs, f, lv)) for lv in levels}
     return _UNITS[key]
 
 

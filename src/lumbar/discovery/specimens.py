@@ -44,7 +44,7 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import nnls
 
-from ..experiments.fsu import MAIN_DIRECTIONS, STAGES
+from ..experiments.fsu import MAIN_DIRECTIONS, STAGES, disc_shear_override
 from ..experiments.l2s1 import LEVELS, derive_cables
 from ..experiments.stepwise_reduction import scenario_grid
 from ..experiments.virtual_experiment import SpecimenVariation, idp_specimens, rom_specimens
@@ -157,7 +157,7 @@ def rom_bank(config, keys: pd.DataFrame, n_specimens: int, stream=NULL_STREAM, v
     return rom_specimens(_geometry(config, [level]), _charset(config), bank_seed(config, stream), int(n_specimens),
                          keys[list(BANK_KEYS["stepwise_rom"])].reset_index(drop=True),
                          _variation(config, "stepwise_reduction"), variants, level=level,
-                         k_shear=f.get("disc_shear_stiffness_n_per_m"),
+                         k_shear=disc_shear_override(f),
                          max_iter=int(((config or {}).get("solver") or {}).get("max_iter", 50)))
 
 
@@ -168,8 +168,7 @@ def idp_bank_table(config, n_specimens: int, stream=NULL_STREAM, disc_scale=1.0,
     l2 = (config or {}).get("l2s1") or {}
     return idp_specimens(_geometry(config, LEVELS), _charset(config), bank_seed(config, stream), int(n_specimens),
                          _variation(config, "l2s1"), derive_cables(l2.get("cables")), l2.get("idp_formula", "paper1"),
-                         l2.get("disc_area_m2", DISC_AREA_M2), ((config or {}).get("fsu") or {}).get(
-                             "disc_shear_stiffness_n_per_m"), disc_scale=disc_scale,
+                         l2.get("disc_area_m2", DISC_AREA_M2), disc_shear_override(config), disc_scale=disc_scale,
                          max_iter=int(((config or {}).get("solver") or {}).get("max_iter", 50)), first=first)
 
 

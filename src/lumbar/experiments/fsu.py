@@ -97,7 +97,7 @@ class FSU:
         return fmask, cmask
 
 
-def add_level(model: SpineModel, level, charset, facet_stiffness=None, k_shear=None,
+def add_level(model: SpineModel, level, charset, facet_stiffness_n_per_m=None, disc_shear_stiffness_n_per_m=None,
               exclude=()):
     """Add the disc, facet joints and ligaments of one geometry level to ``model``.
 
@@ -106,7 +106,7 @@ def add_level(model: SpineModel, level, charset, facet_stiffness=None, k_shear=N
     """
     up, lo = model.body_index(level.upper), model.body_index(level.lower)
     disc = charset.disc
-    ks = disc.k_shear if k_shear is None else k_shear
+    ks = disc.k_shear if disc_shear_stiffness_n_per_m is None else disc_shear_stiffness_n_per_m
     if ks is None:
         raise ValueError("characteristic set has no disc shear stiffness: set fsu.disc_shear_stiffness_n_per_m")
     if not np.isfinite(ks) or ks <= 0:
@@ -132,11 +132,11 @@ def add_level(model: SpineModel, level, charset, facet_stiffness=None, k_shear=N
                                   scale=law.n_strands / lig.n_fibres)
         kinds.append(lig.kind)
     sides = []
-    k_fac = charset.facet.stiffness if facet_stiffness is None else facet_stiffness
-    if not np.isfinite(k_fac) or k_fac < 0:
-        raise ValueError(f"facet stiffness must be a finite value >= 0 N/m, got {k_fac}")
+    facet_stiffness_n_per_m = charset.facet.stiffness if facet_stiffness_n_per_m is None else facet_stiffness_n_per_m
+    if not np.isfinite(facet_stiffness_n_per_m) or facet_stiffness_n_per_m < 0:
+        raise ValueError(f"facet stiffness must be a finite value >= 0 N/m, got {facet_stiffness_n_per_m}")
     for side, fl, surf in facet_surfaces(level):
-        model.add_facet(up, lo, surf, getattr(fl, "contact_set", fl.inferior), k_fac)
+        model.add_facet(up, lo, surf, getattr(fl, "contact_set", fl.inferior), facet_stiffness_n_per_m)
         sides.append(side)
     return kinds, sides
 
@@ -206,7 +206,7 @@ def facet_surfaces(level) -> list:
 FOLLOWER_CABLE_LENGTH_M = 1.0
 
 
-def build_fsu(geometry, charset, level="L4-L5", facet_stiffness=None, k_shear=None,
+def build_fsu(geometry, charset, level="L4-L5", facet_stiffness_n_per_m=None, disc_shear_stiffness_n_per_m=None,
               contact_eps=5e-5, slack_width_pct=0.5, follower=False) -> FSU:
     """The functional unit of ``level``: lower vertebra fixed, upper free.
 
@@ -219,7 +219,7 @@ def build_fsu(geometry, charset, level="L4-L5", facet_stiffness=None, k_shear=No
     m = SpineModel(contact_eps=contact_eps, slack_width_pct=slack_width_pct)
     m.add_body(lev.upper, geometry.vertebrae[lev.upper].centroid)
     m.add_body(lev.lower, geometry.vertebrae[lev.lower].centroid, fixed=True)
-    kinds, sides = add_level(m, lev, charset, facet_stiffness, k_shear)
+    kinds, sides = add_level(m, lev, charset, facet_stiffness_n_per_m, disc_shear_stiffness_n_per_m)
     gid = None
     if follower:
         c = np.asarray(lev.disc_centre, float)
@@ -229,6 +229,53 @@ def build_fsu(geometry, charset, level="L4-L5", facet_stiffness=None, k_shear=No
         kinds = kinds + [FOLLOWER]
     m.finalize()
     return FSU(m, lev, charset, kinds, sides, gid)
+
+
+#: the configuration's stiffness overrides of a unit (section ``fsu``; None = the characteristic set's own value),
+#: by the names every builder takes them under (build_fsu, add_level, build_l2s1, run_set, ...): read only by
+#: :func:`unit_options`
+UNIT_KEYS = ("facet_stiffness_n_per_m", "disc_shear_stiffness_n_per_m")
+
+
+def unit_options(config) -> dict:
+    """The stiffness overrides of a configuration as the builders' keyword arguments: ``{facet_stiffness_n_per_m,
+    disc_shear_stiffness_n_per_m}`` (None where the configuration leaves the set's own value). ``config``: the whole
+    configuration (its ``fsu`` section is read), the ``fsu`` section itself, or None. The one place a
+    configuration's unit keys are unpacked: scripts and library modules pass this on, never the keys themselves."""
+    f = config or {}
+    if "fsu" in f and isinstance(f["fsu"], dict):
+        f = f["fsu"] or {}
+    out = {}
+    for k in UNIT_KEYS:
+        v = f.get(k)
+        if v is not None and not (isinstance(v, (int, float)) and np.isfinite(v) and v >= 0):
+            raise ValueError(f"fsu.{k} must be a finite number >= 0 N/m or null, got {v!r}")
+        out[k] = None if v is None else float(v)
+    return out
+
+
+def unit_stiffness(charset, config) -> tuple[float, float]:
+    """(facet stiffness, disc shear stiffness) [N/m] a unit of ``charset`` built from ``config`` gets: the
+    configuration's overrides where given, else the set's own values."""
+    o = unit_options(config)
+    k_f, k_s = o["facet_stiffness_n_per_m"], o["disc_shear_stiffness_n_per_m"]
+    return (charset.facet.stiffness if k_f is None else k_f), (charset.disc.k_shear if k_s is None else k_s)
+
+
+def disc_shear_override(config) -> float | None:
+    """The configuration's disc shear stiffness override [N/m] (None = the set's own): for the functions that build
+    their unit themselves and take only this override (the calibrations, the virtual specimens)."""
+    return unit_options(config)["disc_shear_stiffness_n_per_m"]
+
+
+def configured_unit(geometry, charset, config, level=None, **kw) -> FSU:
+    """The unit a configuration describes, the one way from a configuration to a model: :func:`build_fsu` of
+    ``level`` (default the configuration's ``fsu.level``) with ``charset`` and the configuration's stiffness
+    overrides (:func:`unit_options`); ``kw`` (``follower``, ``contact_eps``, ...) goes to :func:`build_fsu`."""
+    f = config or {}
+    if "fsu" in f and isinstance(f["fsu"], dict):
+        f = f["fsu"] or {}
+    return build_fsu(geometry, charset, level or f.get("level", "L4-L5"), **unit_options(f), **kw)
 
 
 def moment_loads(directions, moments_nm, nb=1, body=0):
@@ -355,7 +402,8 @@ def main(argv=None, prog: str = "python -m lumbar.experiments.fsu") -> int:
     try:
         geo = load_geometry(a.geometry, path=geometry_dir)
         cs = resolve_characteristic_set(a.set, calibrated_dir=a.calibrated_dir)
-        fsu = build_fsu(geo, cs, a.level, facet_stiffness=a.facet_stiffness, k_shear=a.shear_stiffness)
+        fsu = build_fsu(geo, cs, a.level, facet_stiffness_n_per_m=a.facet_stiffness,
+                        disc_shear_stiffness_n_per_m=a.shear_stiffness)
         df = range_of_motion(fsu, a.moment, directions, stages)
     except (ValueError, KeyError, FileNotFoundError) as e:
         print(f"error: {e}", file=sys.stderr)

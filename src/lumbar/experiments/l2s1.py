@@ -237,7 +237,8 @@ class L2S1:
         return out
 
 
-def build_l2s1(geometry, charset, cables: pd.DataFrame | None = None, facet_stiffness=None, k_shear=None,
+def build_l2s1(geometry, charset, cables: pd.DataFrame | None = None, facet_stiffness_n_per_m=None,
+               disc_shear_stiffness_n_per_m=None,
                cable_length_m=CABLE_LENGTH_M, contact_eps=5e-5, slack_width_pct=0.5,
                registration="auto") -> L2S1:
     """L2-S1 model of ``geometry`` with ``charset`` at every level and the derived cables.
@@ -261,7 +262,7 @@ def build_l2s1(geometry, charset, cables: pd.DataFrame | None = None, facet_stif
     m.add_body("S1", geometry.vertebrae["S1"].centroid, fixed=True)
     kinds, sides = [], []
     for lv in LEVELS:
-        k, s = add_level(m, geometry.levels[lv], charset, facet_stiffness, k_shear)
+        k, s = add_level(m, geometry.levels[lv], charset, facet_stiffness_n_per_m, disc_shear_stiffness_n_per_m)
         kinds += k
         sides += [(lv, x) for x in s]
     cab = cables.copy()
@@ -431,15 +432,17 @@ def internal_loads(sol: Solution, level=IDP_LEVEL) -> pd.DataFrame:
     return df
 
 
-def run_set(geometry, charset, cables=None, idp_formula="paper1", idp_kwargs=None, facet_stiffness=None,
-            k_shear=None, load_steps=1, max_iter=50, tol=1e-7, moment_nm=MOMENT_NM, specimen=False):
+def run_set(geometry, charset, cables=None, idp_formula="paper1", idp_kwargs=None, facet_stiffness_n_per_m=None,
+            disc_shear_stiffness_n_per_m=None, load_steps=1, max_iter=50, tol=1e-7, moment_nm=MOMENT_NM,
+            specimen=False):
     """Build, solve the 49 scenarios, and return (internal-loads table with idp_mpa, Solution).
 
     Scenarios without equilibrium are flagged (``converged`` False, ``idp_mpa`` NaN) with a WARNING; for a virtual
     specimen (``specimen`` True), where the generator drops the specimen from that row and counts it, an INFO line."""
     if idp_formula not in FORMULAS:
         raise ValueError(f"unknown IDP formula {idp_formula!r} (config key l2s1.idp_formula); expected one of {FORMULAS}")
-    sp = build_l2s1(geometry, charset, cables, facet_stiffness=facet_stiffness, k_shear=k_shear)
+    sp = build_l2s1(geometry, charset, cables, facet_stiffness_n_per_m=facet_stiffness_n_per_m,
+                    disc_shear_stiffness_n_per_m=disc_shear_stiffness_n_per_m)
     sol = solve_scenarios(sp, moment_nm=moment_nm, load_steps=load_steps, max_iter=max_iter, tol_force=tol,
                           tol_moment=tol)
     df = internal_loads(sol)

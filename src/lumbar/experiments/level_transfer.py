@@ -69,13 +69,14 @@ def size_scale_factors(level, reference) -> dict:
             "facet": s["facet_area"] / r["facet_area"]}
 
 
-def size_scaled_set(charset, level, reference, k_shear=None, facet_stiffness=None):
+def size_scaled_set(charset, level, reference, disc_shear_stiffness_n_per_m=None, facet_stiffness_n_per_m=None):
     """The characteristic set with the disc and facet stiffness scaled by :func:`size_scale_factors` (torque law
-    amplitudes p1 and p3 scaled, the angle scale p2 kept); ``k_shear``/``facet_stiffness``: the unit's overrides."""
+    amplitudes p1 and p3 scaled, the angle scale p2 kept); ``disc_shear_stiffness_n_per_m`` /
+    ``facet_stiffness_n_per_m``: the unit's overrides (None = the set's own)."""
     f = size_scale_factors(level, reference)
     d = charset.disc
-    ks = d.k_shear if k_shear is None else k_shear
-    kf = charset.facet.stiffness if facet_stiffness is None else facet_stiffness
+    ks = d.k_shear if disc_shear_stiffness_n_per_m is None else disc_shear_stiffness_n_per_m
+    kf = charset.facet.stiffness if facet_stiffness_n_per_m is None else facet_stiffness_n_per_m
     torque = {k: (p1 * f["disc_torque"], p2, p3 * f["disc_torque"]) for k, (p1, p2, p3) in d.torque.items()}
     disc = dataclasses.replace(d, torque=torque, k_axial_quadratic=d.k_axial_quadratic * f["disc_axial"],
                                k_axial_linear=d.k_axial_linear * f["disc_axial"],
@@ -139,9 +140,9 @@ def reading_unit(reading, geometry, charset, level, reference, build, **kw):
     if reading == "ligaments_on_strain":
         return build(geometry, strain_transfer_set(charset, lev, reference), level, **kw)
     if reading == "size_scaled":
-        cs = size_scaled_set(charset, lev, reference, k_shear=kw.get("k_shear"),
-                             facet_stiffness=kw.get("facet_stiffness"))
-        return build(geometry, cs, level, **{**kw, "k_shear": None, "facet_stiffness": None})
+        from .fsu import UNIT_KEYS, unit_options  # noqa: PLC0415
+        cs = size_scaled_set(charset, lev, reference, **unit_options(kw))
+        return build(geometry, cs, level, **{**kw, **dict.fromkeys(UNIT_KEYS)})
     return build(disc_frame_geometry(geometry, level), charset, level, **kw)
 
 

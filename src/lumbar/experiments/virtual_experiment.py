@@ -207,7 +207,7 @@ def stepwise_reduction_table(geometry, charset, seed, n_specimens=8, variation=N
     v = _variation(variation)
     def one(rng):
         geo_k, cs_k = virtual_specimen(geometry, charset, rng, v, levels=[level])
-        fsu = build_fsu(geo_k, cs_k, level, k_shear=k_shear)
+        fsu = build_fsu(geo_k, cs_k, level, disc_shear_stiffness_n_per_m=k_shear)
         sim = simulate_stepwise_reduction(fsu, STAGES, MAIN_DIRECTIONS, moments_nm, effects=effects,
                                           max_iter=max_iter, tol=tol)
         rom = sim["rom_deg"].to_numpy(float) + rng.normal(0.0, noise_sd_deg, len(sim))
@@ -312,7 +312,7 @@ def idp_table(geometry, charset, seed, n_specimens=7, variation=None, noise_sd_m
     vals = []
     for k, rng in enumerate(specimen_rngs(int(seed), n_specimens)):
         geo_k, cs_k = virtual_specimen(geometry, charset, rng, v, levels=list(LEVELS))
-        sim, _ = run_set(geo_k, cs_k, cables, idp_formula=idp_formula, k_shear=k_shear, max_iter=max_iter, tol=tol,
+        sim, _ = run_set(geo_k, cs_k, cables, idp_formula=idp_formula, disc_shear_stiffness_n_per_m=k_shear, max_iter=max_iter, tol=tol,
                          specimen=True)
         idp = sim["idp_mpa"].to_numpy(float) + rng.normal(0.0, noise_sd_mpa, len(sim))
         for key, delta in (effects or {}).items():
@@ -409,7 +409,7 @@ def rom_specimens(geometry, charset, seed, n_specimens, scenarios, variation=Non
         for mod, js in groups.items():
             cs_m = modified_charset(cs_k, **dict(mod)) if mod else cs_k
             try:
-                fv = fx.FsuVariants(build_fsu(geo_k, cs_m, level, k_shear=k_shear))
+                fv = fx.FsuVariants(build_fsu(geo_k, cs_m, level, disc_shear_stiffness_n_per_m=k_shear))
             except LawDomainError as exc:
                 log.info("virtual specimen %d, variant %s: no model (%s); its ROM is left out", k,
                          dict(mod) or "nominal", exc)
@@ -443,7 +443,7 @@ def idp_specimens(geometry, charset, seed, n_specimens, variation=None, cables=N
         geo_k, cs_k = virtual_specimen(geometry, charset, rng, v, levels=list(LEVELS))
         if disc_scale != 1.0:
             cs_k = modified_charset(cs_k, disc_scale=disc_scale)
-        sim, _ = run_set(geo_k, cs_k, cables, idp_formula=idp_formula, k_shear=k_shear, max_iter=max_iter, tol=tol,
+        sim, _ = run_set(geo_k, cs_k, cables, idp_formula=idp_formula, disc_shear_stiffness_n_per_m=k_shear, max_iter=max_iter, tol=tol,
                          specimen=True)
         d = sim[["muscle_setup", "load_case", "converged", "idp_mpa", "disc_axial_force_n",
                  "disc_moment_sagittal_nm"]].copy()

@@ -603,7 +603,7 @@ def resolve_characteristic_set(name: str, data_dir=None, calibrated_dir=None, ov
     disc.csv, else from ``data_dir`` (data/characteristics: the paper's published Table 3 set, as printed).
     Every other name (the literature sets) comes from ``data_dir``. The facet stiffness and the disc shear
     stiffness are the set's own values (facet.csv / disc.csv); a caller overrides them only explicitly
-    (``overrides``, or ``build_fsu(facet_stiffness=...)`` from the config key fsu.facet_stiffness_n_per_m).
+    (``overrides``, or ``build_fsu(facet_stiffness_n_per_m=...)`` from the config key fsu.facet_stiffness_n_per_m).
     """
     if name == "calibrated" and calibrated_dir is not None and (Path(calibrated_dir) / DISC_TABLE).is_file():
         return load_characteristic_set(name, data_dir=calibrated_dir, overrides=overrides)

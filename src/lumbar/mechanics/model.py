@@ -120,14 +120,30 @@ class SpineModel:
             self._fibres.append((upper, lower, s_upper[i], s_lower[i], extra[i], l0[i], code, P[i], scale, gid))
         return gid
 
-    def add_facet(self, upper, lower, surface: FacetSurface, points, stiffness):
-        """Contact points (n, 3) on ``upper`` against ``surface`` fixed to ``lower``; joint stiffness [N/m]."""
+    def add_facet(self, upper, lower, surface: FacetSurface, points, facet_stiffness_n_per_m):
+        """Contact points (n, 3) on ``upper`` against ``surface`` fixed to ``lower``; the joint's stiffness [N/m] is
+        shared equally by its n points (``k_stiff``, the kernel's per-point array, is joint stiffness / n: a joint
+        pressed evenly carries the same force whatever its number of points)."""
         sid = len(self.surfaces)
         self.surfaces.append(surface)
         pts = np.atleast_2d(np.asarray(points, float))
         for q in pts:
-            self._contacts.append((upper, lower, q, sid, stiffness / len(pts)))
+            self._contacts.append((upper, lower, q, sid, facet_stiffness_n_per_m / len(pts), 1.0 / len(pts)))
         return sid
+
+    def set_facet_stiffness(self, facet_stiffness_n_per_m, surfaces=None):
+        """Set, in place on a finalized model, the stiffness [N/m] of every facet joint (or of the contact surfaces
+        ``surfaces``, ids from :meth:`add_facet`): the one way to change it after the build (each point gets its
+        share, as :meth:`add_facet` gives it). A value may be given per selected point (an array)."""
+        k = np.asarray(facet_stiffness_n_per_m, float)
+        if not np.all(np.isfinite(k)) or np.any(k < 0):
+            raise ValueError(f"facet_stiffness_n_per_m must be finite and >= 0 N/m, got {facet_stiffness_n_per_m}")
+        sel = slice(None) if surfaces is None else np.isin(self.k_surf, list(surfaces))
+        self.k_stiff[sel] = k * self.k_share[sel]
+
+    def facet_stiffness(self) -> np.ndarray:
+        """The stiffness [N/m] of each contact surface's joint (summed over its points), in surface order."""
+        return np.bincount(self.k_surf, weights=self.k_stiff, minlength=len(self.surfaces))
 
     def kernel_supported(self) -> bool:
         """Whether the compiled core computes this model: its discs use the Eq. 3 torque law and one shear stiffness
@@ -165,7 +181,8 @@ class SpineModel:
         self.k_b = np.array([e[1] for e in k], int)
         self.k_s = np.array([e[2] for e in k], float).reshape(-1, 3)
         self.k_surf = np.array([e[3] for e in k], int)
-        self.k_stiff = np.array([e[4] for e in k], float)
+        self.k_stiff = np.array([e[4] for e in k], float)       # per point: joint stiffness x k_share [N/m]
+        self.k_share = np.array([e[5] for e in k], float)       # each point's share of its joint (1 / n points)
         self.nd = len(self.discs)
         return self
 

@@ -194,7 +194,6 @@ class _Objective:
         self.dr_weight = np.array([1.0 / math.sqrt(n_dir[d]) for d, _, _ in dr])
         m = probe.fsu.model
         self.groups = {k: [g for g, (_, kk, _lv) in enumerate(m.fibre_groups) if kk == k] for k in base.ligaments}
-        self.k0 = m.k_stiff.copy()
         self.torque_idx = {n.split(":")[1]: j for j, n in enumerate(names) if n.startswith("disc_torque:")}
         self.n_eval = [0, 0]
         self.n_res = None        # length of a residual vector (a failed probe returns one of the same length)
@@ -207,7 +206,7 @@ class _Objective:
         for kind, law in cs.ligaments.items():
             if hasattr(law, "a") and self.groups.get(kind):
                 set_ligament_law(m, self.groups[kind], law)
-        m.k_stiff[:] = self.k0 * (cs.facet.stiffness / self.base.facet.stiffness)
+        m.set_facet_stiffness(cs.facet.stiffness)
         for d in m.discs:
             d.k_shear = cs.disc.k_shear
             d.torque = dict(cs.disc.torque)

@@ -12,6 +12,7 @@ import pandas as pd
 
 from ...geometry.configured import load_configured
 from ...inputs.characteristics import load_characteristic_set
+from ..fsu import disc_shear_override
 from ..stepwise_reduction import read_experiment_table, reference_table
 from .admissible import admissible_fit_targets, read_fit_start
 from .stepwise import CalibrationResult, calibrate
@@ -60,7 +61,7 @@ def calibrate_configured(geometry: dict, fsu: dict, solver: dict, sr: dict, expe
                     "calibration stage says which criteria the set fails)", experiment)
     else:
         log.info("final fit (admissibility-constrained) pinned to %s (%d rows)", origin, len(targets))
-    res = calibrate(geo, ref, initial=paper, level=fsu["level"], k_shear=fsu.get("disc_shear_stiffness_n_per_m"),
+    res = calibrate(geo, ref, initial=paper, level=fsu["level"], k_shear=disc_shear_override(fsu),
                     tolerance_deg=sr["outlier_tolerance_deg"], data_kind=data_kind, max_iter=solver["max_iter"],
                     surrogate_weight=sr["surrogate_weight"], family=sr["calibration_family"],
                     final_surrogate_weight=sr["final_surrogate_weight"], real_targets=targets,

@@ -153,19 +153,19 @@ def fit_real_targets(geometry, charset, targets: pd.DataFrame, level="L4-L5", pa
     t_all, measured_all, scale = _rows_and_scales(t, measured, secondary, secondary_weight, tolerance_deg)
     ks0 = float(k_shear if k_shear is not None else charset.disc.k_shear)
     names, lo, hi, x0 = _parameter_vector(charset, parameters, ks0)
-    fsu = build_fsu(geometry, charset, level, k_shear=ks0)
+    fsu = build_fsu(geometry, charset, level, disc_shear_stiffness_n_per_m=ks0)
     m = fsu.model
-    par_scale0, k0 = m.f_scale.copy(), m.k_stiff.copy()
+    par_scale0, k_fac0 = m.f_scale.copy(), m.facet_stiffness()
     groups = {k: np.isin(m.f_group, kind_groups(m, k)) for k in names}
     ss = StageSolver(fsu, t_all[["stage", "direction", "moment_nm"]], max_iter=max_iter, tol=tol)
     n_eval = [0]
 
     def apply(q):
         m.f_scale[:] = par_scale0
-        m.k_stiff[:] = k0
+        m.set_facet_stiffness(k_fac0[m.k_surf])
         for name, v in zip(names, q):
             if name == "facet_stiffness":
-                m.k_stiff[:] = k0 * 10.0 ** v
+                m.set_facet_stiffness(k_fac0[m.k_surf] * 10.0 ** v)
             elif name == "disc_shear":
                 for d in m.discs:
                     d.k_shear = 10.0 ** v

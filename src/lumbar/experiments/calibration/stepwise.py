@@ -168,7 +168,6 @@ class _StepwiseFit:
         self.max_iter, self.tol, self.max_nfev = max_iter, tol, max_nfev
         self.k_fac0 = float(base.facet.stiffness)
         self.k_fac = self.k_fac0
-        self.k_stiff0 = self.m.k_stiff.copy()
         self.fitted = {}                 # kind -> (a, b, c, d)
         self.rom_fit, self.lig_pts = [], []
 
@@ -177,11 +176,11 @@ class _StepwiseFit:
         None). Facets: log10 c_stiff. A ligament: the monotone branch (d > 0, F(0) = 0) and, for the ``concave``
         kinds, the concave one (d < 0, F(0) = F0 >= 0); family scaled_published: only the force scale and knee shift
         of the start law."""
-        m, family, k_stiff0, k_fac0 = self.m, self.family, self.k_stiff0, self.k_fac0
+        m, family = self.m, self.family
         candidates = []
         if what == "facets":
             def apply_f(q):
-                m.k_stiff[:] = k_stiff0 * (10.0 ** q[0] / k_fac0)
+                m.set_facet_stiffness(10.0 ** q[0])
             candidates.append((apply_f, [math.log10(self.k_fac)], [math.log10(K_FACET_BOUNDS[0])],
                                [math.log10(K_FACET_BOUNDS[1])], [0.3], None))
         else:
@@ -255,7 +254,7 @@ class _StepwiseFit:
         """A structure that is not identifiable keeps the start set's value (a ligament: the start set's law)."""
         m = self.m
         if what == "facets":
-            m.k_stiff[:] = self.k_stiff0 * (self.k_fac0 / self.k_fac0)
+            m.set_facet_stiffness(self.k_fac0)
         else:
             pub = self.base.ligaments.get(what)
             if pub is not None and hasattr(pub, "a"):
@@ -496,7 +495,7 @@ def calibrate(geometry, reference: pd.DataFrame, initial=None, level="L4-L5", k_
     disc, disc_pts = _disc_step(base, reference, steps)
     # ---- steps 2-8: model with every calibrated ligament (start values); unfitted ones are masked by the stages
     cs, ligs, extra = _start_set(base, disc, family, start)
-    fsu = build_fsu(geometry, cs, level, facet_stiffness=float(base.facet.stiffness), k_shear=k_shear)
+    fsu = build_fsu(geometry, cs, level, facet_stiffness_n_per_m=float(base.facet.stiffness), disc_shear_stiffness_n_per_m=k_shear)
     sw = _StepwiseFit(fsu, base, ligs, family, concave, tolerance_deg, surrogate_weight, max_iter, tol, max_nfev)
     for step, (what, stage) in enumerate(ORDER[1:], start=2):
         steps.append(sw.fit_structure(step, what, stage, reference))
