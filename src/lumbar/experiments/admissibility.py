@@ -423,11 +423,13 @@ def force_scales(charset, prior) -> dict:
 
 
 def evaluate(geometry, charset, prior, published, level="L4-L5", geometry_path=None, fit_parameters=None,
-             moments_nm=None, facet_stiffness=None, k_shear=None) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+             moments_nm=None, facet_stiffness_n_per_m=None, disc_shear_stiffness_n_per_m=None
+             ) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
     """The one admissibility check of a characteristic set on a geometry level: (criteria table, curves, compression)."""
     if published is None:
         published = load_characteristic_set("calibrated")
-    fsu = build_fsu(geometry, charset, level, facet_stiffness_n_per_m=facet_stiffness, disc_shear_stiffness_n_per_m=k_shear, follower=True)
+    fsu = build_fsu(geometry, charset, level, facet_stiffness_n_per_m=facet_stiffness_n_per_m,
+                    disc_shear_stiffness_n_per_m=disc_shear_stiffness_n_per_m, follower=True)
     curves, comp = assess(fsu, fsu, fsu.follower_group, moments_nm=moments_nm)
     limits = pretension_limits(published, prior, geometry, level, geometry_path)
     remus = remus_comparison(fsu, geometry_path) if geometry_path is not None else None
