@@ -294,7 +294,12 @@ def _neutral_zone_rows(cv: pd.DataFrame, nz: dict, level: str) -> list:
         if plane not in nz:
             continue
         ref, src = nz[plane]
-        at1 = cv[cv["moment_nm"] == 1.0].set_index("direction")["rotation_deg"]
+        # the rotation at 1 N*m of each side, interpolated on its curve (a grid without 1.0 exactly still counts)
+        at1 = {}
+        for d in (dpos, dneg):
+            g = cv[cv["direction"] == d].sort_values("moment_nm")
+            if len(g) and g["moment_nm"].min() <= 1.0 <= g["moment_nm"].max():
+                at1[d] = float(np.interp(1.0, g["moment_nm"].to_numpy(float), g["rotation_deg"].to_numpy(float)))
         if dpos not in at1 or dneg not in at1:
             continue
         v = float(at1[dpos] + at1[dneg])
@@ -364,7 +369,9 @@ def _facet_loading_rows(cv: pd.DataFrame, level: str) -> list:
             continue
         F = g[cols].sum(axis=1).to_numpy(float)
         on = F > CONTACT_ON_N
-        drop = float(np.max(np.maximum(0.0, -np.diff(F))[on[1:]], initial=0.0))
+        # a drop counts where the facets were in contact before or after the step: one that opens within a step
+        # (in contact, then not) is a drop too
+        drop = float(np.max(np.maximum(0.0, -np.diff(F))[on[:-1] | on[1:]], initial=0.0))
         rows.append(_row("facet contact non-decreasing with the moment", drop, CONTACT_TOL_N, "N",
                          drop <= CONTACT_TOL_N and F[-1] > F[0], _PROJECT,
                          f"{'both facets' if side is None else side + ' (contralateral) facet'}: {F[0]:.3g} -> "
