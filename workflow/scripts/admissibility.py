@@ -15,7 +15,7 @@ import pandas as pd  # noqa: E402
 
 from lumbar.experiments import admissibility as ADM  # noqa: E402
 from lumbar.experiments.calibration import read_prior_set  # noqa: E402
-from lumbar.geometry.configured import load_configured  # noqa: E402
+from lumbar.geometry.configured import load_configured, visible_human_path  # noqa: E402
 from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 
@@ -26,12 +26,12 @@ cal = load_characteristic_set("calibrated", data_dir=Path(_common.as_list(snakem
 on_elongation = any(getattr(law, "law_length_m", None) is not None for law in cal.ligaments.values())
 prior = read_prior_set(snakemake.input.prior, published) if on_elongation else published
 limits = ADM.pretension_limits(published, prior, geo, f["level"],
-                               g["path"] if g["kind"] == "visible_human" else None)
+                               visible_human_path(g))
 remus = None
-if g["kind"] == "visible_human":
+if visible_human_path(g) is not None:
     from lumbar.experiments.fsu import configured_unit
 
-    remus = ADM.remus_comparison(configured_unit(geo, cal, f), g["path"])
+    remus = ADM.remus_comparison(configured_unit(geo, cal, f), visible_human_path(g))
 (remus if remus is not None else pd.DataFrame(columns=["ligament", "state", "model_n", "remus2021_n", "ratio"])).pipe(
     write_table_atomic, snakemake.output.remus)
 table = ADM.criteria_table(pd.read_csv(snakemake.input.curves), pd.read_csv(snakemake.input.compression), limits,

@@ -21,7 +21,7 @@ from lumbar.experiments import validation as V  # noqa: E402
 from lumbar.experiments.fsu import build_fsu, configured_unit, unit_options  # noqa: E402
 from lumbar.experiments.load_sharing import moment_rotation_curves  # noqa: E402
 from lumbar.experiments.posterior import read_draw_offsets, read_posterior  # noqa: E402
-from lumbar.geometry.configured import load_configured  # noqa: E402
+from lumbar.geometry.configured import load_configured, visible_human_path  # noqa: E402
 from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 from lumbar.plots.validation import plot_multilevel  # noqa: E402
@@ -46,7 +46,7 @@ def main(snakemake, log):
         cv, comp = ADM.assess(fsu, fsu, moments_nm=moments)
         cv.insert(0, "level", lv)
         curves.append(cv)
-        vh_path = g["path"] if g["kind"] == "visible_human" else None
+        vh_path = visible_human_path(g)
         limits = ADM.pretension_limits(published, prior, geo, lv, vh_path)
         # the force scales' sourced exception, evaluated on this level's fibres (as at the calibrated level)
         remus = None if vh_path is None else ADM.remus_comparison(

@@ -13,7 +13,7 @@ import _common  # noqa: E402
 snakemake, log = _common.start(globals())
 
 from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
-from lumbar.geometry.configured import load_configured  # noqa: E402
+from lumbar.geometry.configured import load_configured, visible_human_path  # noqa: E402
 from lumbar.inputs.io import write_table_atomic  # noqa: E402
 from lumbar.experiments.fsu import disc_shear_override  # noqa: E402
 from lumbar.experiments.virtual_experiment import stepwise_reduction_table  # noqa: E402
@@ -30,7 +30,7 @@ if sr.get("anchor_generator") and sr.get("real_targets"):
     targets = pd.concat([read_experiment_table(p) for p in sr["real_targets"]], ignore_index=True)
     if sr["ligament_transfer"] == "elongation":
         published = cs
-        vh_path = g["path"] if g["kind"] == "visible_human" else None
+        vh_path = visible_human_path(g)
         cs, _, spreads = calibration_prior(published, geo, f["level"], vh_path, sr["ligament_prior"])
         derived = _common.first(snakemake.input.get("derived", []))
         fit = fit_admissible(geo, cs, targets, level=f["level"], published=published, geometry_path=vh_path,

@@ -295,6 +295,13 @@ def _build(si: SpecimenInputs, mesh_dir: Path | None) -> SpecimenBuild:
     return SpecimenBuild(si, read, sp, mesh_dir)
 
 
+def visible_human_path(g: dict):
+    """The folder of the Visible Human set a ``geometry:`` section names (its ligament insertion and material tables
+    are read beside the meshes), or None for any other kind of geometry."""
+    g = g or {}
+    return g.get("path") if g.get("kind") == "visible_human" else None
+
+
 def load_configured(g: dict, levels=None) -> SpineGeometry:
     """The geometry a configuration's ``geometry:`` section names (module doc), with only ``levels`` (None: all
     present). A specimen comes from the cache when it was built before from the same inputs, else it is built."""
