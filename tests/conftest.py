@@ -28,6 +28,13 @@ import time
 from pathlib import Path
 
 import numpy as np
+from hypothesis import settings as _hypothesis_settings
+
+# Property tests draw the same examples on every run (a failure is a finding that reproduces, not a flake of the
+# random seed): ``HYPOTHESIS_PROFILE=explore pytest ...`` draws fresh ones when hunting for new cases.
+_hypothesis_settings.register_profile("ci", derandomize=True, print_blob=True)
+_hypothesis_settings.register_profile("explore", derandomize=False, print_blob=True)
+_hypothesis_settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 import pandas as pd
 import pytest
 from filelock import FileLock

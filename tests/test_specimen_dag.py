@@ -176,7 +176,8 @@ def test_another_calibrated_unit_takes_its_own_yamamoto_targets(smk_tree, tmp_pa
 
 MEAN_TARGETS = ["results/morphable_mean/geometry/levels.csv",
                 "results/morphable_mean/calibration/admissibility.csv",
-                "results/morphable_mean/tables/multilevel_rom.csv"]
+                "results/morphable_mean/tables/multilevel_rom.csv",
+                "results/morphable_mean/export/opensim_check.csv"]
 
 
 @pytest.fixture(scope="module")
@@ -244,6 +245,17 @@ def test_mean_calibration_admissibility_and_the_other_levels(mean_run):
     ml = pd.read_csv(mean_run / "results/morphable_mean/tables/multilevel_rom.csv")
     assert {"L2-L3", "L3-L4"} == set(ml["level"])          # L1-L2 and L5-S1: no such unit in the mean shape
     assert ml["converged"].astype(bool).all()
+
+
+@pytest.mark.workflow
+def test_mean_units_exported_to_opensim_and_checked_there(mean_run):
+    """The mean shape's calibrated L4-L5 as an OpenSim 4.6 model: loaded and solved in OpenSim (in the rule), the
+    detailed unit within 0.01 deg of the project's solver, the reduced joint within 10 %."""
+    chk = pd.read_csv(mean_run / "results/morphable_mean/export/opensim_check.csv")
+    assert set(chk["level"]) == {"L4-L5"} and (chk["status"] == "ok").all(), chk.to_string()
+    assert chk.loc[chk["variant"].str.startswith("detailed"), "difference_deg"].abs().max() < 0.01
+    assert chk.loc[chk["variant"] == "reduced", "relative_difference"].abs().max() < 0.10
+    assert (mean_run / "results/morphable_mean/export/calibrated/morphable_lumbar_mean_L4-L5.osim").is_file()
 
 
 @pytest.mark.workflow

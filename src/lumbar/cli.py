@@ -5,6 +5,7 @@
     lumbar fsu --moment 10 --direction all          # range of motion of one motion segment (lumbar.experiments.fsu)
     lumbar discovery --config CONFIG --measured FILE.csv --out DIR   # discrepancy discovery (lumbar.discovery.cli)
     lumbar landmarks MESH_DIR --units mm --axes LPS --out DIR        # a specimen's landmarks (lumbar.plots.specimen)
+    lumbar export-opensim --set calibrated --levels L4-L5            # units as OpenSim models (lumbar.experiments.export_opensim)
 
 ``python -m lumbar.cli ...`` is the same without the installed script. Each subcommand delegates its arguments
 unchanged to the ``main()`` of its module (``lumbar <command> --help`` shows them), and its exit status is the
@@ -23,11 +24,17 @@ def _landmarks(argv, prog):
     return specimen.main(argv, prog=prog)
 
 
+def _export_opensim(argv, prog):
+    from .experiments import export_opensim  # noqa: PLC0415
+    return export_opensim.main(argv, prog=prog)
+
+
 #: subcommand -> (main(argv, prog), one-line summary)
 COMMANDS = {
     "fsu": (fsu.main, "range of motion of one functional spinal unit under pure moments"),
     "discovery": (discovery_cli.main, "discrepancy discovery: which missing effect explains a measured table"),
     "landmarks": (_landmarks, "a specimen's project frame, landmarks, tables and QA figures from its meshes"),
+    "export-opensim": (_export_opensim, "a characteristic set's units as OpenSim 4.6 models, checked in OpenSim"),
 }
 
 

@@ -241,6 +241,15 @@ MANIFESTS: dict[str, Manifest] = {m.stage: m for m in (
         "posterior_figure": _o("figures/calibration_posterior.png", "posterior_figure", "calibration_posterior",
                                _CAL, final=True),
     }, report_module="lumbar.report.posterior"),
+    # The calibrated units as OpenSim 4.6 models (lumbar.experiments.export_opensim): every level of the configured geometry with
+    # the calibrated (MAP) set, the parameters' 90 % intervals beside them, and the models' ROM in OpenSim beside the
+    # project's (docs/opensim_export.md)
+    Manifest("export_opensim", {
+        "models": _o("export/calibrated", "export_opensim", directory=True, final=True),
+        "check": _o("export/opensim_check.csv", "export_opensim", "opensim_check", "OpenSim export", final=True),
+        "figure": _o("figures/opensim_check.png", "export_opensim", "opensim_check_figure", "OpenSim export",
+                     final=True),
+    }, report_module="lumbar.report.export_opensim_section", when=("export_opensim", "run")),
     Manifest("landmark_accuracy", {
         "summary": _o("geometry/landmark_accuracy_summary.csv", "landmark_accuracy", final=True),
         "groups": _o("geometry/landmark_accuracy_groups.csv", "landmark_accuracy"),
