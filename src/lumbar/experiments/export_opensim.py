@@ -418,6 +418,12 @@ def lumbar_rom(fsu, moments_nm, directions, include_facets=True) -> pd.DataFrame
     return df[["direction", "moment_nm", "rom_deg", "converged"]].reset_index(drop=True)
 
 
+def _quiet(osim):
+    """OpenSim's log at warnings only and no opensim.log in the working directory."""
+    osim.Logger.removeFileSink()          # first: setting the level logs a line, which would open the file
+    osim.Logger.setLevelString("warn")
+
+
 def static_rom(osim_path, moments_nm, directions, tol=1e-9):
     """ROM [deg] of an exported unit in OpenSim: the equilibrium of its FreeJoint under each pure moment, found as
     the root of OpenSim's own generalised residual forces (``InverseDynamicsSolver`` at zero speed and acceleration:
@@ -429,7 +435,7 @@ def static_rom(osim_path, moments_nm, directions, tol=1e-9):
     from scipy.optimize import root  # noqa: PLC0415
 
     from ..mechanics import so3  # noqa: PLC0415
-    osim.Logger.setLevelString("warn")
+    _quiet(osim)
     model = osim.Model(str(osim_path))
     model.finalizeConnections()
     free = [model.getJointSet().get(i) for i in range(model.getJointSet().getSize())
@@ -738,6 +744,7 @@ def attach_reduced_joint(model_path, joint_name, reduced_path, out_path, force_n
     docs/opensim_export.md."""
     import opensim as osim  # noqa: PLC0415
 
+    _quiet(osim)
     model = osim.Model(str(model_path))
     model.finalizeConnections()
     frag = osim.Model(str(reduced_path))
