@@ -247,7 +247,7 @@ MANIFESTS: dict[str, Manifest] = {m.stage: m for m in (
     Manifest("export_opensim", {
         "models": _o("export/calibrated", "export_opensim", directory=True, final=True),
         "check": _o("export/opensim_check.csv", "export_opensim", "opensim_check", "OpenSim export", final=True),
-        "figure": _o("figures/opensim_check.png", "export_opensim", "opensim_check_figure", "OpenSim export",
+        "figure": _o("figures/opensim_rom_check.png", "export_opensim", "opensim_rom_check", "OpenSim export",
                      final=True),
     }, report_module="lumbar.report.export_opensim_section", when=("export_opensim", "run")),
     Manifest("landmark_accuracy", {

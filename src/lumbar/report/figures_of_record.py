@@ -295,6 +295,28 @@ class _Reader:
                               note="median distance of the automatic ligament insertion-group centroids from the "
                                    "reference (leave one out)"))
 
+    # -- the OpenSim export's check
+    def opensim(self):
+        rel = self.out("export_opensim", "check")
+        names = [("opensim.detailed_max_difference_deg", LOWER, ("abs", 1e-3), "deg"),
+                 ("opensim.reduced_max_relative_difference", LOWER, ("abs", 0.01), "-"),
+                 ("opensim.scenarios_solved", HIGHER, ("abs", 0), "scenarios")]
+        if not self.exists(rel):
+            self.missing(names, rel)
+            return
+        t = pd.read_csv(rel)
+        ok = t[t["status"] == "ok"]
+        det = ok.loc[ok["variant"].str.startswith("detailed"), "difference_deg"].abs()
+        red = ok.loc[ok["variant"] == "reduced", "relative_difference"].abs()
+        self.put(names[0][0], figure(float(det.max()) if len(det) else None, LOWER, rel, ("abs", 1e-3), unit="deg",
+                                     note="largest |ROM in OpenSim - ROM of the project's solver| of the exported "
+                                          "detailed units, with and without facets"))
+        self.put(names[1][0], figure(float(red.max()) if len(red) else None, LOWER, rel, ("abs", 0.01), unit="-",
+                                     note="largest relative ROM difference of the reduced joint from the detailed "
+                                          "unit (acceptance 0.10)"))
+        self.put(names[2][0], figure(len(ok), HIGHER, rel, ("abs", 0), of=len(t), unit="scenarios",
+                                     note="check scenarios both engines solved"))
+
     # -- the report's first page
     def first_page(self):
         rel = self.out("report", "html")
@@ -344,6 +366,7 @@ def collect(root: str | Path = manifests.RESULTS_DIR, job_times: bool = True) ->
     r.paper2()
     r.admissibility()
     r.landmarks()
+    r.opensim()
     r.first_page()
     if job_times:
         r.job_times()
