@@ -516,3 +516,17 @@ def test_landmarks_on_a_ct_label_map_of_the_visible_human_set():
     assert list(table["input"].unique()) == ["surface meshes", "label volume"] and len(faces) == 18
     # 1 mm voxels do not resolve the facet joint space (half of its sourced lower bound): said, not hidden
     assert not table.loc[table["input"] == "label volume", "facet_surfaces_supported"].iloc[0]
+
+
+def test_rbf_kernel_fast_form_equals_the_direct_distances():
+    """The registration's Gaussian kernel by one matrix product agrees with the direct (n, k, 3) form, at the project
+    frame's offsets (coordinates 0.1-0.2 m from the origin, where |p|^2 + |c|^2 - 2 p.c would cancel badly without
+    the centring); a width change shows (the control)."""
+    from lumbar.geometry.register import _kernel
+    rng = np.random.default_rng(5)
+    P = rng.normal(size=(400, 3)) * 0.02 + [0.05, -0.01, 0.18]
+    C = rng.normal(size=(60, 3)) * 0.02 + [0.05, -0.01, 0.18]
+    for s in (0.006, 0.010, 0.016):
+        direct = np.exp(-0.5 * ((P[:, None, :] - C[None, :, :]) ** 2).sum(-1) / s**2)
+        np.testing.assert_allclose(_kernel(P, C, s), direct, rtol=0, atol=1e-13)
+    assert np.abs(_kernel(P, C, 0.010) - _kernel(P, C, 0.011)).max() > 1e-3

@@ -605,10 +605,12 @@ def _inside_distance(mesh, pts):
     return d, inside
 
 
-def overlap_radius(A, B, step_m: float = 0.001, max_points: int = 40_000) -> float:
+def overlap_radius(A, B, step_m: float = 0.001, max_points: int = 15_000) -> float:
     """Radius (m) of the largest ball inside both closed surfaces A and B (0 when they do not overlap): half the
     thickness of their common volume. Grid points (``step_m``, coarser when the boxes' overlap would need more
-    than ``max_points``) inside both, screened by the nearest face (:func:`_inside_distance`); the points screened
+    than ``max_points``: a ball of radius ``MAX_OVERLAP_M`` holds a grid point whenever the step is below 2 /
+    sqrt(3) of it, 4.6 mm; 15,000 points keep neighbouring lumbar vertebrae at a 1-1.5 mm step) inside both, screened
+    by the nearest face (:func:`_inside_distance`); the points screened
     beyond ``MAX_OVERLAP_M`` are confirmed by trimesh's ray test and measured to both surfaces exactly (the ray
     test on every point took seconds per pair of Visible Human vertebrae)."""
     lo = np.maximum(A.bounds[0], B.bounds[0])
