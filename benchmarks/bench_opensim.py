@@ -51,6 +51,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.spatial.transform import Rotation  # noqa: E402
 
+from lumbar.experiments import export_opensim  # noqa: E402
 from lumbar.mechanics import kernel, so3  # noqa: E402
 from lumbar.inputs.characteristics import load_characteristic_set  # noqa: E402
 from lumbar.mechanics.elements.ligament import slack_length  # noqa: E402
@@ -157,61 +158,32 @@ def lumbar_side(geo, cs, case="wo_va", moments=MOMENTS_NM, directions=MAIN_DIREC
 
 
 # ------------------------------------------------------------------ OpenSim side
-def _eq3(phi, p):
-    """Lepton text of Eq. 3 for angle expression ``phi`` and parameters (p1, p2, p3)."""
-    p1, p2, p3 = (repr(float(v)) for v in p)
-    return f"({p1}*tanh(({phi})^3/{p2})+{p3}*({phi}))"
-
-
 def disc_moment_expressions(torque, mapping="exact"):
     """(Mx, My, Mz) Lepton expressions of the disc's rotational stiffness in theta_x/y/z.
 
-    OpenSim applies the moment ``-R_GM ~N(theta) M`` to frame2 for expressions M (``N``: BodyXYZ
-    kinematic matrix in the body frame, ``qdot = N w_M``). lumbar applies ``-T(phi)`` in the lower
-    body's frame with ``phi = log(R_FM)``. ``exact``: M = (R_FM N^-1)^T T(phi(theta)), whose columns
-    are the F-frame Euler axes (e1, (0, c1, s1), (s2, -s1 c2, c1 c2)). ``naive``: M_i = T_i(theta_i).
+    ``exact``: the export's mapping (:func:`lumbar.experiments.export_opensim.disc_moment_expressions`: Eq. 3 on
+    lumbar's rotation vector computed from the bushing's angles, the torque mapped to the angles' generalised
+    forces). ``naive``: M_i = T_i(theta_i), what a modeller would write by hand.
     """
-    lb, fl, ex, ar = (torque[k] for k in ("lateral_bending", "flexion", "extension", "axial_rotation"))
-    if mapping == "naive":
-        return (_eq3("theta_x", lb),
-                f"step(theta_y)*{_eq3('theta_y', fl)}+(1-step(theta_y))*{_eq3('theta_y', ex)}",
-                _eq3("theta_z", ar))
-    if mapping != "exact":
+    if mapping == "exact":
+        return export_opensim.disc_moment_expressions(torque)
+    if mapping != "naive":
         raise ValueError(f"disc mapping must be 'exact' or 'naive', got {mapping!r}")
-    defs = [
-        "Tx=" + _eq3("px", lb),
-        "Ty=step(py)*" + _eq3("py", fl) + "+(1-step(py))*" + _eq3("py", ex),
-        "Tz=" + _eq3("pz", ar),
-        "px=k*(r32-r23)", "py=k*(r13-r31)", "pz=k*(r21-r12)",
-        # theta/(2 sin theta) by its series (exact to < 1e-8 relative below 20 deg; no 0/0 at rest)
-        "k=0.5*(1+a^2/6+7*a^4/360+31*a^6/15120+127*a^8/604800)",
-        "a=acos(min(max((r11+r22+r33-1)/2,-1),1))",
-        "r11=c2*c3", "r12=-c2*s3", "r13=s2",
-        "r21=c1*s3+s1*s2*c3", "r22=c1*c3-s1*s2*s3", "r23=-s1*c2",
-        "r31=s1*s3-c1*s2*c3", "r32=s1*c3+c1*s2*s3", "r33=c1*c2",
-        "c1=cos(theta_x)", "s1=sin(theta_x)", "c2=cos(theta_y)", "s2=sin(theta_y)",
-        "c3=cos(theta_z)", "s3=sin(theta_z)",
-    ]
-    tail = "; " + "; ".join(defs)
-    return ("Tx" + tail, "c1*Ty+s1*Tz" + tail, "s2*Tx-s1*c2*Ty+c1*c2*Tz" + tail)
+    lb, fl, ex, ar = (torque[k] for k in ("lateral_bending", "flexion", "extension", "axial_rotation"))
+    eq3 = export_opensim.eq3_expression
+    return (eq3("theta_x", lb), f"step(theta_y)*{eq3('theta_y', fl)}+(1-step(theta_y))*{eq3('theta_y', ex)}",
+            eq3("theta_z", ar))
 
 
 def disc_force_expressions(k_quadratic, k_linear, k_shear, k_tension=0.0):
-    """(Fx, Fy, Fz) in the disc frame: OpenSim applies ``-F`` to frame2 (restoring)."""
-    ks, k1, k2, kt = (repr(float(v)) for v in (k_shear, k_linear, k_quadratic, k_tension))
-    fz = f"({k1}*delta_z-{k2}*delta_z^2)*(1-step(delta_z))+{kt}*delta_z*step(delta_z)"
-    return f"{ks}*delta_x", f"{ks}*delta_y", fz
+    """(Fx, Fy, Fz) in the disc frame: OpenSim applies ``-F`` to frame2 (restoring); the export's."""
+    return export_opensim.disc_force_expressions(k_quadratic, k_linear, k_shear, k_tension)
 
 
 def fibre_expression(law, l0, extra, scale, slack_width_pct, damping):
-    """Tension [N] (positive pulls the two points together) of one softplus fibre as a Lepton text."""
-    a, b, c, dd = (repr(float(v)) for v in (law.a, law.b, law.c, law.d))
-    w = repr(float(slack_width_pct))
-    # overflow-free softplus (as numpy's logaddexp): ln(1 + e^z) = max(z, 0) + ln(1 + e^-|z|); the ISL's
-    # d = 0.024 % makes e^z overflow to inf within a few percent strain otherwise
-    return (f"{float(scale)!r}*max(F,0)*t*t*(3-2*t)+{float(damping)!r}*ddot; "
-            f"F={a}*(max(z,0)+log(1+exp(-abs(z))))+{c}; z=(e+{b})/{dd}; t=min(max(e/{w},0),1); "
-            f"e=(d+{float(extra)!r})/{float(l0)!r}*100-100")
+    """Tension [N] of one softplus fibre as a Lepton text (the export's, :func:`lumbar.experiments.export_opensim.
+    fibre_expression`)."""
+    return export_opensim.fibre_expression(law.a, law.b, law.c, law.d, l0, extra, scale, slack_width_pct, damping)
 
 
 class OpenSimFSU:
