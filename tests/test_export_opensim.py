@@ -206,3 +206,17 @@ def test_reduced_joint_goes_into_an_existing_model(tmp_path, unit):
     with_joint, reduced = json.loads(r.stdout.strip().splitlines()[-1])
     assert min(with_joint) > 0.5                 # the bushing is there and carries the moments
     np.testing.assert_allclose(with_joint, reduced, atol=1e-6)
+
+
+def test_command_refuses_an_unknown_set_or_level_by_name(tmp_path, capsys):
+    """``lumbar export-opensim``: a set that does not exist and a level the geometry lacks end with exit 2 and a
+    message naming the key, before anything is written; no traceback."""
+    from lumbar.cli import main
+    out = tmp_path / "x"
+    assert main(["export-opensim", "--set", "no_such_set", "--out", str(out), "--no-check"]) == 2
+    err = capsys.readouterr().err
+    assert "no_such_set" in err and "column 'name'" in err and "Traceback" not in err
+    assert main(["export-opensim", "--levels", "L9-L5", "--out", str(out), "--no-check"]) == 2
+    err = capsys.readouterr().err
+    assert "L9-L5" in err and "not in geometry" in err
+    assert not out.exists()
