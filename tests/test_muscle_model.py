@@ -478,9 +478,10 @@ def test_handover_gives_the_certified_optimum_of_the_full_sqp(model):
     did take place)."""
     from lumbar.muscles.muscle_model import LumbarMuscleModel, make_solver, solve_postures
     # the model the stall was measured on: the detailed passive chain (paper 1's published set) with the muscles
-    # read at 100 N/cm^2, in-situ lengths in the as-segmented pose and no IAP (paper 2's springs do not stall here)
+    # read at 100 N/cm^2, in-situ lengths in the as-segmented pose, no IAP and the myo-sim facet faces as carried
+    # (their rest overlap not cleared; paper 2's springs do not stall here)
     model = LumbarMuscleModel(passive_model="detailed", in_situ_posture="reference", iap_force_n=0.0,
-                              pcsa_source_spt_n_per_cm2=100.0)
+                              pcsa_source_spt_n_per_cm2=100.0, clear_facet_overlap=False)
     sols = []
     for w in (0, 10):
         sv = make_solver(model, {"max_iter": 150, "multistart": False, "handover_window": w})
@@ -490,3 +491,34 @@ def test_handover_gives_the_certified_optimum_of_the_full_sqp(model):
     assert on.iterations < off.iterations
     assert on.cost == pytest.approx(off.cost, rel=1e-5)
     assert np.allclose(on.a, off.a, atol=1e-3)
+
+
+def test_calibrated_facets_carried_onto_the_muscle_geometry_carry_no_preload_at_rest():
+    """The detailed passive chain on the myo-sim levels: every facet contact surface that the carried landmarks put
+    its contact points beyond at rest is moved out to touch (rest gap 0, moved by the overlap), the others are kept;
+    the control, the same level built without the clearing, has the overlap (L3-L4: the hand-placed myo-sim faces
+    cross)."""
+    from lumbar.experiments.fsu import add_level
+    from lumbar.mechanics.model import SpineModel
+    from lumbar.muscles.muscle_model import FREE, LumbarMuscleModel, clear_rest_overlap, facet_gaps
+
+    m = LumbarMuscleModel(passive_model="detailed", in_situ_posture="reference")
+    x0, R0 = m.reference_state()
+    moved = dict(zip(m.levels, m.facet_surface_moved_m))
+    for lv, lm in zip(m.levels, m.level_models):
+        g = facet_gaps(lm, x0, R0)[0]
+        assert g.min() > -1e-12, (lv, g)                                    # no preload at rest
+        assert np.all((moved[lv] == 0) | (np.abs(g) < 1e-12)), (lv, g)     # a moved surface touches
+    assert moved["L3-L4"].min() > 1e-3                                      # the myo-sim L3-L4 faces cross by mm
+    # control: the L3-L4 level as the builder makes it, before the clearing
+    raw = SpineModel()
+    for v in FREE:
+        raw.add_body(v, m.geo.vertebrae[v].centroid)
+    raw.add_body("S1", m.geo.vertebrae["S1"].centroid, fixed=True)
+    add_level(raw, m.geo.levels["L3-L4"], m.charset)
+    raw.finalize()
+    before = facet_gaps(raw, x0, R0)[0]
+    np.testing.assert_allclose(-before, moved["L3-L4"], rtol=0, atol=1e-12)
+    again = clear_rest_overlap(raw, x0, R0)            # moves it by the overlap; a second call moves nothing
+    np.testing.assert_allclose(again, -before, atol=1e-15)
+    assert np.all(clear_rest_overlap(raw, x0, R0) == 0)

@@ -168,13 +168,43 @@ def passive_characteristics(passive_set, data_dir=None, calibrated_dir=None):
     return load_characteristic_set("calibrated" if passive_set == "published_table3" else passive_set, data_dir=d)
 
 
+def facet_gaps(m, x, R):
+    """Smallest gap [m] of each facet surface's contact points (B, n_surfaces) of a level's model ``m`` in the states
+    ``x``, ``R``; negative = the points lie beyond the surface (penetration)."""
+    p, _ = m._attach(x, R, m.k_a, m.k_s)
+    P = m._to_body(x, R, m.k_b, p)
+    return np.stack([surf.gap(P[:, m.k_surf == sid])[0].min(axis=-1) for sid, surf in enumerate(m.surfaces)],
+                    axis=-1)
+
+
+def clear_rest_overlap(m, x0, R0) -> np.ndarray:
+    """Move each facet contact surface of a level's model ``m`` whose contact points lie beyond it in the rest state
+    (``x0``, ``R0``: the as-segmented pose) along its own normal until the nearest point touches it (rest gap 0);
+    surfaces with a positive rest gap are kept. A contact preload before any load is not anatomy: the cartilage
+    surfaces of a facet joint touch at rest, they are not pressed into each other (the calibrated Visible Human unit
+    has its surfaces "touching", data/landmarks/README.md). Used where the calibrated set is carried onto another
+    geometry whose landmarks put the faces into each other (the muscle model's myo-sim levels). Returns the
+    distance [m] each surface was moved (0 where kept), in surface order."""
+    import dataclasses  # noqa: PLC0415
+
+    g = facet_gaps(m, x0, R0)[0] if m.nc else np.zeros(0)
+    moved = np.zeros(len(m.surfaces))
+    for sid, surf in enumerate(m.surfaces):
+        if g[sid] < -1e-9:                        # below 1 nm: the round-off of a surface already moved
+            coef = np.array(surf.coef, float)
+            coef[4] += g[sid]                     # w = f(u, v) lowered by the overlap: the rest gap becomes 0
+            m.surfaces[sid] = dataclasses.replace(surf, coef=coef)
+            moved[sid] = -g[sid]
+    return moved
+
+
 class LumbarMuscleModel:
     """Bodies, passive levels, muscles and weights; ``evaluate`` is the equilibrium residual + Jacobian."""
 
     def __init__(self, geometry=None, charset=None, muscle_set: MuscleSet | None = None, body_mass_kg=71.0,
                  anthropometry_csv=None, iap_force_n=None, passive_set="published_table3", data_dir=None,
                  calibrated_dir=None, symmetric_passive=True, in_situ_posture="standing", passive_model="springs",
-                 pcsa_source_spt_n_per_cm2=None):
+                 pcsa_source_spt_n_per_cm2=None, clear_facet_overlap=True):
         from ..geometry import load_geometry
         from ..geometry.symmetry import mirror_average
         if not body_mass_kg > 0:
@@ -229,6 +259,11 @@ class LumbarMuscleModel:
                 _, sides = add_level(m, self.geo.levels[lv], self.charset)
             self.level_models.append(m.finalize())
             self.facet_sides.append(list(sides))
+        # the calibrated facets carried onto this geometry: no contact preload at rest (clear_rest_overlap)
+        x0 = np.broadcast_to(cents, (1, len(FREE), 3)).copy()
+        R0 = np.broadcast_to(np.eye(3), (1, len(FREE), 3, 3)).copy()
+        self.facet_surface_moved_m = [clear_rest_overlap(m, x0, R0) if clear_facet_overlap else np.zeros(len(m.surfaces))
+                                      for m in self.level_models]
         self.paths = MusclePaths(self.ms, self.body_index, cents)
         cab = SpineModel()
         bodies(cab)

@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 
 from ..experiments.fsu import facet_surfaces
-from .muscle_model import certificate, get_activity, idp_parts
+from .muscle_model import certificate, facet_gaps, get_activity, idp_parts
 from .muscle_set import ABDOMINALS, EXTENSORS
 from .paths import N_PER_CM2
 
@@ -35,16 +35,8 @@ def flexion_relaxation(model, sols, names):
     return pd.DataFrame(rows)
 
 
-FACET_CONTACT_COLUMNS = ["activity", "level", "side", "contact_n", "min_gap_mm", "rest_min_gap_mm",
+FACET_CONTACT_COLUMNS = ["activity", "level", "side", "contact_n", "min_gap_mm", "rest_min_gap_mm", "surface_moved_mm",
                          "rest_face_separation_mm", "facet_stiffness_n_per_m", "reached", "passive_set"]
-
-
-def _facet_gaps(m, x, R):
-    """Smallest gap [m] of each facet surface's contact points (B, n_surfaces); negative = penetration."""
-    p, _ = m._attach(x, R, m.k_a, m.k_s)
-    P = m._to_body(x, R, m.k_b, p)
-    return np.stack([surf.gap(P[:, m.k_surf == sid])[0].min(axis=-1) for sid, surf in enumerate(m.surfaces)],
-                    axis=-1)
 
 
 def face_separation(surface, landmarks) -> float:
@@ -65,22 +57,25 @@ def facet_contact(model, sols, names) -> pd.DataFrame:
     the contact points to the contact surface [mm] in the posture and at rest (the as-segmented reference pose;
     negative = the points lie beyond the surface, i.e. a contact preload before any load), the joint space the
     landmarks describe (:func:`face_separation`, [mm]; the lumbar facet joint space is 1.4-2.4 mm,
-    data/anatomy) and the facet contact stiffness of the passive set [N/m]. Where the anatomy has the cartilage
+    data/anatomy), how far the contact surface was moved out of a rest overlap (``surface_moved_mm``,
+    :func:`lumbar.muscles.muscle_model.clear_rest_overlap`) and the facet contact stiffness of the passive set [N/m]. Where the anatomy has the cartilage
     surfaces touching at rest (gap 0), a geometry whose rest gap is far from 0 makes a level's facets engage late
     (gap > 0) or preloaded (gap < 0)."""
     x0, R0 = model.reference_state()
     rows = []
-    for lv, m, sides in zip(model.levels, model.level_models, model.facet_sides):
+    moved_all = getattr(model, "facet_surface_moved_m", None) or [np.zeros(len(m.surfaces)) for m in model.level_models]
+    for lv, m, sides, moved in zip(model.levels, model.level_models, model.facet_sides, moved_all):
         if not sides:          # a level without facet joints (paper 2's 6-DOF springs)
             continue
-        rest = _facet_gaps(m, x0, R0)[0]
+        rest = facet_gaps(m, x0, R0)[0]
         space = {side: face_separation(surf, fl) for side, fl, surf in facet_surfaces(model.geo.levels[lv])}
         for name, s in zip(names, sols):
             xs, Rs = s.x[None], s.R[None]
-            cf, g = m.contact_forces(xs, Rs)[0], _facet_gaps(m, xs, Rs)[0]
+            cf, g = m.contact_forces(xs, Rs)[0], facet_gaps(m, xs, Rs)[0]
             for k, side in enumerate(sides):
                 rows.append({"activity": name, "level": lv, "side": side, "contact_n": float(cf[k]),
                              "min_gap_mm": 1e3 * float(g[k]), "rest_min_gap_mm": 1e3 * float(rest[k]),
+                             "surface_moved_mm": 1e3 * float(moved[k]),
                              "rest_face_separation_mm": 1e3 * space[side],
                              "facet_stiffness_n_per_m": float(model.charset.facet.stiffness),
                              "reached": bool(s.reached), "passive_set": model.passive_set})

@@ -314,10 +314,15 @@ def paper_flexion_relaxation(claims: pd.DataFrame | None = None) -> dict:
     return out
 
 
+#: a rest gap below minus this [mm] is a facet overlap at rest: 1 um, far below the contact smoothing (50 um) and far
+#: above the round-off of a surface moved to touch (clear_rest_overlap)
+REST_OVERLAP_TOL_MM = 1e-3
+
+
 def chain_admissibility(variant, facet_contact: pd.DataFrame, rotations: pd.DataFrame) -> pd.DataFrame:
     """Whether a variant's passive chain fits the muscle model's geometry, per level: facet contact points beyond
-    their surface at rest (``rest_min_gap_mm`` < 0: a preload before any load; none for a chain without facets) and
-    the level flexing when the thorax flexes 36 deg (its rotation from standing > 0)."""
+    their surface at rest (``rest_min_gap_mm`` below -:data:`REST_OVERLAP_TOL_MM`: a preload before any load; none for
+    a chain without facets) and the level flexing when the thorax flexes 36 deg (its rotation from standing > 0)."""
     rows = []
     flex = rotations[rotations["activity"] == "flexion_36deg"].set_index("level")
     for lv in flex.index:
@@ -325,7 +330,7 @@ def chain_admissibility(variant, facet_contact: pd.DataFrame, rotations: pd.Data
         gap = float(fc["rest_min_gap_mm"].min()) if len(fc) else np.nan
         rot = float(flex.loc[lv, "rotation_from_standing_deg"])
         rows.append({"variant": variant, "level": lv, "rest_min_gap_mm": gap,
-                     "facet_overlap_at_rest": bool(np.isfinite(gap) and gap < 0.0),
+                     "facet_overlap_at_rest": bool(np.isfinite(gap) and gap < -REST_OVERLAP_TOL_MM),
                      "flexion_36deg_rotation_from_standing_deg": rot, "flexes_in_flexion": bool(rot > 0.0),
-                     "admissible": bool(not (np.isfinite(gap) and gap < 0.0) and rot > 0.0)})
+                     "admissible": bool(not (np.isfinite(gap) and gap < -REST_OVERLAP_TOL_MM) and rot > 0.0)})
     return pd.DataFrame(rows)
