@@ -150,9 +150,11 @@ def test_muscle_rules_declare_the_passive_set_they_read(common, calibrated_dir, 
 
 def test_facet_contact_follows_the_gap_and_the_set_stiffness(model):
     """The muscle model's facet-contact table at rest, on its detailed passive chain: a surface carries force
-    exactly where its contact points lie beyond it (gap < 0), none where they are off it (the myo-sim levels have
-    both), and the force is linear in the set's facet stiffness (the penalty beyond its smoothing band). Control:
-    doubling the stiffness doubles it; the default model (paper 2's springs) has no facet joints and no rows."""
+    exactly where its contact points lie beyond it (gap < 0), none where they are off it (the myo-sim levels as
+    carried, before their rest overlap is cleared, have both), and the force is linear in the set's facet stiffness
+    (the penalty beyond its smoothing band). Control: doubling the stiffness doubles it; the default model (paper 2's
+    springs) has no facet joints and no rows; with the overlap cleared (the default of the detailed chain) no facet
+    carries force at rest."""
     import dataclasses
     from types import SimpleNamespace
 
@@ -162,7 +164,10 @@ def test_facet_contact_follows_the_gap_and_the_set_stiffness(model):
     x0, R0 = model.reference_state()
     rest = [SimpleNamespace(x=x0[0], R=R0[0], reached=True)]
     assert facet_contact(model, rest, ["rest"]).empty and model.passive_model == "springs"
-    model = LumbarMuscleModel(passive_model="detailed", in_situ_posture="reference")
+    cleared = facet_contact(LumbarMuscleModel(passive_model="detailed", in_situ_posture="reference"), rest, ["rest"])
+    assert (cleared["contact_n"] < 1e-9).all() and cleared["rest_min_gap_mm"].min() > -1e-9   # round-off only
+    assert cleared["surface_moved_mm"].max() > 1.0                                  # L3-L4's faces crossed by mm
+    model = LumbarMuscleModel(passive_model="detailed", in_situ_posture="reference", clear_facet_overlap=False)
     t = facet_contact(model, rest, ["rest"])
     assert len(t) == 2 * len(model.levels) and set(t["side"]) == {"left", "right"}
     np.testing.assert_allclose(t["min_gap_mm"], t["rest_min_gap_mm"], atol=1e-12)
@@ -170,8 +175,8 @@ def test_facet_contact_follows_the_gap_and_the_set_stiffness(model):
     assert (t["min_gap_mm"] > 0.1).any() and (t["min_gap_mm"] < -0.1).any()     # both cases occur here
     stiff = dataclasses.replace(model.charset, facet=dataclasses.replace(model.charset.facet,
                                                                          stiffness=2 * model.charset.facet.stiffness))
-    t2 = facet_contact(LumbarMuscleModel(charset=stiff, passive_model="detailed", in_situ_posture="reference"), rest,
-                       ["rest"])
+    t2 = facet_contact(LumbarMuscleModel(charset=stiff, passive_model="detailed", in_situ_posture="reference",
+                                         clear_facet_overlap=False), rest, ["rest"])
     deep = t["min_gap_mm"] < -0.5                     # beyond the smoothing band at every contact point that touches
     assert deep.any()
     np.testing.assert_allclose(t2.loc[deep, "contact_n"], 2 * t.loc[deep, "contact_n"], rtol=0.05)
