@@ -403,7 +403,8 @@ def test_automatic_facet_contact_surfaces_face_the_joint(monkeypatch, vh, vh_acc
 
 #: what the leave-one-out measurement reaches (docs/specimen.md, "Accuracy"), with a small margin
 ACCURACY = dict(overall_median_mm=1.8, structure_median_mm=3.2, facet_bone_median_mm=0.9, facet_cartilage_median_mm=1.4,
-                length_rel=0.15, length_exempt=("CL_L", "CL_R"), exempt_length_rel=0.3, contact_normal_deg=30.0)
+                length_rel=0.15, every_level_length_rel=0.3, contact_normal_deg=30.0,
+                anchored_median_mm={"ITL": 0.95, "SSL": 2.2, "ISL lower": 3.5})
 
 
 @pytest.mark.slow
@@ -420,11 +421,19 @@ def test_accuracy_on_the_visible_human_set_leave_one_out(monkeypatch, vh_accurac
     # the via-point fibres at every level: the ALL's path follows each level's own disc height
     via = every[every["structure"].isin(["ALL", "PLL"])]
     assert len(via) == 10 and (via["relative_error"].abs() <= ACCURACY["length_rel"]).all()
-    le = every[every["level"] == "L4-L5"].set_index("structure")
-    keep = [n for n in le.index if n not in ACCURACY["length_exempt"]]
-    assert (le.loc[keep, "relative_error"].abs() <= ACCURACY["length_rel"]).all()
-    # known miss (docs/specimen.md): the capsule fibres have the other levels' length
-    assert (le["relative_error"].abs() <= ACCURACY["exempt_length_rel"]).all()
+    # every ligament's fibre length: within 15 % as the median over the five levels, within 30 % at every level
+    # (known misses, docs/specimen.md: the capsule fibres have the other levels' length, -26 % at L4-L5; the ISL at
+    # L4-L5 -22 % with its lower ends on the bone-feature anchor, at L3-L4 +32 % without)
+    rel = every.pivot_table(index="structure", columns="level", values="relative_error").abs()
+    assert (rel.median(axis=1) <= ACCURACY["length_rel"]).all(), rel.round(2)
+    assert (rel <= ACCURACY["every_level_length_rel"]).all().all(), rel.round(2)
+    # the bone-feature anchors (intertransverse, supraspinous, interspinous lower ends): medians between the anchored
+    # (measured 0.81, 1.59 and 2.71 mm, seed 0) and the plain transfer's (1.03, 2.57 and 4.94 mm)
+    g = r["groups"]
+    for key, limit in ACCURACY["anchored_median_mm"].items():
+        kind, _, end = key.partition(" ")
+        sel = g[(g["kind"] == kind) & ((g["end"] == end) if end else True)]
+        assert sel["centroid_error_mm"].median() <= limit, key
     # control: the atlas without the registration step (templates only moved onto the target's centroid)
     c = visible_human_accuracy(seed=0, method="translation")["summary"].set_index("structure")
     assert c.loc["all ligament groups", "median_mm"] > ACCURACY["overall_median_mm"]
@@ -442,6 +451,36 @@ def test_accuracy_on_the_visible_human_set_leave_one_out(monkeypatch, vh_accurac
     assert f.loc["facet faces vs cartilage nodes", "median_mm"] > ACCURACY["facet_cartilage_median_mm"]
     # ... and their contact surfaces are turned around (165-177 deg from the reference's)
     assert (control["facets"]["contact_normal_angle_deg"] > 90.0).any()
+
+
+def test_bone_feature_anchor_follows_the_targets_own_process():
+    """A specimen whose transverse processes are 5 mm longer than the atlas vertebra's (the Visible Human L3 with its
+    vertices lateral of 25 mm moved outwards, leave one out): the intertransverse ends anchored on the transverse
+    tip move outwards with it on both sides (at least 4 of the 5 mm); control: the plain transfer (no anchors) is
+    carried by the smooth warp of the whole vertebra and falls more than 1.5 mm short on one side (measured 2.7 of
+    5 mm on the left)."""
+    import lumbar.geometry.specimen_landmarks as sl
+    from lumbar.geometry.bone_features import feature_point
+    atlas = sl.default_atlas()
+    base = atlas["L3"]["mesh"]
+    longer = base.copy()
+    V = np.asarray(longer.vertices).copy()
+    far = np.abs(V[:, 1]) > 0.025
+    V[far, 1] += np.sign(V[far, 1]) * 0.005
+    longer.vertices = V
+    for s, sign in (("ITL_L", 1.0), ("ITL_R", -1.0)):   # the feature itself: the lateral end, 5 mm further out
+        assert sign * (feature_point(longer, s, "upper") - feature_point(base, s, "upper"))[1] == pytest.approx(
+            5e-3, abs=1e-4)
+    moved = {}
+    for anchored in ((), None):
+        w0, w1 = {}, {}
+        a = sl.transfer("L3", base, "upper", atlas, exclude=("L3",), warps=w0, anchored=anchored)
+        b = sl.transfer("L3", longer, "upper", atlas, exclude=("L3",), warps=w1, anchored=anchored)
+        moved[anchored] = {s: sign * (b[s]["points"] - a[s]["points"]).mean(0)[1]
+                           for s, sign in (("ITL_L", 1.0), ("ITL_R", -1.0))}
+        assert all((b[s]["anchor"] == "transverse_tip") == (anchored is None) for s in ("ITL_L", "ITL_R"))
+    assert min(moved[None].values()) >= 4e-3, moved
+    assert min(moved[()].values()) < 3.5e-3, moved
 
 
 def test_fibre_lengths_follow_the_specimen_size(monkeypatch):

@@ -41,6 +41,13 @@ FACET_PROCESS_ITERATIONS = 20
 #: ligaments whose fibre length (segment and via-point path) is scaled with the target's own disc height
 #: (:func:`lumbar.geometry.specimen.level_disc`): the ALL's path spans the anterior disc and onto the bodies
 DISC_SCALED = ("ALL",)
+#: insertion groups (ligament, role) whose carried points are moved by the warp's miss at a bone feature of the
+#: target (:mod:`lumbar.geometry.bone_features`): landmark = warp(template point) + (target feature - warp(template
+#: feature)), per template, before the median. Kept where it beat the plain transfer leave one out on the Visible
+#: Human surfaces and on their 3 mm label map (docs/specimen.md, "Bone-feature anchors"): both ends of the
+#: intertransverse and supraspinous ligaments, the interspinous ligament's lower ends
+ANCHORED: tuple = (("ITL_L", "upper"), ("ITL_L", "lower"), ("ITL_R", "upper"), ("ITL_R", "lower"),
+                   ("SSL", "upper"), ("SSL", "lower"), ("ISL", "lower"))
 
 
 def _canonical_order(up, lo):
@@ -181,10 +188,27 @@ def _process_fit(template_mesh, grid, warp, target_vertices, tree, radius=None):
     return G @ R.T + t
 
 
+def _anchor_shifts(s, role, target, mesh, temps, atlas, warps, anchored, cache):
+    """Per template, the warp's miss at the bone feature of ``s`` (target feature - carried template feature), or
+    None where the group is not anchored or a feature is missing (:data:`ANCHORED`)."""
+    if (s, role) not in anchored or target == "S1":
+        return None
+    from .bone_features import feature_point  # noqa: PLC0415 - only for anchored groups
+    f = feature_point(mesh, s, role, cache)
+    ft = [feature_point(atlas[t]["mesh"], s, role, atlas[t].setdefault("_features", {})) for t in temps]
+    if f is None or any(x is None for x in ft):
+        return None
+    return [f - warps[t](x[None])[0] for t, x in zip(temps, ft)]
+
+
 def transfer(target: str, mesh, role: str, atlas: dict, exclude=(), warps: dict | None = None,
-             method: str = "full") -> dict:
+             method: str = "full", anchored=None) -> dict:
     """Landmarks of ``role`` on the target vertebra ``mesh`` (project frame): {structure: dict(points (k,3),
-    extra (k,) or None, spread_m (k,): largest distance of a template's point from the median, templates)}."""
+    extra (k,) or None, spread_m (k,): largest distance of a template's point from the median, templates,
+    anchor: the bone feature that moved the group or None)}; ``anchored``: the (ligament, role) groups anchored on
+    a bone feature (default :data:`ANCHORED`)."""
+    anchored = ANCHORED if anchored is None else tuple(anchored)
+    fcache: dict = {}
     temps = templates_for(target, role, atlas, exclude)
     if not temps and target == "S1":      # the atlas's only sacrum: kept under leave-one-out (S1 ends not scored)
         temps = templates_for(target, role, atlas)
@@ -210,6 +234,9 @@ def transfer(target: str, mesh, role: str, atlas: dict, exclude=(), warps: dict 
                                  np.asarray(mesh.vertices), tree) for t in temps]
         else:
             cand = [warps[t](atlas[t][role][s]["points"]) for t in temps]
+        shifts = _anchor_shifts(s, role, target, mesh, temps, atlas, warps, anchored, fcache)
+        if shifts is not None:
+            cand = [c + d for c, d in zip(cand, shifts)]
         if len({c.shape for c in cand}) != 1:
             continue
         P = np.median(np.stack(cand), axis=0)
@@ -221,7 +248,11 @@ def transfer(target: str, mesh, role: str, atlas: dict, exclude=(), warps: dict 
         extra = None
         if atlas[temps[0]][role][s]["extra"] is not None:
             extra = np.median([atlas[t][role][s]["extra"] * warps[t].scale for t in temps], axis=0)
-        out[s] = dict(points=P, extra=extra, spread_m=spread, on_surface=on, templates=list(temps))
+        anchor = None
+        if shifts is not None:
+            from .bone_features import FEATURE_OF  # noqa: PLC0415
+            anchor = FEATURE_OF[s]
+        out[s] = dict(points=P, extra=extra, spread_m=spread, on_surface=on, templates=list(temps), anchor=anchor)
     return out
 
 
@@ -258,7 +289,9 @@ def level_landmarks(meshes: dict, level: str, atlas: dict, leave_one_out: bool =
             facets[side] = (sup, _facing_face(meshes[U], meshes[L], sup))
             spread[f"facet_{side}"] = (lo[ks]["spread_m"], up[ki]["spread_m"])
     templates = {"upper": next(iter(up.values()))["templates"], "lower": next(iter(lo.values()))["templates"]}
-    return dict(ligaments=ligs, facets=facets, spread=spread, templates=templates)
+    anchors = {(name, role): d["anchor"] for role, tr in (("upper", up), ("lower", lo)) for name, d in tr.items()
+               if d.get("anchor")}
+    return dict(ligaments=ligs, facets=facets, spread=spread, templates=templates, anchors=anchors)
 
 
 def _facing_face(upper_mesh, lower_mesh, sup):

@@ -46,12 +46,15 @@ def _side(name, p):
     return "medial" if abs(p[1]) < 2e-3 else ("left" if p[1] > 0 else "right")
 
 
-def _rule(structure, body, templates, snapped):
+def _rule(structure, body, templates, snapped, anchor=None):
     how = ("closest point on the surface" if snapped else
            "fibre centred on the carried midpoint with the atlas's fibre vector, not snapped (docs/specimen.md)")
+    moved = ("" if not anchor else
+             f", moved per template by the warp's miss at the bone feature '{anchor}' of {body} "
+             "(lumbar.geometry.bone_features)")
     return (f"{structure} on {body}: the Visible Human atlas point (Remus et al. 2021) carried by surface "
             f"registration (similarity ICP, affine ICP, smooth non-rigid field) from template(s) "
-            f"{'+'.join(templates)}, median over templates, {how}")
+            f"{'+'.join(templates)}{moved}, median over templates, {how}")
 
 
 def landmark_table(sp, units: str | None = None) -> pd.DataFrame:
@@ -81,7 +84,8 @@ def landmark_table(sp, units: str | None = None) -> pd.DataFrame:
             role = "upper" if body == U else "lower"
             rows.append(dict(level=lv, structure=name, side=side, point_index=k, x_m=p[0], y_m=p[1], z_m=p[2],
                              body=body, vertex_index=int(vi),
-                             rule=_rule(name, body, tmpl.get(role, []), extra == 0.0 and not name.startswith("CL")),
+                             rule=_rule(name, body, tmpl.get(role, []), extra == 0.0 and not name.startswith("CL"),
+                                        lm.get("anchors", {}).get((name, role))),
                              source=src[body], kind="derived_from_geometry", extra_length_m=extra))
     df = pd.DataFrame(rows, columns=COLUMNS + ["extra_length_m"])
     P_in = sp.alignment.inverse(df[["x_m", "y_m", "z_m"]].to_numpy(float)) / f if len(df) else np.zeros((0, 3))
