@@ -356,6 +356,28 @@ def test_virtual_specimens_without_equilibrium_are_redrawn_not_dropped():
     assert (V[:, 1] > 2.3).all()
 
 
+def test_virtual_specimens_without_a_model_are_redrawn_and_do_not_make_limits():
+    """A specimen whose drawn prestrain puts a law outside its domain on its short fibres has no model
+    (simulate_one returns None): it is replaced by a reserve specimen like one without equilibrium, and its missing
+    rows are not counted towards a model limit (half the first specimens without a model would otherwise mark every
+    scenario a limit). Control: when no specimen has a model the table is refused by name."""
+    import logging
+    from lumbar.experiments.fsu import LawDomainError
+    from lumbar.experiments.virtual_experiment import _without_survivor_bias
+    sim = pd.DataFrame({"stage": ["intact"] * 2, "direction": ["flexion"] * 2, "moment_nm": [1.0, 10.0]})
+
+    def one(rng):
+        u = rng.random()
+        return (None, None, None) if u < 0.5 else (sim, np.array([1.0, 2.0 + u]), np.array([True, True]))
+
+    _, vals, redrawn, limit = _without_survivor_bias(one, 3, 8, logging.getLogger("test"))
+    assert redrawn > 0 and not limit.any()
+    V = np.vstack(vals)
+    assert np.isfinite(V).all() and (V[:, 1] >= 2.5).all()      # every row from specimens with a model
+    with pytest.raises(LawDomainError, match="none of the first 4 virtual specimens has a model"):
+        _without_survivor_bias(lambda rng: (None, None, None), 3, 4, logging.getLogger("test"))
+
+
 # ------------------------------------------------------------------ CLI, published artefact, in vivo
 def test_cli_va_artefact_has_too_few_rows_and_names_nothing(tmp_path, capsys):
     """The published artefact is one difference (0.66 -> 2.2 deg): too few rows to name anything."""

@@ -207,7 +207,11 @@ def stepwise_reduction_table(geometry, charset, seed, n_specimens=8, variation=N
     v = _variation(variation)
     def one(rng):
         geo_k, cs_k = virtual_specimen(geometry, charset, rng, v, levels=[level])
-        fsu = build_fsu(geo_k, cs_k, level, disc_shear_stiffness_n_per_m=k_shear)
+        try:
+            fsu = build_fsu(geo_k, cs_k, level, disc_shear_stiffness_n_per_m=k_shear)
+        except LawDomainError as exc:    # its drawn prestrain on its jittered short fibres: no model, re-drawn
+            log.info("virtual specimen without a model (%s)", exc)
+            return None, None, None
         sim = simulate_stepwise_reduction(fsu, STAGES, MAIN_DIRECTIONS, moments_nm, effects=effects,
                                           max_iter=max_iter, tol=tol)
         rom = sim["rom_deg"].to_numpy(float) + rng.normal(0.0, noise_sd_deg, len(sim))
@@ -255,27 +259,39 @@ def stepwise_reduction_table(geometry, charset, seed, n_specimens=8, variation=N
 def _without_survivor_bias(simulate_one, seed, n_specimens, log, max_redraws=None):
     """Specimens for a surrogate table without survivor bias.
 
-    ``simulate_one(rng) -> (sim, values, converged)``. A scenario where most of the first ``n_specimens`` lack an
-    equilibrium is a limit of the model (e.g. the disc-only flexion law's peak), not of one specimen: it is
-    returned in ``limit`` and left out of the table. A specimen without equilibrium in any other scenario is
-    replaced as a whole by the next specimen of a seeded reserve stream (``SeedSequence(seed).spawn``, after the
-    ``n_specimens`` of the table, so the first specimens are unchanged), so every row averages the same specimens
-    instead of the survivors of that row. Only when the reserve (``max_redraws``, default 2 n) runs out is a
-    specimen kept with its missing rows (then reported by a reduced ``n_specimens``). Returns
-    (sim, values list, number re-drawn, limit mask)."""
+    ``simulate_one(rng) -> (sim, values, converged)``, or (None, None, None) for a specimen without a model (a drawn
+    ligament law outside its domain on the specimen's fibres). A scenario where most of the first ``n_specimens``
+    with a model lack an equilibrium is a limit of the model (e.g. the disc-only flexion law's peak), not of one
+    specimen: it is returned in ``limit`` and left out of the table. A specimen without a model, or without
+    equilibrium in any other scenario, is replaced as a whole by the next specimen of a seeded reserve stream
+    (``SeedSequence(seed).spawn``, after the ``n_specimens`` of the table, so the first specimens are unchanged), so
+    every row averages the same specimens instead of the survivors of that row. Only when the reserve
+    (``max_redraws``, default 2 n) runs out is a specimen kept with its missing rows (then reported by a reduced
+    ``n_specimens``). Returns (sim, values list, number re-drawn, limit mask)."""
     max_redraws = 2 * n_specimens if max_redraws is None else int(max_redraws)
     rngs = specimen_rngs(seed, n_specimens + max_redraws)
     first = [simulate_one(r) for r in rngs[:n_specimens]]
-    sim = first[0][0]
-    conv = np.vstack([c for _, _, c in first])
+    modelled = [f for f in first if f[0] is not None]
+    if not modelled:
+        raise LawDomainError(f"none of the first {n_specimens} virtual specimens has a model (every draw puts a "
+                             "ligament law outside its domain on the specimen's fibres; the log names them)")
+    sim = modelled[0][0]
+    conv = np.vstack([c for _, _, c in modelled])
     limit = conv.mean(0) < 0.5
+    none = (np.full(len(sim), np.nan), np.zeros(len(sim), bool))
     vals, redrawn, nxt = [], 0, n_specimens
-    for k, (_, val, c) in enumerate(first):
+    for k, (s_k, val, c) in enumerate(first):
+        if s_k is None:
+            val, c = none
         while not (c | limit).all() and nxt < len(rngs):
             bad = np.flatnonzero(~(c | limit))
-            log.info("virtual specimen %d: no equilibrium in %d scenario(s) (first: %s); re-drawn as reserve "
-                     "specimen %d", k, len(bad), " ".join(map(str, sim.iloc[bad[0]].to_dict().values())), nxt)
-            _, val, c = simulate_one(rngs[nxt])
+            why = ("no model" if s_k is None else
+                   f"no equilibrium in {len(bad)} scenario(s) (first: "
+                   f"{' '.join(map(str, sim.iloc[bad[0]].to_dict().values()))})")
+            log.info("virtual specimen %d: %s; re-drawn as reserve specimen %d", k, why, nxt)
+            s_k, val, c = simulate_one(rngs[nxt])
+            if s_k is None:
+                val, c = none
             nxt += 1
             redrawn += 1
         if not (c | limit).all():
