@@ -174,10 +174,12 @@ def softplus_fibre_params(law, l_ref, where=""):
     return l_ref / l0 - 1.0, par
 
 
-def set_ligament_law(model: SpineModel, groups, law):
+def set_ligament_law(model: SpineModel, groups, law, sel=None):
     """Rewrite, in place, the slack lengths and Eq. 7 parameters of the fibres of ``groups`` (fibre-group ids of a
-    finalized model) for the softplus ``law`` (the same conversion as :func:`add_level`)."""
-    sel = np.flatnonzero(np.isin(model.f_group, list(groups)))
+    finalized model) for the softplus ``law`` (the same conversion as :func:`add_level`); ``sel``: those fibres'
+    indices when the caller has them (``np.flatnonzero(np.isin(model.f_group, groups))``, kept by a fit that sets
+    the law thousands of times)."""
+    sel = np.flatnonzero(np.isin(model.f_group, list(groups))) if sel is None else sel
     if sel.size == 0:
         return
     pre, par = softplus_fibre_params(law, model.f_lref[sel], f"groups {list(groups)}")

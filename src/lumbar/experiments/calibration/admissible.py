@@ -194,6 +194,8 @@ class _Objective:
         self.dr_weight = np.array([1.0 / math.sqrt(n_dir[d]) for d, _, _ in dr])
         m = probe.fsu.model
         self.groups = {k: [g for g, (_, kk, _lv) in enumerate(m.fibre_groups) if kk == k] for k in base.ligaments}
+        self.fibres = {k: np.flatnonzero(np.isin(m.f_group, g)) for k, g in self.groups.items()}
+        self.applied = {}        # kind -> the law last written into the model (a Jacobian column changes one)
         self.torque_idx = {n.split(":")[1]: j for j, n in enumerate(names) if n.startswith("disc_torque:")}
         self.n_eval = [0, 0]
         self.n_res = None        # length of a residual vector (a failed probe returns one of the same length)
@@ -204,8 +206,9 @@ class _Objective:
         m = self.probe.fsu.model
         cs = set_with(self.base, self.names, q)
         for kind, law in cs.ligaments.items():
-            if hasattr(law, "a") and self.groups.get(kind):
-                set_ligament_law(m, self.groups[kind], law)
+            if hasattr(law, "a") and self.groups.get(kind) and self.applied.get(kind) != law:
+                set_ligament_law(m, self.groups[kind], law, sel=self.fibres[kind])
+                self.applied[kind] = law
         m.set_facet_stiffness(cs.facet.stiffness)
         for d in m.discs:
             d.k_shear = cs.disc.k_shear
