@@ -377,3 +377,37 @@ def test_force_scale_penalty_is_the_criterions_own_exception():
     assert pen(3.0, 30.0, {"PLL": 10.0, "FL": 70.0})["force scale PLL"] == 0      # 3 N vs 10 N: within
     assert pen(1.2, 30.0, {"PLL": 0.5, "FL": 70.0})["force scale PLL"] > 0        # no Remus tension: the scale
     assert "force scale PLL:pre_elongation" not in p
+
+
+def test_probe_metrics_from_one_fibre_state_equal_the_models_own_calls():
+    """The fit's probe reads every fibre quantity from one fibre-state call over the rows it needs (the fast path); the
+    model's own group_forces and fibre_state on each row set (the reference) give the same group tensions, flexion
+    moments and Remus pairs. Control: a changed ligament law changes the group tensions the probe reads."""
+    from lumbar.experiments.calibration.probe import Probe
+    from lumbar.experiments.fsu import set_ligament_law
+    from lumbar.geometry import load_geometry
+    from lumbar.geometry.visible_human import read_uw_materials, uw_force
+    from lumbar.inputs import resources
+    geo = load_geometry("visible_human", levels=["L4-L5"])
+    cs = cal.elongation_prior(load_characteristic_set("calibrated"))[0]
+    probe = Probe(build_fsu(geo, cs, "L4-L5", follower=True))
+    probe.set_remus(read_uw_materials(resources.data_dir() / "geometry" / "visible_human_lss", "L4-L5"))
+    x, R, ok = probe.run()
+    assert ok
+    mt = probe.metrics(x, R)
+    m, sel = probe.fsu.model, probe.sel
+    gf = m.group_forces(x[sel], R[sel], probe.fm[sel])
+    for k, g in probe.kinds.items():
+        assert mt["rest_tension"][k] == pytest.approx(float(gf[0, g].sum()), rel=1e-12, abs=1e-12)
+        assert mt["flex_tension"][k] == pytest.approx(float(gf[1, g].sum()), rel=1e-12, abs=1e-12)
+    rows = probe._remus_rows()
+    length, _, T = m.fibre_state(x[rows], R[rows], probe.fm[rows])[:3]
+    assert mt["remus"] and mt["remus"] == probe._remus_pairs(length, T)
+    for k, (t_m, t_r) in mt["remus"].items():     # the pair is the model's and Remus's tension at one state
+        parts = probe.remus[k]
+        t_rs = sum(uw_force(length[:, mk], m.f_lref[mk], mat).sum(axis=1) for mk, mat in parts)
+        assert t_r == pytest.approx(float(t_rs.max()), rel=1e-12)
+    kind = "CL"
+    law = cs.ligaments[kind]
+    set_ligament_law(m, probe.kinds[kind], dataclasses.replace(law, a=2.0 * law.a, c=2.0 * law.c))
+    assert probe.metrics(x, R)["rest_tension"][kind] != pytest.approx(mt["rest_tension"][kind], rel=1e-3)

@@ -53,6 +53,8 @@ class Probe:
         for g, (_, k, _lv) in enumerate(m.fibre_groups):
             self.kinds.setdefault(k, []).append(g)
         self.group_masks = {k: np.isin(m.f_group, g) for k, g in self.st.groups.items()}
+        self.group_sum = np.zeros((len(m.fibre_groups), m.nf))    # fibre tensions -> group totals (group_forces)
+        self.group_sum[m.f_group, np.arange(m.nf)] = 1.0
         self.remus = None          # kind -> [(fibre mask, Remus et al. 2021 material)] (:meth:`set_remus`)
         self.warm = None
         self.state = None
@@ -68,15 +70,16 @@ class Probe:
             if lv == self.fsu.level.name and name in materials:
                 self.remus.setdefault(kind, []).append((m.f_group == g, materials[name]))
 
-    def _remus_pairs(self, x, R):
+    def _remus_rows(self):
+        return [0] + [self.scen.index(("moment", d, M)) for _, d, M in ADM.REMUS_STATES if d] if self.remus else []
+
+    def _remus_pairs(self, length, T):
         """{kind: (model tension, Remus et al. 2021 tension) [N]} at the state of the admissibility criterion's
         comparison (``ADM.REMUS_STATES``: rest and 10 N*m in four directions) where the Remus law carries the kind
-        most; {} without :meth:`set_remus`."""
+        most, from the fibre lengths and tensions (rows :meth:`_remus_rows`); {} without :meth:`set_remus`."""
         if not self.remus:
             return {}
         m = self.fsu.model
-        rows = [0] + [self.scen.index(("moment", d, M)) for _, d, M in ADM.REMUS_STATES if d]
-        length, _, T = m.fibre_state(x[rows], R[rows], self.fm[rows])[:3]
         out = {}
         for k, parts in self.remus.items():
             t_r = sum(uw_force(length[:, mask], m.f_lref[mask], mat).sum(axis=1) for mask, mat in parts)
@@ -139,16 +142,19 @@ class Probe:
         deg = np.degrees(phi[np.arange(len(rows)), self.rot_axis] * self.rot_sign)
         rot = {self.scen[i][1:]: float(v) for i, v in zip(rows, deg)}
         sel = self.sel
-        gf = m.group_forces(x[sel], R[sel], self.fm[sel])
+        # one fibre state for every row read below (rest, 10 N*m flexion, compression, the Remus states): each row is
+        # computed on its own, so the values are those of separate calls
+        frows = list(sel) + self._remus_rows()
+        length, _, T, _, d, dn, pa, _ = m.fibre_state(x[frows], R[frows], self.fm[frows])
+        gf = T[:3] @ self.group_sum.T                              # m.group_forces at the rows of sel
         cf = m.contact_forces(x[sel], R[sel], self.cm[sel])
         kinds = self.kinds
         # ligament moments about the disc centre at 10 N*m flexion, straight from the fibre forces
         i = sel[1]
-        _, _, T, _, d, dn, pa, _ = m.fibre_state(x[[i]], R[[i]], self.fm[[i]])
-        f = -T[..., None] * d / dn[..., None]                     # force on the upper vertebra at pa
+        f = -T[1, :, None] * d[1] / dn[1, :, None]                 # force on the upper vertebra at pa
         st = self.st
         centre = x[i, st.upper] + R[i, st.upper] @ (st.centre - m.c[st.upper])
-        mom = np.cross(pa[0] - centre, f[0])[:, 1]                # flexion component (world y)
+        mom = np.cross(pa[1] - centre, f)[:, 1]                   # flexion component (world y)
         flex_moment = {k: float(-mom[mask].sum()) for k, mask in self.group_masks.items()}
         # facets' share of the follower load: their contact forces along the disc normal (masked residuals)
         j = [sel[2]]
@@ -163,7 +169,7 @@ class Probe:
                 "rest_tension": {k: float(gf[0, g].sum()) for k, g in kinds.items()},
                 "rest_facet": cf[0].copy(),
                 "flex_tension": {k: float(gf[1, g].sum()) for k, g in kinds.items()},
-                "flex_moment": flex_moment, "remus": self._remus_pairs(x, R),
+                "flex_moment": flex_moment, "remus": self._remus_pairs(length[3:], T[3:]),
                 "compression_facet_share": max(up, 0.0) / max(max(up, 0.0) + max(disc_up, 0.0), 1e-9)}
 
 
