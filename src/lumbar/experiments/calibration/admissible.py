@@ -196,24 +196,47 @@ class _Objective:
         self.groups = {k: [g for g, (_, kk, _lv) in enumerate(m.fibre_groups) if kk == k] for k in base.ligaments}
         self.fibres = {k: np.flatnonzero(np.isin(m.f_group, g)) for k, g in self.groups.items()}
         self.applied = {}        # kind -> the law last written into the model (a Jacobian column changes one)
+        # the fit vector's entries per part of the set (a ligament kind, the facets, the disc), in the vector's order:
+        # set_with on a part's entries alone gives that part as set_with on the whole vector does
+        parts: dict = {}
+        for j, n in enumerate(names):
+            kind = n.split(":")[0]
+            part = kind if kind in base.ligaments else ("facet" if n == "facet_stiffness" else "disc")
+            parts.setdefault(part, []).append(j)
+        self.parts = {k: np.array(v) for k, v in parts.items()}
+        self.part_cache = {}     # part -> (its entries of q, the set_with made of them): the last one
+        self.disc_cache = None   # (disc torque scales, disc_residuals, disc_reach): the last ones
         self.torque_idx = {n.split(":")[1]: j for j, n in enumerate(names) if n.startswith("disc_torque:")}
         self.n_eval = [0, 0]
         self.n_res = None        # length of a residual vector (a failed probe returns one of the same length)
         self.last = {}
 
+    def _part(self, part, q):
+        """The set made by ``q``'s entries of ``part`` alone (:func:`set_with`), kept for the next call: a Jacobian
+        column changes one entry, so every other part is the one made before."""
+        idx = self.parts.get(part)
+        if idx is None:
+            return self.base
+        v = tuple(float(x) for x in np.asarray(q, float)[idx])
+        hit = self.part_cache.get(part)
+        if hit is None or hit[0] != v:
+            hit = (v, set_with(self.base, [self.names[j] for j in idx], v))
+            self.part_cache[part] = hit
+        return hit[1]
+
     def apply(self, q):
-        """Write the set at ``q`` into the probe's model; returns that set."""
+        """Write the set at ``q`` (that of ``set_with(base, names, q)``) into the probe's model."""
         m = self.probe.fsu.model
-        cs = set_with(self.base, self.names, q)
-        for kind, law in cs.ligaments.items():
+        for kind in self.base.ligaments:
+            law = self._part(kind, q).ligaments[kind]
             if hasattr(law, "a") and self.groups.get(kind) and self.applied.get(kind) != law:
                 set_ligament_law(m, self.groups[kind], law, sel=self.fibres[kind])
                 self.applied[kind] = law
-        m.set_facet_stiffness(cs.facet.stiffness)
+        m.set_facet_stiffness(self._part("facet", q).facet.stiffness)
+        disc = self._part("disc", q).disc
         for d in m.discs:
-            d.k_shear = cs.disc.k_shear
-            d.torque = dict(cs.disc.torque)
-        return cs
+            d.k_shear = disc.k_shear
+            d.torque = dict(disc.torque)
 
     def disc_residuals(self, q):
         """The disc-only rows in torque space at the measured angle (Eq. 3 as step 1 fits it)."""
@@ -251,8 +274,12 @@ class _Objective:
         pen = fit_penalties(mt, self.limit, self.nz) + scale_penalties(self.names, q, mt)
         rel = (rom_of(mt, self.directions) - self.measured) / self.measured
         edge = np.maximum(0.0, np.abs(rel) - FIT_MARGIN["rom_rel"]) / 0.05
-        return np.concatenate([rel / self.data_sd_rel, self.disc_residuals(q), PENALTY_WEIGHT * edge,
-                               PENALTY_WEIGHT * self.disc_reach(q),
+        key = tuple(float(q[j]) for j in self.torque_idx.values())   # both read only the disc torque scales
+        if self.disc_cache is None or self.disc_cache[0] != key:
+            self.disc_cache = (key, self.disc_residuals(q), self.disc_reach(q))
+        _, disc_r, reach = self.disc_cache
+        return np.concatenate([rel / self.data_sd_rel, disc_r, PENALTY_WEIGHT * edge,
+                               PENALTY_WEIGHT * reach,
                                PENALTY_WEIGHT * np.array([v for _, v in pen]),
                                (q - self.prior_q) / self.prior_sd]), pen
 
