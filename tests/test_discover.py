@@ -529,3 +529,33 @@ def test_cli_bad_input_exits_2_with_message(tmp_path, capsys):
                  str(tmp_path / "none.csv"), "--out", str(tmp_path / "o")])
     assert rc == 2
     assert capsys.readouterr().err.strip() == f"error: measured file not found: {tmp_path / 'none.csv'}"
+
+
+def test_idp_surrogate_redraws_a_specimen_without_a_model(monkeypatch):
+    """The in-vitro IDP surrogate: a virtual specimen whose drawn law has no model on its fibres is replaced by a
+    seeded reserve specimen, the others keep their own streams; control: with every draw outside the domain the
+    table is refused by name after the reserve."""
+    from lumbar.experiments import virtual_experiment as ve
+    from lumbar.experiments.fsu import LawDomainError
+    sim = pd.DataFrame({"muscle_setup": ["a", "b"], "load_case": ["x", "x"], "converged": [True, True],
+                        "idp_mpa": [0.5, 0.6], "disc_moment_sagittal_nm": [0.0, 0.0]})
+    calls = []
+
+    def run_set(geo, cs, cables, **kw):
+        calls.append(cs)
+        if len(calls) == 2:                       # the second specimen drawn has no model
+            raise LawDomainError("test: pre-elongation beyond the shortest fibre")
+        return sim.copy(), None
+
+    monkeypatch.setattr(ve, "run_set", run_set)
+    monkeypatch.setattr(ve, "virtual_specimen", lambda g, c, rng, v, levels=None: (g, rng.random()))
+    geo = type("G", (), {"name": "g", "levels": {"L4-L5": type("L", (), {"disc_csa": 1.6e-3})()}})()
+    cs = type("C", (), {"name": "c"})()
+    t = ve.idp_table(geo, cs, seed=3, n_specimens=3, cables=object(), noise_sd_mpa=0.0)
+    assert len(calls) == 4 and list(t["n_specimens"]) == [3, 3]
+    # slots 0 and 2 keep their own streams; slot 1's has no model and is replaced by the first reserve stream (3)
+    want = [ve.specimen_rngs(3, 9)[i].random() for i in (0, 1, 3, 2)]
+    assert calls == want
+    monkeypatch.setattr(ve, "run_set", lambda *a, **k: (_ for _ in ()).throw(LawDomainError("always")))
+    with pytest.raises(LawDomainError, match="no model after the reserve of 6 specimens"):
+        ve.idp_table(geo, cs, seed=3, n_specimens=3, cables=object(), noise_sd_mpa=0.0)

@@ -314,7 +314,8 @@ def idp_table(geometry, charset, seed, n_specimens=7, variation=None, noise_sd_m
     ``lumbar.experiments.effects`` (axial_preload, idp_moment_term, disc_load_share; hidden-effect fixtures).
     Per scenario: mean and sample SD over the specimens that reached equilibrium; a specimen without
     equilibrium is dropped from that row with a log line and ``n_specimens`` reduced; a row no specimen reached is left out (logged).
-    Columns: muscle_setup, load_case, idp_mean_mpa, idp_sd_mpa, n_specimens, kind (= "surrogate"), source.
+    A specimen without a model (a drawn ligament law outside its domain on its fibres) is re-drawn from a seeded
+    reserve (logged). Columns: muscle_setup, load_case, idp_mean_mpa, idp_sd_mpa, n_specimens, kind (= "surrogate"), source.
     """
     n_specimens = _check_design(n_specimens, noise_sd_mpa, "noise_sd_mpa", "MPa")
     for key, delta in (effects or {}).items():
@@ -326,10 +327,25 @@ def idp_table(geometry, charset, seed, n_specimens=7, variation=None, noise_sd_m
     v = _variation(variation)
     cables = derive_cables() if cables is None else cables
     vals = []
-    for k, rng in enumerate(specimen_rngs(int(seed), n_specimens)):
-        geo_k, cs_k = virtual_specimen(geometry, charset, rng, v, levels=list(LEVELS))
-        sim, _ = run_set(geo_k, cs_k, cables, idp_formula=idp_formula, disc_shear_stiffness_n_per_m=k_shear, max_iter=max_iter, tol=tol,
-                         specimen=True)
+    # a specimen without a model (a drawn law outside its domain on its fibres) is replaced by the next of a seeded
+    # reserve, after the n_specimens of the table (their streams do not depend on the reserve's size)
+    rngs = specimen_rngs(int(seed), 3 * n_specimens)
+    reserve = iter(range(n_specimens, len(rngs)))
+    for k in range(n_specimens):
+        rng = rngs[k]
+        while True:
+            geo_k, cs_k = virtual_specimen(geometry, charset, rng, v, levels=list(LEVELS))
+            try:
+                sim, _ = run_set(geo_k, cs_k, cables, idp_formula=idp_formula, disc_shear_stiffness_n_per_m=k_shear,
+                                 max_iter=max_iter, tol=tol, specimen=True)
+                break
+            except LawDomainError as exc:
+                j = next(reserve, None)
+                if j is None:
+                    raise LawDomainError(f"virtual specimen {k}: no model after the reserve of {2 * n_specimens} "
+                                         f"specimens ran out ({exc})") from exc
+                log.info("virtual specimen %d: no model (%s); re-drawn as reserve specimen %d", k, exc, j)
+                rng = rngs[j]
         idp = sim["idp_mpa"].to_numpy(float) + rng.normal(0.0, noise_sd_mpa, len(sim))
         for key, delta in (effects or {}).items():
             if key in fx.EFFECTS:      # a discrepancy candidate acting on the IDP from the disc loads
