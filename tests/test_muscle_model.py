@@ -89,7 +89,8 @@ def test_standing_solution_is_an_equilibrium(standing):
     assert standing.converged, standing.message
     assert standing.residual_force_n < 1e-6 and standing.residual_moment_nm < 1e-6
     assert standing.tracking_error_deg < 1.0
-    assert np.all(standing.a >= 0) and np.all(standing.a <= 1)
+    # activations within [0, 1] up to IPOPT's relaxation of the bounds (bound_relax_factor, 1e-8 by default)
+    assert np.all(standing.a >= -1e-8) and np.all(standing.a <= 1 + 1e-8)
 
 
 def test_mirror_average_makes_geometry_symmetric():
@@ -137,7 +138,8 @@ def test_activations_left_right_symmetric(model, baseline, posture):
     right = [names.index(names[i][:-2] + "_r") for i in left]
     assert len(left) == len(right) == model.ms.n // 2
     assert np.abs(sol.a[left] - sol.a[right]).max() < 1e-4
-    assert abs(sol.a[left].sum() - sol.a[right].sum()) <= 1e-4 * max(sol.a[left].sum(), 1e-3)
+    # the sums: each pair within the solver's tolerance (1e-6 per pair) on top of the relative bound
+    assert abs(sol.a[left].sum() - sol.a[right].sum()) <= 1e-4 * max(sol.a[left].sum(), 1e-3) + 1e-6 * len(left)
     assert np.abs(sol.x[:, 1]).max() < 1e-6                    # m: no lateral shift of any vertebra
 
 
@@ -176,7 +178,9 @@ def test_final_polish_brings_an_off_equilibrium_posture_back(model, standing):
                                                            R0=standing.R[None], a0=standing.a[None])[0]
     assert sol.equilibrium and sol.residual_force_n < 1e-6 and sol.residual_moment_nm < 1e-6
     assert sol.reached and sol.tracking_error_deg < 0.1
-    np.testing.assert_allclose(sol.a, standing.a)
+    # activations unchanged (the polish starts from them clipped to [0, 1]; IPOPT's optimum may sit up to its
+    # bound_relax_factor, 1e-8, outside)
+    np.testing.assert_allclose(sol.a, standing.a, atol=1e-8)
 
 
 def test_cold_standing_solve_starts_near_reference_and_converges(model):
@@ -251,9 +255,9 @@ def test_kkt_residual_certifies_the_optimum_and_detects_a_perturbation(model, so
                    np.array([0.0]))
     assert r.kkt_residuals(st0)[0] == pytest.approx(s.sqp_kkt_residual, rel=1e-6, abs=1e-12)
     # on a model whose standing optimum the SQP reaches by its own test (the detailed chain of paper 1's set)
-    from lumbar.muscles.muscle_model import LumbarMuscleModel, make_solver, solve_postures
+    from lumbar.muscles.muscle_model import DE_LEVA_TABLE, LumbarMuscleModel, make_solver, solve_postures
     model = LumbarMuscleModel(passive_model="detailed", in_situ_posture="reference", iap_force_n=0.0,
-                              pcsa_source_spt_n_per_cm2=100.0)
+                              pcsa_source_spt_n_per_cm2=100.0, anthropometry_csv=DE_LEVA_TABLE)
     s = solve_postures(model, make_solver(model, {"max_iter": 150, "multistart": False}), ["upright_standing"])[0]
     assert s.certified and s.sqp_kkt_residual <= solver.kkt_tol
     r = RedundancySolver(model)
@@ -476,12 +480,13 @@ def test_handover_gives_the_certified_optimum_of_the_full_sqp(model):
     body (where the SQP stalls before its own stopping test; measured 116 SQP iterations without the hand-over) ends
     at the same certified optimum with and without it, and with fewer iterations with it (control: the hand-over
     did take place)."""
-    from lumbar.muscles.muscle_model import LumbarMuscleModel, make_solver, solve_postures
+    from lumbar.muscles.muscle_model import DE_LEVA_TABLE, LumbarMuscleModel, make_solver, solve_postures
     # the model the stall was measured on: the detailed passive chain (paper 1's published set) with the muscles
     # read at 100 N/cm^2, in-situ lengths in the as-segmented pose, no IAP and the myo-sim facet faces as carried
     # (their rest overlap not cleared; paper 2's springs do not stall here)
     model = LumbarMuscleModel(passive_model="detailed", in_situ_posture="reference", iap_force_n=0.0,
-                              pcsa_source_spt_n_per_cm2=100.0, clear_facet_overlap=False)
+                              pcsa_source_spt_n_per_cm2=100.0, clear_facet_overlap=False,
+                                  anthropometry_csv=DE_LEVA_TABLE)
     sols = []
     for w in (0, 10):
         sv = make_solver(model, {"max_iter": 150, "multistart": False, "handover_window": w})

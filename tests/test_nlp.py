@@ -15,9 +15,9 @@ def detailed_model():
     optimum of upright standing IPOPT accepts as it is, so that the zero-iteration certificate is tested at an SQP
     point (the default, paper 2's springs, has IPOPT move the SQP point in standing; its certificate is IPOPT's
     converged status, tests/test_muscle_model.py)."""
-    from lumbar.muscles.muscle_model import LumbarMuscleModel
+    from lumbar.muscles.muscle_model import DE_LEVA_TABLE, LumbarMuscleModel
     return LumbarMuscleModel(passive_model="detailed", in_situ_posture="reference", iap_force_n=0.0,
-                             pcsa_source_spt_n_per_cm2=100.0)
+                             pcsa_source_spt_n_per_cm2=100.0, anthropometry_csv=DE_LEVA_TABLE)
 
 
 @pytest.fixture(scope="module")

@@ -126,6 +126,55 @@ def test_iap_force_points_superior_and_tilts_posterior():
     assert np.degrees(np.arctan2(-f[0], f[2])) == pytest.approx(iap.tilt_posterior_deg)
 
 
+#: body frame origins in the paper's model code (LumbarSpineBaseDemo.java l.623-646, world metres, x anterior, y
+#: superior; quoted in the notes of data/paper2/paper2_upper_body_third_party.csv)
+_SOURCE_ORIGINS = {"torso": (-0.104, 1.0412), "lumbar1": (-0.1065, 1.1302), "lumbar2": (-0.0951, 1.1014),
+                   "lumbar3": (-0.0884, 1.0663), "lumbar4": (-0.089, 1.0331), "lumbar5": (-0.098, 1.001)}
+
+
+def test_paper_model_loads_sit_on_the_same_body_origins_as_myotorso():
+    """The paper's model code gives its centres of mass as offsets from body origins; they are MyoTorso's body
+    origins up to one translation (every pair of origins differs by the same vector in both models, within 0.1 mm),
+    so the offsets carry over. Control: a source origin moved by 5 mm breaks the agreement."""
+    from lumbar.muscles.muscle_set import load_muscle_set
+    org = load_muscle_set().mjcf_origins
+    ref = "lumbar4"
+    for b, (ax, ay) in _SOURCE_ORIGINS.items():
+        d_myo = np.asarray(org[b]) - np.asarray(org[ref])
+        d_src = np.array([ax - _SOURCE_ORIGINS[ref][0], 0.0, ay - _SOURCE_ORIGINS[ref][1]])
+        assert np.allclose(d_myo, d_src, atol=1e-4), b
+    moved = np.array([_SOURCE_ORIGINS["torso"][0] + 0.005 - _SOURCE_ORIGINS[ref][0], 0.0,
+                      _SOURCE_ORIGINS["torso"][1] - _SOURCE_ORIGINS[ref][1]])
+    assert not np.allclose(np.asarray(org["torso"]) - np.asarray(org[ref]), moved, atol=1e-4)
+
+
+def test_paper_model_upper_body_table_places_each_weight_at_its_body_offset(tmp_path):
+    """data/paper2/paper2_upper_body_third_party.csv through the model: the thorax weight 18.619 kg at 22.44 mm
+    anterior / 206.65 mm superior of the torso origin; the total above L4-L5; a malformed rule refused by name."""
+    from lumbar.muscles.muscle_model import G, LumbarMuscleModel
+    path = Path(__file__).resolve().parents[1] / "data" / "paper2" / "paper2_upper_body_third_party.csv"
+    m = LumbarMuscleModel(anthropometry_csv=path, in_situ_posture="reference", iap_point="source")
+    seg = {s: (b, mass, com) for s, b, mass, com in m.segments}
+    b, mass, com = seg["thorax"]
+    assert b == 0 and mass == pytest.approx(18.619)
+    assert com == pytest.approx(np.asarray(m.ms.mjcf_origins["torso"]) + [0.02244, 0.0, 0.20665], abs=1e-12)
+    above = sum(mass for _, b, mass, _ in m.segments if b < 4)     # bodies L1-L4 carry the weights above L4-L5
+    assert above == pytest.approx(18.619 + 55 / G + 6.8072 + 1.677 + 1.689 + 1.67 + 1.799, rel=1e-3)
+    # the IAP at the source's point (T12 centroid + 8 cm anterior), not at the stand-in's
+    (_, _, p_src, follower), = list(m.follower_forces())
+    assert follower and p_src == pytest.approx(np.asarray(m.ms.mjcf_origins["torso"]) + [0.04571, 0.0, 0.12621])
+    stand_in = LumbarMuscleModel(in_situ_posture="reference", iap_point="stand_in")
+    (_, _, p_std, _), = list(stand_in.follower_forces())
+    assert np.linalg.norm(p_std - p_src) > 0.01
+    bad = pd.read_csv(path)
+    bad.loc[0, "com_rule"] = "body_offset:ribcage:0.02:0.2"
+    bad.to_csv(tmp_path / "bad.csv", index=False)
+    with pytest.raises(ValueError, match="body_offset"):
+        LumbarMuscleModel(anthropometry_csv=tmp_path / "bad.csv", in_situ_posture="reference")
+    with pytest.raises(ValueError, match="iap_point"):
+        LumbarMuscleModel(in_situ_posture="reference", iap_point="diaphragm")
+
+
 def test_pcsa_is_max_force_over_the_source_specific_tension():
     """The paper's PCSA: maximum force / 46.6 N/cm^2 (its model code); control: the previous reading (/ 100 N/cm^2)
     gives muscles 2.15 times weaker, which this test rejects."""

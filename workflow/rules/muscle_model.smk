@@ -35,7 +35,7 @@ rule muscle_validation:
         # read by lumbar.muscles.muscle_model from the repository's data/ (its defaults), not from config paths
         data=[
             "data/muscles/muscle_groups.csv",
-            "data/anthropometry/upper_body_segments.csv",
+            config["muscle_model"]["upper_body_table"],
             "data/paper2/paper2_model_inputs_third_party.csv",
             "data/paper2/paper2_claims_original_text.csv",
         ],
@@ -155,7 +155,7 @@ rule muscle_validation_calibrated:
         ),
         data=[
             "data/muscles/muscle_groups.csv",
-            "data/anthropometry/upper_body_segments.csv",
+            config["muscle_model"]["upper_body_table"],
             "data/paper2/paper2_model_inputs_third_party.csv",
         ],
     output:

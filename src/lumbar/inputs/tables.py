@@ -505,6 +505,7 @@ DATA_FILES = {
     "data/landmarks/myo_sim_landmarks.csv": "landmarks",
     "data/muscles/muscle_groups.csv": "muscle_groups",
     "data/anthropometry/upper_body_segments.csv": "anthropometry",
+    "data/paper2/paper2_upper_body_third_party.csv": "anthropometry",
     "data/in_vivo/wilke_idp_l4l5.csv": "in_vivo_idp",
     "data/in_vivo/wilke1999_idp_lying_original_text.csv": "in_vivo_idp",
 }

@@ -55,7 +55,22 @@ FREE = ("L1", "L2", "L3", "L4", "L5")
 DATA = resources.data_dir()
 LENGTH_SCALE = 0.05   # m, moments -> forces in the FSU-load cost
 PROP_FIELDS = ("spt_pa", "k_pa", "ssl_um", "in_situ_sl_um", "pennation_rad")
+#: the upper-body weights of the paper's model code (masses and centres of mass; config ``muscle_model.upper_body_table``)
+UPPER_BODY_TABLE = DATA / "paper2" / "paper2_upper_body_third_party.csv"
+#: de Leva 1996's segment fractions at MyoTorso's centres of mass (the muscle stage's loads before it took the paper's)
+DE_LEVA_TABLE = DATA / "anthropometry" / "upper_body_segments.csv"
 IN_SITU_POSTURES = ("reference", "standing")   # where the fascicles have their in-situ sarcomere length
+#: where each level's 6-DOF spring acts (config ``muscle_model.spring_point``; springs passive model only)
+SPRING_POINTS = {
+    "disc_centre": "the disc centre of the myo-sim landmarks, in the disc frame",
+    "source": "the paper's model code's point: the upper vertebra's body centre, frames along the project axes",
+}
+#: where the intra-abdominal pressure force acts (config ``muscle_model.iap_point``)
+IAP_POINTS = {
+    "stand_in": "the T12 centroid stood in for by the L1 centroid moved up by the L1-L2 centroid spacing, + the "
+                "source's anterior offset",
+    "source": "the paper's model code's point: its T12 mesh centroid + 0.08 m anterior, on the thorax",
+}
 #: how each level's passive structures are modelled (config ``muscle_model.passive_model``)
 PASSIVE_MODELS = {
     "springs": "paper 2's model (Sect. 2.1): one 6-DOF spring per level, its rotational terms fitted to the intact "
@@ -103,7 +118,7 @@ def get_activity(name) -> Activity:
 
 
 def read_anthropometry(path=None) -> pd.DataFrame:
-    path = Path(path) if path is not None else DATA / "anthropometry" / "upper_body_segments.csv"
+    path = Path(path) if path is not None else UPPER_BODY_TABLE
     from lumbar.inputs.tables import read_kind  # noqa: PLC0415
     read_kind(path, "anthropometry")   # schema: file, row, column and expected form of a bad cell
     df = pd.read_csv(path)
@@ -204,7 +219,8 @@ class LumbarMuscleModel:
     def __init__(self, geometry=None, charset=None, muscle_set: MuscleSet | None = None, body_mass_kg=71.0,
                  anthropometry_csv=None, iap_force_n=None, passive_set="published_table3", data_dir=None,
                  calibrated_dir=None, symmetric_passive=True, in_situ_posture="standing", passive_model="springs",
-                 pcsa_source_spt_n_per_cm2=None, clear_facet_overlap=True):
+                 pcsa_source_spt_n_per_cm2=None, clear_facet_overlap=True, iap_point="source",
+                 spring_point="source"):
         from ..geometry import load_geometry
         from ..geometry.symmetry import mirror_average
         if not body_mass_kg > 0:
@@ -215,6 +231,15 @@ class LumbarMuscleModel:
             iap_force_n = self.iap.force_n
         if not iap_force_n >= 0:
             raise ValueError(f"muscle_model.iap_force_n must be >= 0 N (or null for the source's value), got {iap_force_n}")
+        if iap_point not in IAP_POINTS:
+            raise ValueError(f"muscle_model.iap_point must be one of {sorted(IAP_POINTS)}, got {iap_point!r}")
+        if iap_point == "source" and self.iap.point_from_torso_m is None:
+            raise ValueError("muscle_model.iap_point = source: data/paper2/paper2_model_inputs_third_party.csv has no "
+                             "rows iap_point_anterior and iap_point_superior (thorax, m)")
+        self.iap_point = iap_point
+        if spring_point not in SPRING_POINTS:
+            raise ValueError(f"muscle_model.spring_point must be one of {sorted(SPRING_POINTS)}, got {spring_point!r}")
+        self.spring_point = spring_point
         if in_situ_posture not in IN_SITU_POSTURES:
             raise ValueError(f"in_situ_posture must be one of {IN_SITU_POSTURES}, got {in_situ_posture!r}")
         if passive_model not in PASSIVE_MODELS:
@@ -245,15 +270,26 @@ class LumbarMuscleModel:
         self.level_models = []
         self.facet_sides = []              # per level: the side of each facet surface, in surface order
         self.spring_law = None
+        spring_points = {}
         if passive_model == "springs":
-            from .springs import paper2_spring_law
+            from .springs import paper2_spring_law, paper2_spring_points
             self.spring_law = paper2_spring_law()
+            if spring_point == "source":
+                spring_points = paper2_spring_points()
+                if set(spring_points) != set(LEVEL_NAMES):
+                    raise ValueError("muscle_model.spring_point = source: data/paper2/paper2_model_inputs_third_party."
+                                     f"csv needs spring_point_anterior/superior rows for {list(LEVEL_NAMES)}, has "
+                                     f"{sorted(spring_points)}")
         for lv in self.levels:
             m = SpineModel()
             bodies(m)
             if self.spring_law is not None:
                 from .springs import add_spring_level
-                add_spring_level(m, self.geo.levels[lv], self.spring_law)
+                point = None
+                if lv in spring_points:
+                    body, a, sup = spring_points[lv]
+                    point = self._body_offset(f"lumbar{body[1:]}:{a}:{sup}", f"spring point of {lv}")
+                add_spring_level(m, self.geo.levels[lv], self.spring_law, point)
                 sides = []
             else:
                 _, sides = add_level(m, self.geo.levels[lv], self.charset)
@@ -302,11 +338,13 @@ class LumbarMuscleModel:
         out = []
         for _, r in df.iterrows():
             mass = r["mass_fraction"] * self.body_mass_kg if pd.notna(r["mass_fraction"]) else r["mass_kg_fixed"]
-            rule, arg = str(r["com_rule"]).split(":")
+            rule, arg = str(r["com_rule"]).split(":", 1)
             if rule == "mjcf_com":
                 com = self.ms.mjcf_bodies[arg][1]
             elif rule == "shoulder_drop":
                 com = self.ms.mjcf_bodies["Arm_attachment"][1] - np.array([0, 0, float(arg)])
+            elif rule == "body_offset":
+                com = self._body_offset(arg, r["com_rule"])
             else:
                 raise ValueError(f"unknown com_rule {r['com_rule']!r} in the anthropometry table")
             com = np.array(com, float)
@@ -315,13 +353,27 @@ class LumbarMuscleModel:
             out.append((r["segment"], self.body_index[r["body"]], float(mass), com))
         return out
 
+    def _body_offset(self, arg, text):
+        """``body_offset:<MJCF body>:<anterior m>:<superior m>``: a point at that offset from the body's frame
+        origin in the upright reference pose (the paper's model code gives its centres of mass so, on the same
+        body origins as MyoTorso: ``data/paper2/README.md``)."""
+        parts = arg.split(":")
+        if len(parts) != 3 or parts[0] not in self.ms.mjcf_origins:
+            raise ValueError(f"com_rule {text!r}: expected body_offset:<body>:<anterior m>:<superior m> with a body "
+                             f"of {sorted(self.ms.mjcf_origins)}")
+        try:
+            a, s = float(parts[1]), float(parts[2])
+        except ValueError:
+            raise ValueError(f"com_rule {text!r}: offsets must be numbers in metres") from None
+        return np.asarray(self.ms.mjcf_origins[parts[0]], float) + np.array([a, 0.0, s])
+
     # ------------------------------------------------------------------ loads
     def point_forces(self, activity):
         """Weights, crate and IAP: a :class:`PointForces` of (body, force (3,), reference point (3,), follower)."""
         f = [(b, np.array([0, 0, -m * G]), com, False) for _, b, m, com in self.segments]
         act = get_activity(activity)
         if act.crate_n:
-            z = self.segments[1][3][2]
+            z = self.ms.mjcf_bodies["torso"][1][2]     # the crate at the MyoTorso torso COM height
             p = np.array([self.l5s1_centre[0] + act.crate_anterior_m, 0.0, z])
             f.append((self.thorax, np.array([0, 0, -act.crate_n]), p, False))
         return PointForces(f + list(self.follower_forces()))
@@ -334,8 +386,12 @@ class LumbarMuscleModel:
         the per-activity arrays of :meth:`load_arrays`."""
         if not self.iap_force_n:
             return PointForces([])
-        t12 = self.c[0] + (self.c[0] - self.c[1])
-        p = t12 + np.array([self.iap.anterior_offset_m, 0.0, 0.0])
+        if self.iap_point == "source":                     # the source's point: T12 centroid + its offset
+            a, s = self.iap.point_from_torso_m
+            p = np.asarray(self.ms.mjcf_origins["torso"], float) + np.array([a, 0.0, s])
+        else:                                              # stand-in: T12 = L1 centroid + the L1-L2 spacing
+            t12 = self.c[0] + (self.c[0] - self.c[1])
+            p = t12 + np.array([self.iap.anterior_offset_m, 0.0, 0.0])
         f = self.iap.vector_body() * (self.iap_force_n / self.iap.force_n)
         return PointForces([(self.thorax, f, p, True)])
 
@@ -357,7 +413,7 @@ class LumbarMuscleModel:
             for k, (_, b, mass, com) in enumerate(segs):
                 F[i, k, 2] = -mass * G
                 P[i, k] = com
-            P[i, -1] = [self.l5s1_centre[0] + act.crate_anterior_m, 0.0, segs[1][3][2]]
+            P[i, -1] = [self.l5s1_centre[0] + act.crate_anterior_m, 0.0, self.ms.mjcf_bodies["torso"][1][2]]
             F[i, -1, 2] = -act.crate_n
         return F, P
 
@@ -596,7 +652,10 @@ def model_from_config(cfg: dict, passive_dir) -> LumbarMuscleModel:
                              calibrated_dir=d, symmetric_passive=cfg.get("symmetric_passive", True),
                              in_situ_posture=cfg.get("in_situ_posture", "standing"),
                              iap_force_n=cfg.get("iap_force_n"), passive_model=cfg.get("passive_model", "springs"),
-                             pcsa_source_spt_n_per_cm2=cfg.get("pcsa_source_spt_n_per_cm2"))
+                             pcsa_source_spt_n_per_cm2=cfg.get("pcsa_source_spt_n_per_cm2"),
+                             anthropometry_csv=cfg.get("upper_body_table"),
+                             iap_point=cfg.get("iap_point", "source"),
+                             spring_point=cfg.get("spring_point", "source"))
 
 
 def write_baseline(sols, names, path) -> Path:

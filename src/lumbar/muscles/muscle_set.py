@@ -61,6 +61,7 @@ class MuscleSet:
     mujoco_length_m: np.ndarray
     source: str = ""
     mjcf_bodies: dict = field(default_factory=dict)   # MJCF body -> (mass, com (3,) project frame)
+    mjcf_origins: dict = field(default_factory=dict)  # MJCF body -> its frame origin (3,), project frame
     symmetrized: list = field(default_factory=list)   # left fascicles replaced by the mirrored right one
 
     @property
@@ -190,11 +191,12 @@ def load_muscle_set(group_table=None, source_spt_n_per_cm2=None) -> MuscleSet:
     if np.any(~(fmax > 0)):
         raise ValueError("MJCF maximum force must be > 0 for every fascicle")
     pref = [prefix_of(n) for n in names]
-    bodies = {}
+    bodies, origins = {}, {}
     for b in ("torso", "head", "neck", "lumbar1", "lumbar2", "lumbar3", "lumbar4", "lumbar5", "Arm_attachment"):
         i = m.body(b).id
         bodies[b] = (float(m.body_subtreemass[i] if b == "head" else m.body_mass[i]),
                      to_p(d.xipos[i] if b != "Arm_attachment" else d.xpos[i]))
+        origins[b] = to_p(d.xpos[i])
     return MuscleSet(
         names=names, groups=np.array(groups), sides=np.array(sides), sites=sites, f_max_n=fmax,
         pcsa_m2=fmax / spt,
@@ -203,4 +205,4 @@ def load_muscle_set(group_table=None, source_spt_n_per_cm2=None) -> MuscleSet:
         fibre_ratio=np.array([gt.loc[p, "fibre_ratio"] for p in pref], float),
         mujoco_length_m=np.array(mjl),
         source=f"myo-sim {package_version()} MyoTorso (Apache-2.0), myotorso_tendon.xml / myotorso_muscle.xml",
-        mjcf_bodies=bodies, symmetrized=fixes)
+        mjcf_bodies=bodies, mjcf_origins=origins, symmetrized=fixes)

@@ -91,6 +91,7 @@ class IapForce:
     force_n: float
     anterior_offset_m: float
     tilt_posterior_deg: float
+    point_from_torso_m: tuple | None = None    # (anterior, superior) from the thorax frame origin, when the source gives it
 
     def vector_body(self) -> np.ndarray:
         """The force in the thorax's body frame (x anterior, z superior): superior, tilted posteriorly."""
@@ -107,8 +108,22 @@ def paper2_spring_law(path=None) -> SpringLaw:
 
 def paper2_iap(path=None) -> IapForce:
     df = read_model_inputs(None if path is None else str(path))
+    point = None
+    if {"iap_point_anterior", "iap_point_superior"} <= set(df["parameter"]):
+        point = (_value(df, "iap_point_anterior", "thorax"), _value(df, "iap_point_superior", "thorax"))
     return IapForce(_value(df, "iap_force", "thorax"), _value(df, "iap_anterior_offset", "thorax"),
-                    _value(df, "iap_tilt_posterior", "thorax"))
+                    _value(df, "iap_tilt_posterior", "thorax"), point)
+
+
+def paper2_spring_points(path=None) -> dict:
+    """Where each level's spring acts in the paper's model code: level -> (upper body, anterior m, superior m), the
+    offset from the upper vertebra's body origin (about the centre of its vertebral body); empty when the table has
+    no such rows."""
+    df = read_model_inputs(None if path is None else str(path))
+    out = {}
+    for lv in df.loc[df["parameter"] == "spring_point_anterior", "direction"]:
+        out[lv] = (lv.split("-")[0], _value(df, "spring_point_anterior", lv), _value(df, "spring_point_superior", lv))
+    return out
 
 
 def paper2_pcsa_source_spt_n_per_cm2(path=None) -> float:
@@ -123,12 +138,17 @@ def spring_rom_deg(law: SpringLaw, direction, moment_nm) -> float:
     return float(r.min())
 
 
-def add_spring_level(model, level, law: SpringLaw):
-    """One level's 6-DOF spring added to a :class:`lumbar.mechanics.model.SpineModel` (bodies already added)."""
+def add_spring_level(model, level, law: SpringLaw, point=None):
+    """One level's 6-DOF spring added to a :class:`lumbar.mechanics.model.SpineModel` (bodies already added): at the
+    disc centre in the disc frame, or with ``point`` (3,) [m] at that point in frames along the project axes (the
+    paper's model code: its springs act at the upper vertebra's body centre, frames aligned with the world)."""
     from ..experiments.fsu import disc_frame  # noqa: PLC0415 (the FSU helpers, not needed to read the table)
     from ..mechanics.model import DiscSpec  # noqa: PLC0415
 
     up, lo = model.body_index(level.upper), model.body_index(level.lower)
-    model.add_disc(DiscSpec(up, lo, np.asarray(level.disc_centre, float), disc_frame(level.disc_normal),
+    centre, frame = np.asarray(level.disc_centre, float), disc_frame(level.disc_normal)
+    if point is not None:
+        centre, frame = np.asarray(point, float), disc_frame([0.0, 0.0, 1.0])
+    model.add_disc(DiscSpec(up, lo, centre, frame,
                             0.0, law.k_axial, law.k_anterior_posterior, law.k_axial, dict(law.torque),
                             name=f"{level.name} spring", law="cubic_deg", k_shear_lateral=law.k_lateral))
