@@ -175,6 +175,36 @@ def test_paper_model_upper_body_table_places_each_weight_at_its_body_offset(tmp_
         LumbarMuscleModel(in_situ_posture="reference", iap_point="diaphragm")
 
 
+def test_spring_acts_at_the_upper_vertebras_body_centre():
+    """The paper's model code attaches each level's spring to the upper vertebra at its body centre: L4 turned 2 deg
+    in flexion about that point loads the L4-L5 spring with the law's moment and no force; turned about the disc
+    centre (the former stand-in point, 2.4 cm lower), the same rotation shears the spring by hundreds of newtons."""
+    from lumbar.mechanics import so3
+    from lumbar.muscles.muscle_model import LumbarMuscleModel
+    m = LumbarMuscleModel(in_situ_posture="reference")
+    k = m.levels.index("L4-L5")
+    up = m.body_index["L4"]
+    law = springs.paper2_spring_law()
+    _, a, sup = springs.paper2_spring_points()["L4-L5"]
+    point = np.asarray(m.ms.mjcf_origins["lumbar4"]) + [a, 0.0, sup]
+    disc = np.asarray(m.geo.levels["L4-L5"].disc_centre, float)
+    assert 0.015 < np.linalg.norm(point - disc) < 0.035
+
+    def loads(about):
+        R = np.broadcast_to(np.eye(3), (1, m.nb, 3, 3)).copy()
+        x = m.c[None].copy()
+        Ry = so3.exp(np.array([0.0, np.radians(2.0), 0.0]))      # +y: flexion (x anterior, z superior)
+        R[0, up] = Ry
+        x[0, up] = about + Ry @ (m.c[up] - about)
+        return m.level_models[k].evaluate(x, R, jacobian=False)[0][0, up]
+
+    q = loads(point)
+    assert np.linalg.norm(q[:3]) < 1.0                                    # N: no translation at the spring point
+    p1, p2, p3 = law.torque["flexion"]
+    assert abs(q[4]) == pytest.approx((p1 * 4.0 + p2 * 2.0 + p3) * 2.0, rel=2e-3)   # N*m, the law at 2 deg
+    assert np.linalg.norm(loads(disc)[:3]) > 100.0                       # control: about the disc centre, sheared
+
+
 def test_pcsa_is_max_force_over_the_source_specific_tension():
     """The paper's PCSA: maximum force / 46.6 N/cm^2 (its model code); control: the previous reading (/ 100 N/cm^2)
     gives muscles 2.15 times weaker, which this test rejects."""

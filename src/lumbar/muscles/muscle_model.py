@@ -4,7 +4,8 @@ Two variants of the passive spine (``passive_model``, config ``muscle_model.pass
 
 * ``springs`` (the default, the reproduction model): paper 2's own model, one massless 6-DOF spring per level with
   nonlinear rotational and linear translational diagonal terms (:mod:`lumbar.muscles.springs`, values from the
-  paper's model code, data/paper2/paper2_model_inputs_third_party.csv);
+  paper's model code, data/paper2/paper2_model_inputs_third_party.csv), acting where the code attaches it, at the
+  upper vertebra's body centre (``spring_point``);
 * ``detailed`` (the calibrated passive chain): the project's disc, facet and ligament elements at every level
   (:func:`lumbar.experiments.fsu.add_level`) from the passive set named by ``passive_set`` (config
   ``muscle_model.passive_set``, :func:`passive_characteristics`): ``workflow_calibrated`` = the workflow's own
@@ -17,9 +18,9 @@ With ``symmetric_passive`` (default) the geometry is first mirror-averaged about
 fascicles the model is exactly bilateral. Muscles: the 210 MyoTorso fascicles (:mod:`lumbar.muscles`), Hill-type
 without tendon compliance, PCSA = maximum force / 46.6 N/cm^2 as in the paper's model, in-situ sarcomere lengths
 (paper 2 Table 2) in solved upright standing (``in_situ_posture``, the paper's multifidus is at 2.27 um in
-standing). Upper-body weights: de Leva (1996) fractions for a ``body_mass_kg`` body plus the MyoTorso lumbar slice
-masses (``data/anthropometry``). Intra-abdominal pressure: the paper's model's force on the thorax
-(:meth:`LumbarMuscleModel.follower_forces`). Activities (paper Sect. 2.4): thorax sagittal rotation targets and the
+standing). Upper-body weights: the paper's model code's (``UPPER_BODY_TABLE``; ``DE_LEVA_TABLE``: de Leva (1996)
+fractions for a ``body_mass_kg`` body plus the MyoTorso lumbar slice masses). Intra-abdominal pressure: the paper's
+model's force on the thorax at its code's point (:meth:`LumbarMuscleModel.follower_forces`, ``iap_point``). Activities (paper Sect. 2.4): thorax sagittal rotation targets and the
 190 N crate held 25 / 55 cm anterior to the L5-S1 disc, applied to the L1+thorax body. The redundancy solver is
 :mod:`lumbar.muscles.redundancy`.
 
