@@ -54,6 +54,7 @@ from .jit import leaf_jit as _leaf
 from .kernel_residual import (
     ACC,
     SCREEN_M,  # noqa: F401 - the contact screen's margin (kernel.SCREEN_M, as before the residual had a module)
+    _log,
     copy2,
     copy3,
     copy_array,
@@ -571,6 +572,28 @@ def newton(model, x, R, loads, fmask, cmask, params, max_iter, tol_force, tol_mo
     return xo, Ro, conv, res_f, res_m, iters
 
 
+@_jit
+def log_batch(flat, out):
+    """Rotation vectors ``out`` (n, 3) of the rotation matrices ``flat`` (n, 3, 3), the compiled
+    :func:`lumbar.mechanics.so3.log` (the residual's own ``_log``: scipy's steps, bit for bit); False, with ``out``
+    unfinished, where a matrix is not orthogonal to 1e-12 or not right-handed (the caller then takes the reference,
+    which orthogonalises it or refuses it)."""
+    q4 = np.empty(4)
+    for n in range(flat.shape[0]):
+        m = flat[n]
+        for i in range(3):
+            for j in range(3):
+                g = m[i, 0] * m[j, 0] + m[i, 1] * m[j, 1] + m[i, 2] * m[j, 2] - (1.0 if i == j else 0.0)
+                if not abs(g) <= 1e-12:
+                    return False
+        det = (m[0, 0] * (m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1]) - m[0, 1] * (m[1, 0] * m[2, 2] - m[1, 2] * m[2, 0])
+               + m[0, 2] * (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0]))
+        if not det > 0.0:
+            return False
+        _log(m, out[n], q4)
+    return True
+
+
 def warm_up() -> bool:
     """Compile both kernels, or load them from the on-disk cache, on an empty one-body model (a process that is
     about to start others, e.g. a test session before its Snakemake runs, calls this so that they all load the
@@ -592,6 +615,7 @@ def _warm_up() -> bool:
     evaluate_batch(x, R, *rows, True, md, np.empty((1, 1, 6)), np.empty((1, 1, 6, 1, 6)))
     newton_batch(x, R, *rows, md, 5, 1e-8, 1e-8, 1e-3, 0.05, np.ones(6), np.ones(6), 0.05, np.empty_like(x),
                  np.empty_like(R), np.zeros(1, bool), np.empty(1), np.empty(1), np.zeros(1, np.int64))
+    log_batch(np.eye(3)[None].copy(), np.empty((1, 3)))
     return True
 
 

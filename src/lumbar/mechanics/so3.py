@@ -5,6 +5,8 @@ Convention: a spatial (left) increment ``w`` updates ``R <- exp(w) @ R``.
 """
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 
 _SMALL = 1e-8
@@ -39,13 +41,32 @@ def exp(w: np.ndarray) -> np.ndarray:
     return mats.reshape(w.shape[:-1] + (3, 3))
 
 
-def log(R: np.ndarray) -> np.ndarray:
-    """Rotation vectors from rotation matrices, batched (angle in [0, pi])."""
+def log_reference(R: np.ndarray) -> np.ndarray:
+    """Rotation vectors from rotation matrices, batched (angle in [0, pi]): scipy's ``Rotation`` (the reference of
+    :func:`log`; it also orthogonalises a matrix that is not, and refuses a left-handed one)."""
     R = np.asarray(R, dtype=float)
     flat = R.reshape(-1, 3, 3)
     from scipy.spatial.transform import Rotation  # noqa: PLC0415
     vecs = Rotation.from_matrix(flat).as_rotvec()
     return vecs.reshape(R.shape[:-2] + (3,))
+
+
+def log(R: np.ndarray) -> np.ndarray:
+    """Rotation vectors from rotation matrices, batched (angle in [0, pi]).
+
+    Where the compiled solver core is loaded and active (:mod:`lumbar.mechanics.kernel`, which this module does not
+    import: numba stays out of processes that never solve), its ``log_batch``: the steps of :func:`log_reference`,
+    bit for bit, without scipy's per-call overhead (about ten times the arithmetic for the few matrices of one model
+    evaluation, measured in the calibration's metrics). Else, and for a matrix that is not orthogonal or not
+    right-handed, :func:`log_reference`."""
+    k = sys.modules.get("lumbar.mechanics.kernel")
+    if k is not None and k.active():
+        R = np.asarray(R, dtype=float)
+        flat = np.ascontiguousarray(R.reshape(-1, 3, 3))
+        out = np.empty((flat.shape[0], 3))
+        if k.log_batch(flat, out):
+            return out.reshape(R.shape[:-2] + (3,))
+    return log_reference(R)
 
 
 def left_jacobian_inverse(phi: np.ndarray) -> np.ndarray:
