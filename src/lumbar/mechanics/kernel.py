@@ -54,13 +54,13 @@ from .jit import leaf_jit as _leaf
 from .kernel_residual import (
     ACC,
     SCREEN_M,  # noqa: F401 - the contact screen's margin (kernel.SCREEN_M, as before the residual had a module)
-    _log,
     copy2,
     copy3,
     copy_array,
     eval_one,
     evaluate_batch,
     rotation_exp,
+    rotation_log,
     same_array,
     same_row,
     zero4,
@@ -78,7 +78,7 @@ inner_jit = _inner
 #: every kernel; when it does not (kernel_residual.py edited), newton_batch compiles without the cache in that
 #: process, and tests/test_kernel.py fails until the digest here is updated, the edit of this file that retires the
 #: cache entry.
-RESIDUAL_SHA256 = "55f76135de77ef7c6096325a881ecfab422bed69397010228f991203fb062102"
+RESIDUAL_SHA256 = "38d036200f08d22c892c2c871838529ef1cb9619f3f11d1255e4a902cff962f1"
 
 
 def residual_pinned(digest: str = RESIDUAL_SHA256) -> bool:
@@ -575,7 +575,7 @@ def newton(model, x, R, loads, fmask, cmask, params, max_iter, tol_force, tol_mo
 @_jit
 def log_batch(flat, out):
     """Rotation vectors ``out`` (n, 3) of the rotation matrices ``flat`` (n, 3, 3), the compiled
-    :func:`lumbar.mechanics.so3.log` (the residual's own ``_log``: scipy's steps, bit for bit); False, with ``out``
+    :func:`lumbar.mechanics.so3.log` (the residual's own ``rotation_log``: scipy's steps, bit for bit); False, with ``out``
     unfinished, where a matrix is not orthogonal to 1e-12 or not right-handed (the caller then takes the reference,
     which orthogonalises it or refuses it)."""
     q4 = np.empty(4)
@@ -590,7 +590,7 @@ def log_batch(flat, out):
                + m[0, 2] * (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0]))
         if not det > 0.0:
             return False
-        _log(m, out[n], q4)
+        rotation_log(m, out[n], q4)
     return True
 
 

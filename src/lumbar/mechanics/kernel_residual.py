@@ -47,7 +47,7 @@ def rotation_exp(w, out):
 
 
 @_inner
-def _log(Rm, out, out4):
+def rotation_log(Rm, out, out4):
     """Rotation vector of rotation matrix Rm (quaternion route, as scipy's Rotation.from_matrix().as_rotvec())."""
     q = out4
     tr = Rm[0, 0] + Rm[1, 1] + Rm[2, 2]
@@ -766,7 +766,7 @@ def _discs(x, R, Q, J, jac, c, d_up, d_lo, d_centre, d_frame, d_k, d_torque, kt,
         for i in range(3):
             for j in range(3):
                 Rrel[i, j] = RB[0, i] * Ra[0, j] + RB[1, i] * Ra[1, j] + RB[2, i] * Ra[2, j]
-        _log(Rrel, phi, q4)
+        rotation_log(Rrel, phi, q4)
         for i in range(3):
             ph[i] = phi[i] - off[i]
         tor = d_torque[n]
