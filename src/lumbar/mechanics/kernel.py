@@ -78,7 +78,7 @@ inner_jit = _inner
 #: every kernel; when it does not (kernel_residual.py edited), newton_batch compiles without the cache in that
 #: process, and tests/test_kernel.py fails until the digest here is updated, the edit of this file that retires the
 #: cache entry.
-RESIDUAL_SHA256 = "38d036200f08d22c892c2c871838529ef1cb9619f3f11d1255e4a902cff962f1"
+RESIDUAL_SHA256 = "62a8f26ca0877c1e8e7c30dfda0e3ab5d348a64df6bfb6d3f146ec7f7fc1699d"
 
 
 def residual_pinned(digest: str = RESIDUAL_SHA256) -> bool:
@@ -162,6 +162,15 @@ _MODEL_ARRAYS = ("c", "f_a", "f_b", "f_sa", "f_sb", "f_extra", "f_law", "f_par",
                  "k_stiff")
 
 
+def _disc_law(d) -> tuple:
+    """A disc's lateral shear stiffness [N/m] (its k_shear where none is given) and the code of its torque law."""
+    from .elements.disc import TORQUE_LAWS  # noqa: PLC0415
+    if d.law not in TORQUE_LAWS:
+        raise ValueError(f"disc {d.name!r}: unknown torque law {d.law!r}; expected one of {TORQUE_LAWS}")
+    ksl = d.k_shear if d.k_shear_lateral is None else d.k_shear_lateral
+    return float(ksl), (kernel_residual.DISC_LAW_CUBIC_DEG if d.law == "cubic_deg" else kernel_residual.DISC_LAW_EQ3)
+
+
 def _elements_key(surfs, discs) -> tuple:
     """The values of the facet surfaces and discs that the kernel reads (Python objects, changed by attribute)."""
     key = []
@@ -169,7 +178,7 @@ def _elements_key(surfs, discs) -> tuple:
         key += (np.asarray(s.origin, float).tobytes(), np.asarray(s.axes, float).tobytes(),
                 np.asarray(s.coef, float).tobytes())
     for d in discs:
-        key += (d.upper, d.lower, float(d.k_quadratic), float(d.k_linear), float(d.k_shear),
+        key += (d.upper, d.lower, float(d.k_quadratic), float(d.k_linear), float(d.k_shear), *_disc_law(d),
                 np.asarray(d.centre, float).tobytes(), np.asarray(d.frame, float).tobytes(),
                 np.asarray([d.torque[k] for k in _TORQUE_ORDER], float).tobytes())
     return tuple(key)
@@ -200,7 +209,7 @@ def model_data(model) -> tuple:
         _f64([s.coef for s in surfs], (ns, 5)),
         _i64([d.upper for d in discs]), _i64([d.lower for d in discs]),
         _f64([d.centre for d in discs], (nd, 3)), _f64([d.frame for d in discs], (nd, 3, 3)),
-        _f64([(d.k_quadratic, d.k_linear, d.k_shear) for d in discs], (nd, 3)),
+        _f64([(d.k_quadratic, d.k_linear, d.k_shear, *_disc_law(d)) for d in discs], (nd, 5)),
         _f64([[d.torque[k] for k in _TORQUE_ORDER] for d in discs], (nd, 4, 3)),
     )
     # cache only where every model array was passed through (a copy would not see a later change in place)

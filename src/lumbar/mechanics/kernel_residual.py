@@ -5,7 +5,7 @@ one).
 Per scenario (:func:`eval_one`): the ligament fibres, the facet contact and the discs, each a compiled step of its own,
 from the same formulas as the numpy reference path (:meth:`lumbar.mechanics.model.SpineModel.evaluate_reference`),
 element by element: the SO(3) maps, the assembly of a force and of its 3x3 stiffness into Q and J, the fibre laws
-(:func:`_tension`), Eq. 3's torque-angle law and the screen of open contact points (:data:`SCREEN_M`).
+(:func:`_tension`), the discs' torque laws (Eq. 3 and cubic_deg) and the screen of open contact points (:data:`SCREEN_M`).
 :func:`evaluate_batch` is the compiled ``SpineModel.evaluate`` of a batch.
 """
 from __future__ import annotations
@@ -20,6 +20,10 @@ from .jit import jit as _jit
 #: a contact point whose screened gap (the affine map of _screen_map; it differs from the exact one by round-off,
 #: about 1e-15 m on these coordinates) exceeds SCREEN_M is open and skipped; every other point is evaluated exactly
 SCREEN_M = 1e-9
+#: degrees per radian (the ``cubic_deg`` torque law's angle unit; lumbar.mechanics.elements.disc._DEG)
+DEG = 180.0 / np.pi
+#: the disc torque laws' codes in column 4 of the discs' stiffness rows (kernel.model_data): Eq. 3 and cubic_deg
+DISC_LAW_EQ3, DISC_LAW_CUBIC_DEG = 0.0, 1.0
 
 
 # ---------------------------------------------------------------------------------------------------- SO(3)
@@ -410,6 +414,21 @@ def _torque_angle(phi, p):
     t = np.tanh(z)
     return p[0] * t + p[2] * phi, p[0] * (1.0 - t ** 2) * 3.0 * phi ** 2 / p[1] + p[2]
 
+
+@_inner
+def _torque_cubic_deg(phi, p):
+    """The ``cubic_deg`` law (lumbar.mechanics.elements.disc.torque_cubic_deg, the same operations): torque [N*m]
+    and its derivative [N*m/rad] at ``phi`` [rad]."""
+    d = abs(phi) * DEG
+    return (p[0] * d * d + p[1] * d + p[2]) * phi * DEG, (3.0 * p[0] * d * d + 2.0 * p[1] * d + p[2]) * DEG
+
+
+@_inner
+def _torque(phi, p, cubic):
+    if cubic:
+        return _torque_cubic_deg(phi, p)
+    return _torque_angle(phi, p)
+
 # The residual and Jacobian of one scenario, in three named steps (fibres, facet contact, discs); each step is one
 # compiled function, called once per scenario (their loops run inside: the cost of the calls is nothing beside them).
 #: accumulators of one body's diagonal Jacobian block from its fibre ends (_acc_end): sum beta g g^T (21, upper triangle
@@ -734,7 +753,8 @@ def _contacts(x, R, Q, J, jac, c, k_a, k_b, k_s, k_surf, k_stiff, ceps, s_orig, 
 
 @_inner
 def _discs(x, R, Q, J, jac, c, d_up, d_lo, d_centre, d_frame, d_k, d_torque, kt, off, w3, w33):
-    """Discs: the translational spring in the disc frame and the Eq. 3 torque per project axis."""
+    """Discs: the translational spring in the disc frame (row n of d_k: k_quadratic, k_linear, k_shear, lateral
+    k_shear, torque-law code) and the torque law (Eq. 3 or cubic_deg) per project axis."""
     pa, ra, rb, P, f, v0, v1, v2 = w3[0], w3[2], w3[3], w3[4], w3[5], w3[7], w3[8], w3[9]
     K = w33[0]
     Ra, RB, Rrel, M, Ji = w33[1], w33[2], w33[3], w33[4], w33[5]
@@ -743,7 +763,8 @@ def _discs(x, R, Q, J, jac, c, d_up, d_lo, d_centre, d_frame, d_k, d_torque, kt,
         a, b = d_up[n], d_lo[n]
         _relative_point(x, R, c, a, b, d_centre, n, pa, ra, rb, P)
         fr = d_frame[n]
-        kq, kl, ks = d_k[n, 0], d_k[n, 1], d_k[n, 2]
+        kq, kl, ks, ksl = d_k[n, 0], d_k[n, 1], d_k[n, 2], d_k[n, 3]
+        cubic = d_k[n, 4] == DISC_LAW_CUBIC_DEG
         r0, r1, r2 = _frame_coords(P, d_centre[n], fr)
         cc = -r2
         if cc > 0.0:
@@ -753,11 +774,11 @@ def _discs(x, R, Q, J, jac, c, d_up, d_lo, d_centre, d_frame, d_k, d_torque, kt,
         _rot(R, b, fr[0], v0)
         _rot(R, b, fr[1], v1)
         _rot(R, b, fr[2], v2)
-        F0, F1 = -ks * r0, -ks * r1
+        F0, F1 = -ks * r0, -ksl * r1
         for i in range(3):
             f[i] = F0 * v0[i] + F1 * v1[i] + Fz * v2[i]
             for j in range(3):
-                K[i, j] = -ks * v0[i] * v0[j] - ks * v1[i] * v1[j] + dFz * v2[i] * v2[j]
+                K[i, j] = -ks * v0[i] * v0[j] - ksl * v1[i] * v1[j] + dFz * v2[i] * v2[j]
         _assemble(Q, J, jac, a, b, f, ra, rb, K, True)
         for i in range(3):
             for j in range(3):
@@ -770,12 +791,12 @@ def _discs(x, R, Q, J, jac, c, d_up, d_lo, d_centre, d_frame, d_k, d_torque, kt,
         for i in range(3):
             ph[i] = phi[i] - off[i]
         tor = d_torque[n]
-        Tq[0], dTq[0] = _torque_angle(ph[0], tor[0])
+        Tq[0], dTq[0] = _torque(ph[0], tor[0], cubic)
         if ph[1] >= 0.0:
-            Tq[1], dTq[1] = _torque_angle(ph[1], tor[1])
+            Tq[1], dTq[1] = _torque(ph[1], tor[1], cubic)
         else:
-            Tq[1], dTq[1] = _torque_angle(ph[1], tor[2])
-        Tq[2], dTq[2] = _torque_angle(ph[2], tor[3])
+            Tq[1], dTq[1] = _torque(ph[1], tor[2], cubic)
+        Tq[2], dTq[2] = _torque(ph[2], tor[3], cubic)
         for i in range(3):
             tau[i] = RB[i, 0] * Tq[0] + RB[i, 1] * Tq[1] + RB[i, 2] * Tq[2]
             if a >= 0:

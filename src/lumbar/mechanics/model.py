@@ -146,9 +146,11 @@ class SpineModel:
         return np.bincount(self.k_surf, weights=self.k_stiff, minlength=len(self.surfaces))
 
     def kernel_supported(self) -> bool:
-        """Whether the compiled core computes this model: its discs use the Eq. 3 torque law and one shear stiffness
-        (a 6-DOF spring with the ``cubic_deg`` law or anisotropic shear, paper 2's, runs on the numpy reference)."""
-        return all(d.law == "eq3" and d.k_shear_lateral is None for d in self.discs)
+        """Whether the compiled core computes this model: every element it has (fibres, facet contact, discs with
+        the Eq. 3 or the ``cubic_deg`` torque law and one or two shear stiffnesses, paper 2's 6-DOF springs among
+        them)."""
+        from .elements.disc import TORQUE_LAWS  # noqa: PLC0415
+        return all(d.law in TORQUE_LAWS for d in self.discs)
 
     def add_disc(self, spec: DiscSpec):
         from .elements.disc import TORQUE_LAWS  # noqa: PLC0415

@@ -77,9 +77,11 @@ def run_sensitivity(model, solver, rows: pd.DataFrame, baseline: dict, area_m2=1
     out["extensor_active_n"] = [float(a[0, ext].sum()) for a, _ in forces]
     out["extensor_passive_n"] = [float(q[0, ext].sum()) for _, q in forces]
     out["abdominal_active_n"] = [float(a[0, abd].sum()) for a, _ in forces]
+    from . import reproduction as rp  # noqa: PLC0415
+    claims = rp.read_claims()             # read once: the table's checks cost more than a row's lookup
     out["paper_claims"] = [";".join(paper_claim_ids(r["parameter"], float(r["value"]),
                                                      None if pd.isna(r["ssl_um"]) else float(r["ssl_um"]),
-                                                     r["group_scope"], r["posture"])) for _, r in out.iterrows()]
+                                                     r["group_scope"], r["posture"], claims)) for _, r in out.iterrows()]
     return out
 
 
