@@ -48,6 +48,29 @@ def assert_jacobian(m, x, R, loads, **kw):
     assert np.abs(J - Jfd).max() < 1e-8 * scale + 1e-4
 
 
+def test_reporting_shortcuts_give_the_full_computations_numbers(charset):
+    """The gap without its Hessian and a disc's displacement and axial force on their own (what the calibration's
+    probe reads at every Jacobian column) are the numbers of the full computations, bit for bit; a moved state gives
+    other numbers (control)."""
+    m = _two_level_model(charset)
+    x, R, _ = perturbed_state(m, 4, 2)
+    P = m._to_body(x, R, m.k_b, m._attach(x, R, m.k_a, m.k_s)[0])
+    for sid, surf in enumerate(m.surfaces):
+        g, grad, hess = surf.gap(P[:, m.k_surf == sid])
+        g2, grad2, none = surf.gap(P[:, m.k_surf == sid], hessian=False)
+        assert none is None and hess.shape == g.shape + (3, 3)
+        assert np.array_equal(g, g2) and np.array_equal(grad, grad2)
+    dl = m.disc_loads(x, R)
+    for k in range(m.nd):
+        r = m.disc_displacement(x, R, k)
+        assert np.array_equal(r, dl["r"][:, k]) and np.abs(r).max() > 1e-5
+        assert np.array_equal(m.disc_axial_force(r, k)[0], dl["force"][:, k, 2])
+        assert np.array_equal(m.disc_axial_force(r[[2]], k)[0], dl["force"][[2], k, 2])    # one row alone
+        moved = x.copy()
+        moved[:, m.discs[k].upper, 2] += 1e-4
+        assert not np.array_equal(m.disc_displacement(moved, R, k), r)
+
+
 def test_jacobian_matches_finite_differences_single_body(charset):
     fsu = build_fsu(symmetric_fsu(), charset)
     m = fsu.model

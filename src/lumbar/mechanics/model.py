@@ -408,7 +408,7 @@ class SpineModel:
         grad = np.empty(P.shape)
         for sid, surf in enumerate(self.surfaces):
             sel = self.k_surf == sid
-            g[:, sel], grad[:, sel], _ = surf.gap(P[:, sel])
+            g[:, sel], grad[:, sel], _ = surf.gap(P[:, sel], hessian=False)
         Fm, dFm = contact_penalty(-g, self.k_stiff, self.contact_eps)
         Fm, dFm = Fm * cmask, dFm * cmask
         # K = R_B (-dF grad grad^T + F hess) R_B^T, hess = -f_uu a_u a_u^T - f_vv a_v a_v^T
@@ -477,17 +477,29 @@ class SpineModel:
                 J[:, b, 3:, b, 3:] += -M - Ht
 
     # ---------------------------------------------------------------- reporting
+    def disc_displacement(self, x, R, k):
+        """Disc-frame displacement [m] (B, 3) of disc ``k``'s upper centre from its reference (``disc_loads``'s
+        ``r``, without the rest of its loads)."""
+        spec = self.discs[k]
+        p, _ = self._attach(x, R, spec._ia, spec.centre[None])
+        P = self._to_body(x, R, spec._ib, p)
+        return ((P - spec.centre) @ spec.frame.T)[:, 0]
+
+    def disc_axial_force(self, r, k):
+        """Axial force [N] on the upper body and its derivative (B,) of disc ``k`` at the disc-frame displacements
+        ``r`` (B, 3) (:meth:`disc_displacement`)."""
+        spec = self.discs[k]
+        return disc_axial_force(r[:, 2], spec.k_quadratic, spec.k_linear, spec.k_tension)
+
     def disc_loads(self, x, R):
         """Per disc: relative rotation vector [rad] (B, nd, 3), disc-frame displacement [m]
         (B, nd, 3), disc-frame force on the upper body [N] (B, nd, 3) and torque [N*m] (B, nd, 3)."""
         out = {"phi": [], "r": [], "force": [], "torque": []}
-        for spec in self.discs:
-            p, _ = self._attach(x, R, spec._ia, spec.centre[None])
-            P = self._to_body(x, R, spec._ib, p)
+        for k, spec in enumerate(self.discs):
             Ra = R[:, spec.upper][:, None] if spec.upper >= 0 else np.broadcast_to(np.eye(3), (x.shape[0], 1, 3, 3))
             RB = R[:, spec.lower][:, None] if spec.lower >= 0 else np.broadcast_to(np.eye(3), (x.shape[0], 1, 3, 3))
-            r = ((P - spec.centre) @ spec.frame.T)[:, 0]
-            Fz, _ = disc_axial_force(r[:, 2], spec.k_quadratic, spec.k_linear, spec.k_tension)
+            r = self.disc_displacement(x, R, k)
+            Fz, _ = self.disc_axial_force(r, k)
             ksl = spec.k_shear if spec.k_shear_lateral is None else spec.k_shear_lateral
             F = np.stack([-spec.k_shear * r[:, 0], -ksl * r[:, 1], Fz], axis=-1)
             phi = so3.log(np.swapaxes(RB[:, 0], -1, -2) @ Ra[:, 0])
@@ -509,7 +521,7 @@ class SpineModel:
         out = np.zeros((x.shape[0], len(self.surfaces)))
         for sid, surf in enumerate(self.surfaces):
             sel = self.k_surf == sid
-            g, grad, _ = surf.gap(P[:, sel])
+            g, grad, _ = surf.gap(P[:, sel], hessian=False)
             Fm, _ = contact_penalty(-g, self.k_stiff[sel], self.contact_eps)
             Fm = Fm * (cmask[..., sel] if np.ndim(cmask) else cmask)
             if beyond_extent:

@@ -189,7 +189,7 @@ def facet_gaps(m, x, R):
     ``x``, ``R``; negative = the points lie beyond the surface (penetration)."""
     p, _ = m._attach(x, R, m.k_a, m.k_s)
     P = m._to_body(x, R, m.k_b, p)
-    return np.stack([surf.gap(P[:, m.k_surf == sid])[0].min(axis=-1) for sid, surf in enumerate(m.surfaces)],
+    return np.stack([surf.gap(P[:, m.k_surf == sid], hessian=False)[0].min(axis=-1) for sid, surf in enumerate(m.surfaces)],
                     axis=-1)
 
 

@@ -161,9 +161,9 @@ class Probe:
         base, _ = m.evaluate(x[j], R[j], None, self.fm[j] * 0, self.cm[j] * 0, jacobian=False)
         onlyf, _ = m.evaluate(x[j], R[j], None, self.fm[j] * 0, self.cm[j], jacobian=False)
         up = float((onlyf - base)[0, st.upper, :3] @ m.discs[st.disc].frame[2])
-        dl = m.disc_loads(x, R)                                    # every scenario in one batch
-        disc_up = float(dl["force"][j[0], st.disc, 2])
-        disc_r = dl["r"][:, st.disc, 2]                            # axial displacement [m], < 0 = compression
+        r = m.disc_displacement(x, R, st.disc)                     # every scenario in one batch
+        disc_up = float(m.disc_axial_force(r[j], st.disc)[0][0])
+        disc_r = r[:, 2]                                           # axial displacement [m], < 0 = compression
         moment_rows = [i for i, sc in enumerate(self.scen) if sc[0] != "compression"]
         return {"rot": rot, "min_disc_compression_mm": float(-disc_r[moment_rows].max() * 1e3),
                 "rest_tension": {k: float(gf[0, g].sum()) for k, g in kinds.items()},

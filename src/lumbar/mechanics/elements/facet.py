@@ -49,12 +49,15 @@ class FacetSurface:
         fvv = 6 * p03 * v + 2 * p02
         return f, fu, fv, fuu, fvv
 
-    def gap(self, P):
-        """Gap g (...,), gradient dg/dP (..., 3) and Hessian (..., 3, 3) in the reference frame."""
+    def gap(self, P, hessian=True):
+        """Gap g (...,), gradient dg/dP (..., 3) and Hessian (..., 3, 3) in the reference frame (None without
+        ``hessian``: g and the gradient are the same numbers either way)."""
         q = self.local(P)
         f, fu, fv, fuu, fvv = self.surface(q[..., 0], q[..., 1])
         g = q[..., 2] - f
         grad_q = np.stack([-fu, -fv, np.ones_like(fu)], axis=-1)
+        if not hessian:
+            return g, grad_q @ self.axes, None
         hess_q = np.zeros(q.shape[:-1] + (3, 3))
         hess_q[..., 0, 0] = -fuu
         hess_q[..., 1, 1] = -fvv
