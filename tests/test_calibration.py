@@ -404,9 +404,10 @@ def test_probe_metrics_from_one_fibre_state_equal_the_models_own_calls():
     length, _, T = m.fibre_state(x[rows], R[rows], probe.fm[rows])[:3]
     assert mt["remus"] and mt["remus"] == probe._remus_pairs(length, T)
     for k, (t_m, t_r) in mt["remus"].items():     # the pair is the model's and Remus's tension at one state
-        parts = probe.remus[k]
+        parts = probe.remus[k]                      # a law evaluation per part: the probe's numbers, bit for bit
         t_rs = sum(uw_force(length[:, mk], m.f_lref[mk], mat).sum(axis=1) for mk, mat in parts)
-        assert t_r == pytest.approx(float(t_rs.max()), rel=1e-12)
+        t_ms = sum(T[:, mk].sum(axis=1) for mk, _ in parts)
+        assert t_r == float(t_rs.max()) and t_m == float(t_ms[int(np.argmax(t_rs))])
     kind = "CL"
     law = cs.ligaments[kind]
     set_ligament_law(m, probe.kinds[kind], dataclasses.replace(law, a=2.0 * law.a, c=2.0 * law.c))

@@ -12,6 +12,9 @@ from .. import admissibility as ADM
 from ..fsu import moment_loads
 from ..load_sharing import AXIS_OF, level_structures
 
+#: the fields of a Remus et al. (2021) material that its law (uw_force) reads
+UW_KEYS = ("reference_strain", "transition_strain", "stiffness_n")
+
 #: moments [N*m] of the fit's probe (the admissibility check itself uses 0.25 N*m steps); 0.25 N*m watches the
 #: compliance at the neutral position (the snap-through criterion's first step), 1 N*m gives the neutral-zone proxy
 PROBE_MOMENTS = (0.25, 1.0, 2.0, 3.0, 5.0, 7.5, 10.0)
@@ -69,6 +72,18 @@ class Probe:
         for g, (name, kind, lv) in enumerate(m.fibre_groups):
             if lv == self.fsu.level.name and name in materials:
                 self.remus.setdefault(kind, []).append((m.f_group == g, materials[name]))
+        # every part's fibres side by side, with their material per column: one evaluation of the law per call, whose
+        # per-part sums are those of a call per part (the same elementwise arithmetic, the same columns in order)
+        idx, cols, self._remus_parts = [], {key: [] for key in UW_KEYS}, {}
+        for kind, parts in self.remus.items():
+            for mask, mat in parts:
+                i = np.flatnonzero(mask)
+                self._remus_parts.setdefault(kind, []).append(slice(len(idx), len(idx) + len(i)))
+                idx += i.tolist()
+                for key in UW_KEYS:
+                    cols[key] += [mat[key]] * len(i)
+        self._remus_idx = np.array(idx, dtype=np.int64)
+        self._remus_mat = {key: np.array(v, float) for key, v in cols.items()}
 
     def _remus_rows(self):
         return [0] + [self.scen.index(("moment", d, M)) for _, d, M in ADM.REMUS_STATES if d] if self.remus else []
@@ -80,10 +95,13 @@ class Probe:
         if not self.remus:
             return {}
         m = self.fsu.model
+        idx = self._remus_idx
+        F = uw_force(length[:, idx], m.f_lref[idx], self._remus_mat)
+        Tp = T[:, idx]
         out = {}
-        for k, parts in self.remus.items():
-            t_r = sum(uw_force(length[:, mask], m.f_lref[mask], mat).sum(axis=1) for mask, mat in parts)
-            t_m = sum(T[:, mask].sum(axis=1) for mask, _ in parts)
+        for k, parts in self._remus_parts.items():
+            t_r = sum(F[:, p].sum(axis=1) for p in parts)
+            t_m = sum(Tp[:, p].sum(axis=1) for p in parts)
             j = int(np.argmax(t_r))
             out[k] = (float(t_m[j]), float(t_r[j]))
         return out
