@@ -727,3 +727,18 @@ def test_first_page_of_a_specimen_run_names_it_and_shows_its_landmark_qa(fake_fu
     assert "Facet joints: not supported: voxels of 3 mm." in text
     assert "Fig. Q" in text and "qa_L4-L5.png" in html.read_text()
     assert "myo-sim meshes" not in text and "a user's specimen: vertebra surfaces" in text
+
+
+def test_first_page_names_internal_loads_in_the_upper_tail_of_the_measured_spread():
+    """A row within mean +- 2 SD but above the mean + 1 SD is named with its value and the mean; one within 1 SD, one
+    outside the tolerance and one judged by another rule are not (control)."""
+    import pandas as pd  # noqa: PLC0415
+
+    from lumbar.report.sections import above_one_sd  # noqa: PLC0415
+    rows = pd.DataFrame({
+        "quantity": ["facet contact force per joint"] * 3 + ["ISL + SSL force"],
+        "condition": ["extension, 7.5 N*m", "flexion, 7.5 N*m", "axial rotation, 7.5 N*m", "flexion, 10 N*m"],
+        "unit": ["N"] * 4, "sim": [115.0, 60.0, 200.0, 130.0], "measured": [51.5, 46.1, 70.3, 134.0],
+        "measured_high": [129.5, 128.7, 156.7, 134.0], "within": [True, True, False, True],
+        "tolerance_rule": ["mean +- 2 SD (in vitro)"] * 3 + ["measured range"]})
+    assert above_one_sd(rows) == ["facet contact force per joint, extension 7.5 N\u00b7m 115 N against 51.5"]

@@ -250,6 +250,21 @@ def null_models_sentence(t: pd.DataFrame) -> str:
     return ("Beside trivial models on the same rows: " + "; ".join(parts) + ".") if parts else ""
 
 
+def above_one_sd(rows: pd.DataFrame) -> list:
+    """The rows judged within mean +- 2 SD whose simulated value is above the mean + 1 SD (the SD read back from the
+    row's high end), per quantity: inside the tolerance, but in the upper tail of the measured spread. One entry per
+    quantity, its conditions (without their parenthesised detail, which the table keeps) with value and mean."""
+    out = {}
+    for r in rows.itertuples():
+        if not str(r.tolerance_rule).startswith("mean +- 2 SD") or not r.within:
+            continue
+        sd = (float(r.measured_high) - float(r.measured)) / 2.0
+        if sd > 0 and float(r.sim) > float(r.measured) + sd:
+            cond = re.sub(r" \([^)]*\)", "", V.condition_label(r.condition)).replace(",", "")
+            out.setdefault(r.quantity, []).append(f"{cond} {fmt(float(r.sim))} {r.unit} against {fmt(float(r.measured))}")
+    return [f"{q}, {' and '.join(v)}" for q, v in out.items()]
+
+
 def trivial_counts(t: pd.DataFrame | None, quantity: str) -> str:
     """The trivial models' counts on the model's rows of one scoreboard quantity, as the first page puts them beside
     the model's (" (trivial models: 9, 13)"); empty without such a model."""
@@ -570,9 +585,11 @@ class ReportBuilder:
             if n:
                 g = d[d["role"] == V.INTERNAL]
                 miss = [f"{V.condition_label(r.condition)}" for r in g.itertuples() if not r.within]
+                high = above_one_sd(g)
                 wc, nc = counts.get(V.CONSTRAINT, (0, 0))
                 out.append(f"Internal loads (judged, never fitted): {w} of {n} within"
                            + (f" (outside: {', '.join(miss)})" if miss else "")
+                           + (f" (above the mean + 1 SD: {'; '.join(high)})" if high else "")
                            + (f"; held as fit constraints: {wc} of {nc}" if nc else "")
                            + " (Tables R3, R4; where they come from: [What the data told us](#posterior)).")
             if out:
